@@ -1,0 +1,1 @@
+"""deltadash application: command line, and (later) the control server and its scene."""

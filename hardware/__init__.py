@@ -1,0 +1,1 @@
+"""Servo buses: the ServoBus interface, the Dynamixel driver, the emulator and the simulator."""

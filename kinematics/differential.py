@@ -1,0 +1,125 @@
+"""Velocity and acceleration kinematics, and the distance to singularity.
+
+Each leg keeps |P - C_i(q_i)| = l. Differentiating once (thesis eq. 3.59-3.68):
+
+    (P - C_i) . dP = (P - C_i) . C_i'(q_i) dq_i      i.e.  M dP = V dq,  J = M^-1 V
+
+with M's rows w_i = P - C_i and V = diag(w_i . C_i'). Differentiating twice
+(thesis eq. 3.71-3.88, written without the local frames):
+
+    w_i . C_i' qdd_i = w_i . Pdd + |Pd - C_i' qd_i|^2 - (w_i . C_i'') qd_i^2
+
+Inverse velocity and acceleration need no matrix inverse; the Jacobian inverts M
+with its adjugate, so a singular M gives inf/NaN instead of an exception.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ._arrays import as_vectors
+
+
+class _LegFrame(NamedTuple):
+    w: np.ndarray  # rows of M: P - C_i, shape (*, 3 legs, 3)
+    d1: np.ndarray  # dC_i/dq_i, (*, 3, 3)
+    d2: np.ndarray  # d2C_i/dq_i^2, (*, 3, 3)
+    v: np.ndarray  # diagonal of V: w_i . d1_i, (*, 3)
+
+
+def _leg_frame(robot: Any, joints: Any) -> _LegFrame:
+    q = as_vectors(joints, "joints")
+    points = robot.fk(q).points
+    with np.errstate(all="ignore"):
+        w = points[..., None, :] - robot.knees(q)
+        derivs = [robot._leg_centre_derivatives(i, q[..., i]) for i in range(3)]
+        d1 = np.stack([np.stack(d[0], -1) for d in derivs], axis=-2)
+        d2 = np.stack([np.stack(d[1], -1) for d in derivs], axis=-2)
+        return _LegFrame(w, d1, d2, np.einsum("...ij,...ij->...i", w, d1))
+
+
+def _inverse_rows(m: np.ndarray) -> np.ndarray:
+    """Inverse of a batch of 3x3 matrices from their rows (adjugate / determinant)."""
+    r0, r1, r2 = m[..., 0, :], m[..., 1, :], m[..., 2, :]
+    adj = np.stack([np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)], axis=-1)
+    det = np.einsum("...i,...i->...", r0, adj[..., :, 0])
+    return adj / det[..., None, None]
+
+
+def jacobian(robot: Any, joints: Any) -> np.ndarray:
+    """dP/dq: platform velocity per joint velocity, shape (*, 3, 3) [m/rad or m/m].
+
+    NaN where FK fails; inf/NaN at a parallel (M) singularity.
+    """
+    frame = _leg_frame(robot, joints)
+    with np.errstate(all="ignore"):
+        return _inverse_rows(frame.w) * frame.v[..., None, :]
+
+
+def joint_velocity(robot: Any, joints: Any, point_velocity: Any) -> np.ndarray:
+    """Inverse velocity kinematics (thesis eq. 3.70): joint speeds for a platform velocity.
+
+    Args:
+        joints: current joints, shape (*, 3).
+        point_velocity: platform velocity in the base frame [m/s], shape (*, 3).
+
+    Returns:
+        joint velocities [rad/s or m/s], shape (*, 3).
+    """
+    frame = _leg_frame(robot, joints)
+    pd = as_vectors(point_velocity, "point_velocity")
+    with np.errstate(all="ignore"):
+        return np.einsum("...ij,...j->...i", frame.w, pd) / frame.v
+
+
+def point_velocity(robot: Any, joints: Any, joint_velocity: Any) -> np.ndarray:
+    """Forward velocity kinematics: platform velocity [m/s] for joint speeds, shape (*, 3)."""
+    qd = as_vectors(joint_velocity, "joint_velocity")
+    return np.einsum("...ij,...j->...i", jacobian(robot, joints), qd)
+
+
+def joint_acceleration(
+    robot: Any, joints: Any, point_velocity: Any, point_acceleration: Any
+) -> np.ndarray:
+    """Inverse acceleration kinematics (thesis eq. 3.88).
+
+    Args:
+        joints: current joints, shape (*, 3).
+        point_velocity: platform velocity [m/s], shape (*, 3).
+        point_acceleration: platform acceleration [m/s^2], shape (*, 3).
+
+    Returns:
+        joint accelerations [rad/s^2 or m/s^2], shape (*, 3).
+    """
+    frame = _leg_frame(robot, joints)
+    pd = as_vectors(point_velocity, "point_velocity")
+    pdd = as_vectors(point_acceleration, "point_acceleration")
+    with np.errstate(all="ignore"):
+        qd = np.einsum("...ij,...j->...i", frame.w, pd) / frame.v
+        relative = pd[..., None, :] - frame.d1 * qd[..., None]
+        numerator = (
+            np.einsum("...ij,...j->...i", frame.w, pdd)
+            + np.einsum("...ij,...ij->...i", relative, relative)
+            - np.einsum("...ij,...ij->...i", frame.w, frame.d2) * qd**2
+        )
+        return numerator / frame.v
+
+
+def dexterity(robot: Any, joints: Any) -> np.ndarray:
+    """Inverse condition number of the Jacobian, shape (*): 1 isotropic, 0 singular.
+
+    Serial singularities (a leg stretched or folded) and parallel ones (M singular)
+    both drive it to 0, so one threshold keeps the loop away from either. NaN where FK
+    fails.
+    """
+    jac = jacobian(robot, joints)
+    finite = np.isfinite(jac).all(axis=(-2, -1))
+    safe = np.where(finite[..., None, None], jac, np.eye(3))
+    singular_values = np.linalg.svd(safe, compute_uv=False)
+    with np.errstate(all="ignore"):
+        ratio = singular_values[..., -1] / singular_values[..., 0]
+    ratio = np.where(np.isfinite(ratio), ratio, 0.0)
+    fk_ok = robot.fk(joints).ok
+    return np.where(finite, ratio, np.where(fk_ok, 0.0, np.nan))
