@@ -22,7 +22,8 @@ def _ik(args: argparse.Namespace) -> int:
         print(json.dumps(payload))
     elif result.ok:
         degrees = ", ".join(f"{math.degrees(v):8.3f}" for v in result.joints)
-        print(f"IK ({args.x*1e3:.1f}, {args.y*1e3:.1f}, {args.z*1e3:.1f}) mm -> joints [{degrees}] deg")
+        mm = f"({args.x * 1e3:.1f}, {args.y * 1e3:.1f}, {args.z * 1e3:.1f}) mm"
+        print(f"IK {mm} -> joints [{degrees}] deg")
     else:
         nearest = THESIS_DELTA.project(point).point
         mm = ", ".join(f"{v * 1e3:.1f}" for v in nearest)

@@ -26,8 +26,10 @@ def is_scalar_triple(value: object) -> bool:
     """True for one 3-vector (a length-3 list/tuple of numbers or a (3,) array)."""
     if isinstance(value, np.ndarray):
         return value.shape == (3,)
-    return isinstance(value, (tuple, list)) and len(value) == 3 and not isinstance(
-        value[0], (tuple, list, np.ndarray)
+    return (
+        isinstance(value, (tuple, list))
+        and len(value) == 3
+        and not isinstance(value[0], (tuple, list, np.ndarray))
     )
 
 

@@ -24,7 +24,7 @@ from .spheres import intersect_below, intersect_below_point
 
 # Points per chunk: temporaries of this size stay in the L2 cache, which makes the
 # batch paths 2-3x faster than whole-array temporaries at N = 1e6.
-CHUNK = 4096
+CHUNK = 8192
 
 _NAN3 = (math.nan, math.nan, math.nan)
 
@@ -110,8 +110,8 @@ class DeltaKinematics(ABC):
                 self._leg_joint(leg, x, y, z, None if near is None else refs[leg], FLOATS)
                 for leg in range(3)
             ]
-        except (ZeroDivisionError, OverflowError):
-            return None  # degenerate corner: let the NumPy path answer it
+        except (ZeroDivisionError, OverflowError, ValueError):
+            return None  # degenerate corner or inf: let the NumPy path answer it
         return _single(joints, (x, y, z, *refs[: 3 if near is not None else 0]), IKResult)
 
     # ---- forward kinematics ----
@@ -126,10 +126,9 @@ class DeltaKinematics(ABC):
             knees is returned; ok=False and NaN where the spheres do not meet.
         """
         if is_scalar_triple(joints):
-            q = triple_floats(joints, "joints")
-            centres = [self._leg_centre(leg, q[leg], FLOATS) for leg in range(3)]
-            point = intersect_below_point(*centres, self.l)
-            return _single(point, (*q, *point), FKResult)
+            single = self._fk_point(joints)
+            if single is not None:
+                return single
         array = as_vectors(joints, "joints")
         flat_q = array.reshape(-1, 3)
         points = np.empty_like(flat_q)
@@ -140,6 +139,15 @@ class DeltaKinematics(ABC):
                 for axis, column in enumerate(intersect_below(*centres, self.l)):
                     points[a : a + CHUNK, axis] = column
         return _masked(points, flat_q, array.shape[:-1], FKResult)
+
+    def _fk_point(self, joints: Any) -> FKResult | None:
+        q = triple_floats(joints, "joints")
+        try:
+            centres = [self._leg_centre(leg, q[leg], FLOATS) for leg in range(3)]
+        except (OverflowError, ValueError):
+            return None  # inf joints: let the NumPy path answer it
+        point = intersect_below_point(*centres, self.l)
+        return _single(point, (*q, *point), FKResult)
 
     # ---- legs ----
     def knees(self, joints: Any) -> np.ndarray:
@@ -185,8 +193,9 @@ def _broadcast_pair(a: np.ndarray, b: np.ndarray, name_a: str, name_b: str):
     try:
         shape = np.broadcast_shapes(a.shape, b.shape)
     except ValueError as exc:
-        raise ShapeError(f"{name_b}: shape {b.shape} does not broadcast with {name_a} "
-                         f"shape {a.shape}") from exc
+        raise ShapeError(
+            f"{name_b}: shape {b.shape} does not broadcast with {name_a} shape {a.shape}"
+        ) from exc
     return np.broadcast_to(a, shape), np.broadcast_to(b, shape)
 
 

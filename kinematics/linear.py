@@ -22,6 +22,7 @@ import numpy as np
 from ._xp import LEG_COS, LEG_SIN
 from .delta import DeltaKinematics
 from .errors import InvalidGeometryError
+from .results import FKResult
 from .rotary import _check_length
 
 
@@ -68,6 +69,20 @@ class LinearDelta(DeltaKinematics):
         # One physical root (the carriage beyond the platform), so ``near`` has no choice.
         along, k2 = self._along_and_norm(leg, x, y, z)
         return along + xp.sqrt(along * along - k2 + self.l * self.l)
+
+    def fk(self, joints: Any) -> FKResult:
+        """Platform centre for carriage positions [m], shape (*, 3) (see DeltaKinematics.fk).
+
+        Also ok=False where the lower sphere intersection would put a carriage on the
+        platform's side (the other root of eq. 14): no physical pose has those joints.
+        """
+        result = super().fk(joints)
+        points, q = result.points, np.asarray(joints, dtype=np.float64)
+        x, y, z = points[..., 0], points[..., 1], points[..., 2]
+        with np.errstate(invalid="ignore"):
+            beyond = [q[..., i] - self._along_and_norm(i, x, y, z)[0] >= -1e-12 for i in range(3)]
+        ok = result.ok & beyond[0] & beyond[1] & beyond[2]
+        return FKResult(np.where(ok[..., None], points, np.nan), ok)
 
     def _leg_centre(self, leg: int, q: Any, xp: Any) -> tuple[Any, Any, Any]:
         Rbar = self.R - self.r

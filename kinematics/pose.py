@@ -24,7 +24,9 @@ UNIT_TOLERANCE = 1e-3
 """Largest | |q| - 1 | that is treated as drift and normalised; beyond it, rejected."""
 
 
-def unit_quaternion(value: Any, name: str = "quaternion", tol: float = UNIT_TOLERANCE) -> np.ndarray:
+def unit_quaternion(
+    value: Any, name: str = "quaternion", tol: float = UNIT_TOLERANCE
+) -> np.ndarray:
     """Validate and normalise quaternions (w, x, y, z), shape (*, 4).
 
     Raises:

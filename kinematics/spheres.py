@@ -23,9 +23,7 @@ from ._xp import ARRAYS, FLOATS
 Columns = tuple[Any, Any, Any]
 
 
-def _lower_intersection(
-    c1: Columns, c2: Columns, c3: Columns, radius: float, xp: Any
-) -> Columns:
+def _lower_intersection(c1: Columns, c2: Columns, c3: Columns, radius: float, xp: Any) -> Columns:
     """The formula, on NumPy columns or Python floats alike (see _xp)."""
     ax, ay, az = c2[0] - c1[0], c2[1] - c1[1], c2[2] - c1[2]
     bx, by, bz = c3[0] - c1[0], c3[1] - c1[1], c3[2] - c1[2]

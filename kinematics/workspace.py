@@ -70,11 +70,14 @@ def _anchor(robot: Any, z_max: float | None) -> tuple[np.ndarray, float]:
 
 
 def _feasible(robot: Any, q: np.ndarray, margin: float, z_max: float | None) -> bool:
-    inside = bool(signed_distance(robot, q) <= -margin)
+    # The IK's own test too: a boundary point must be one the IK accepts after rounding.
+    inside = bool(signed_distance(robot, q) <= -margin) and bool(reachable(robot, q))
     return inside and (z_max is None or q[2] <= z_max)
 
 
-def _bisect(robot: Any, inside: np.ndarray, outside: np.ndarray, margin: float, z_max) -> np.ndarray:
+def _bisect(
+    robot: Any, inside: np.ndarray, outside: np.ndarray, margin: float, z_max
+) -> np.ndarray:
     for _ in range(60):
         middle = 0.5 * (inside + outside)
         if _feasible(robot, middle, margin, z_max):

@@ -1,0 +1,55 @@
+"""Hypothesis strategies: Delta geometries, joints and batch shapes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import strategies as st
+
+from kinematics import THESIS_DELTA, LinearDelta, RotaryDelta
+
+BATCH_SHAPES = st.sampled_from([(), (1,), (5,), (3, 1, 2)])
+
+
+@st.composite
+def rotary_deltas(draw) -> RotaryDelta:
+    """The thesis robot or a random usable rotary Delta (l > L, r < R)."""
+    if draw(st.booleans()):
+        return THESIS_DELTA
+    L = draw(st.floats(0.05, 0.3))
+    l = L * draw(st.floats(1.2, 3.0))
+    R = draw(st.floats(0.03, 0.2))
+    r = R * draw(st.floats(0.0, 0.9))
+    return RotaryDelta(L=L, l=l, R=R, r=r)
+
+
+@st.composite
+def linear_deltas(draw) -> LinearDelta:
+    """Vertical towers (the printer case) or inclined rails."""
+    R = draw(st.floats(0.05, 0.3))
+    r = R * draw(st.floats(0.0, 0.6))
+    l = (R - r) * draw(st.floats(1.5, 4.0))
+    incline = draw(st.sampled_from([math.pi / 2, math.radians(60), math.radians(35)]))
+    return LinearDelta(l=l, R=R, r=r, incline=incline)
+
+
+def joint_range(robot) -> tuple[float, float]:
+    """A joint range that covers the useful workspace of ``robot``."""
+    if isinstance(robot, RotaryDelta):
+        return -0.6, 1.5
+    return -robot.l, robot.l
+
+
+@st.composite
+def robot_and_joints(draw, kind: str = "any", shape=None):
+    """(robot, joints shaped shape + (3,)) for either robot type."""
+    if kind == "rotary" or (kind == "any" and draw(st.booleans())):
+        robot = draw(rotary_deltas())
+    else:
+        robot = draw(linear_deltas())
+    shape = draw(BATCH_SHAPES) if shape is None else shape
+    low, high = joint_range(robot)
+    seed = draw(st.integers(0, 2**32 - 1))
+    joints = np.random.default_rng(seed).uniform(low, high, size=(*shape, 3))
+    return robot, joints

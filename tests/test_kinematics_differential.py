@@ -1,0 +1,86 @@
+"""Velocity and acceleration kinematics against finite differences."""
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+
+from kinematics import THESIS_DELTA, RotaryDelta
+
+from .strategies import robot_and_joints
+
+STEP = 1e-6  # central differences: truncation ~ STEP^2, rounding ~ eps / STEP
+
+
+def _usable(robot, joints):
+    return robot.fk(joints).ok & (np.nan_to_num(robot.dexterity(joints)) > 0.02)
+
+
+def _fd_jacobian(robot, joints):
+    columns = []
+    for j in range(3):
+        dq = np.zeros(3)
+        dq[j] = STEP
+        plus, minus = robot.fk(joints + dq).points, robot.fk(joints - dq).points
+        columns.append((plus - minus) / (2 * STEP))
+    return np.stack(columns, axis=-1)
+
+
+@given(robot_and_joints())
+def test_jacobian_matches_finite_differences(case):
+    robot, joints = case
+    usable = _usable(robot, joints)
+    jac = robot.jacobian(joints)
+    assert jac.shape == joints.shape + (3,)
+    scale = np.abs(jac[usable]).max(initial=1.0)
+    np.testing.assert_allclose(jac[usable], _fd_jacobian(robot, joints)[usable], atol=2e-6 * scale)
+
+
+@given(robot_and_joints(), st.integers(0, 2**32 - 1))
+def test_inverse_velocity_inverts_the_jacobian(case, seed):
+    robot, joints = case
+    usable = _usable(robot, joints)
+    qd = np.random.default_rng(seed).normal(size=joints.shape)
+    pd = robot.point_velocity(joints, qd)
+    np.testing.assert_allclose(robot.joint_velocity(joints, pd)[usable], qd[usable], atol=1e-7)
+
+
+@given(robot_and_joints(shape=()), st.integers(0, 2**32 - 1))
+def test_joint_acceleration_matches_a_differentiated_trajectory(case, seed):
+    """Along q(t) = q0 + v t + a t^2 / 2, the platform's pd, pdd by differences must map back."""
+    robot, q0 = case
+    rng = np.random.default_rng(seed)
+    v, a = rng.normal(size=3), rng.normal(size=3)
+    h = 1e-4  # five-point stencils: truncation ~h^4, rounding ~eps |P| / h^2 ~ 1e-8
+    times = h * np.arange(-2.0, 3.0)[:, None]
+    points, ok = robot.fk(q0 + v * times + 0.5 * a * times**2)
+    if not (ok.all() and _usable(robot, q0)):
+        return
+    pd = (points[0] - 8 * points[1] + 8 * points[3] - points[4]) / (12 * h)
+    pdd = (-points[0] + 16 * points[1] - 30 * points[2] + 16 * points[3] - points[4]) / (12 * h**2)
+    scale = 1.0 + np.abs(a).max()
+    np.testing.assert_allclose(robot.joint_acceleration(q0, pd, pdd), a, atol=1e-4 * scale)
+    np.testing.assert_allclose(robot.joint_velocity(q0, pd), v, atol=1e-6 * scale)
+
+
+def test_acceleration_of_a_constant_velocity_line_is_curvature_only():
+    """Platform moving in a straight line at constant speed: pdd = 0, yet joints accelerate."""
+    start, velocity = np.array([0.0, 0.0, -0.22]), np.array([0.3, 0.1, -0.2])
+    h = 1e-4
+    q = THESIS_DELTA.ik(start + velocity * np.array([[-h], [0.0], [h]])).joints
+    expected = (q[2] - 2 * q[1] + q[0]) / h**2
+    got = THESIS_DELTA.joint_acceleration(q[1], velocity, np.zeros(3))
+    np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-4)
+
+
+def test_dexterity_is_zero_at_a_stretched_leg_and_high_at_home():
+    robot = RotaryDelta(L=0.15, l=0.25, R=0.08, r=0.04)
+    home = robot.ik([0.0, 0.0, -0.25]).joints
+    assert 0.3 < robot.dexterity(home) <= 1.0
+    # leg 1 straight: platform on the circle of radius L + l around the knee circle
+    stretched = robot.ik(robot.project([0.45, 0.0, -0.05]).point).joints
+    assert robot.dexterity(stretched) < 1e-3
+
+
+def test_dexterity_nan_where_fk_fails():
+    assert not THESIS_DELTA.fk([0.0, 0.0, 3.0]).ok
+    assert np.isnan(THESIS_DELTA.dexterity([0.0, 0.0, 3.0]))
