@@ -84,3 +84,24 @@ def test_dexterity_is_zero_at_a_stretched_leg_and_high_at_home():
 def test_dexterity_nan_where_fk_fails():
     assert not THESIS_DELTA.fk([0.0, 0.0, 3.0]).ok
     assert np.isnan(THESIS_DELTA.dexterity([0.0, 0.0, 3.0]))
+
+
+def test_jacobian_equals_the_thesis_matrices():
+    """J = M^-1 V with M, V written out as in thesis eq. 3.63-3.64 (k_i from eq. 3.57)."""
+    robot = THESIS_DELTA
+    theta = np.array([0.3, 0.6, 0.1])
+    x, y, z = robot.fk(theta).points
+    L, l = robot.L, robot.l
+    alpha = np.radians([0.0, 120.0, 240.0])
+    iy = -np.sin(alpha) * x + np.cos(alpha) * y
+    k = np.sqrt(l**2 - iy**2 - (z + L * np.sin(theta)) ** 2)
+    s3 = np.sqrt(3.0)
+    M = np.array(
+        [
+            [-k[0], y, L * np.sin(theta[0]) + z],
+            [(2 * k[1] + 3 * x + s3 * y) / 4, (s3 * x + y - 2 * k[1] * s3) / 4, L * np.sin(theta[1]) + z],
+            [(2 * k[2] + 3 * x - s3 * y) / 4, (2 * k[2] * s3 - s3 * x + y) / 4, L * np.sin(theta[2]) + z],
+        ]
+    )
+    V = np.diag(L * (k * np.sin(theta) - (L * np.sin(theta) + z) * np.cos(theta)))
+    np.testing.assert_allclose(robot.jacobian(theta), np.linalg.solve(M, V), atol=1e-12)
