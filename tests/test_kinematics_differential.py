@@ -99,8 +99,16 @@ def test_jacobian_equals_the_thesis_matrices():
     M = np.array(
         [
             [-k[0], y, L * np.sin(theta[0]) + z],
-            [(2 * k[1] + 3 * x + s3 * y) / 4, (s3 * x + y - 2 * k[1] * s3) / 4, L * np.sin(theta[1]) + z],
-            [(2 * k[2] + 3 * x - s3 * y) / 4, (2 * k[2] * s3 - s3 * x + y) / 4, L * np.sin(theta[2]) + z],
+            [
+                (2 * k[1] + 3 * x + s3 * y) / 4,
+                (s3 * x + y - 2 * k[1] * s3) / 4,
+                L * np.sin(theta[1]) + z,
+            ],
+            [
+                (2 * k[2] + 3 * x - s3 * y) / 4,
+                (2 * k[2] * s3 - s3 * x + y) / 4,
+                L * np.sin(theta[2]) + z,
+            ],
         ]
     )
     V = np.diag(L * (k * np.sin(theta) - (L * np.sin(theta) + z) * np.cos(theta)))
