@@ -1,0 +1,74 @@
+"""Glue between emulated control tables and a MotionModel: commands out, present values in.
+
+Each step reads every servo's goal, limit, profile and gain items, converts them to SI
+units (hardware/registers.py), steps the model, and writes Present Position (quantized to
+ticks), Velocity, Current, Moving and the trajectory items back into the tables.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from hardware.emulated_servo import EmulatedServo
+from hardware.motion import MotionCommand, MotionModel, MotionState
+from hardware.registers import (
+    RAD_PER_TICK,
+    OperatingMode,
+    Reg,
+    acceleration_to_rad_s2,
+    ampere_to_current,
+    current_to_ampere,
+    rad_s_to_velocity,
+    velocity_to_rad_s,
+)
+
+INPUT_VOLTAGE_UNITS = 120  # 12.0 V supply
+TEMPERATURE_C = 30
+
+
+def command_of(servo: EmulatedServo) -> MotionCommand:
+    """The MotionCommand one servo's control table expresses."""
+    t = servo.table
+    mode = t.get(Reg.OPERATING_MODE)
+    return MotionCommand(
+        torque_enabled=t.get(Reg.TORQUE_ENABLE) == 1,
+        mode=OperatingMode(mode) if mode in OperatingMode._value2member_map_ else OperatingMode.PWM,
+        goal_position_rad=t.get(Reg.GOAL_POSITION) * RAD_PER_TICK,
+        goal_velocity_rad_s=velocity_to_rad_s(t.get(Reg.GOAL_VELOCITY)),
+        goal_current_a=current_to_ampere(t.get(Reg.GOAL_CURRENT)),
+        profile_velocity_rad_s=velocity_to_rad_s(t.get(Reg.PROFILE_VELOCITY)),
+        profile_acceleration_rad_s2=acceleration_to_rad_s2(t.get(Reg.PROFILE_ACCELERATION)),
+        velocity_limit_rad_s=velocity_to_rad_s(t.get(Reg.VELOCITY_LIMIT)),
+        current_limit_a=current_to_ampere(t.get(Reg.CURRENT_LIMIT)),
+        position_p=t.get(Reg.POSITION_P_GAIN),
+        position_i=t.get(Reg.POSITION_I_GAIN),
+        position_d=t.get(Reg.POSITION_D_GAIN),
+        feedforward_1st=t.get(Reg.FEEDFORWARD_1ST_GAIN),
+        feedforward_2nd=t.get(Reg.FEEDFORWARD_2ND_GAIN),
+    )
+
+
+def store_state(servo: EmulatedServo, state: MotionState, now_s: float) -> None:
+    """Write a model state into the servo's present-value items."""
+    t = servo.table
+    velocity = rad_s_to_velocity(state.velocity_rad_s)
+    current = ampere_to_current(state.current_a)
+    limit = t.get(Reg.CURRENT_LIMIT)
+    t.set(Reg.PRESENT_POSITION, round(state.position_rad / RAD_PER_TICK))
+    t.set(Reg.PRESENT_VELOCITY, velocity)
+    t.set(Reg.PRESENT_CURRENT, max(-limit, min(limit, current)))
+    t.set(Reg.MOVING, int(abs(velocity) > t.get(Reg.MOVING_THRESHOLD)))
+    t.set(Reg.VELOCITY_TRAJECTORY, velocity)
+    t.set(Reg.POSITION_TRAJECTORY, t.get(Reg.GOAL_POSITION))
+    t.set(Reg.PRESENT_INPUT_VOLTAGE, INPUT_VOLTAGE_UNITS)
+    t.set(Reg.PRESENT_TEMPERATURE, TEMPERATURE_C)
+    t.set(Reg.REALTIME_TICK, int(now_s * 1000) % 32768)
+
+
+def advance_servos(
+    model: MotionModel, servos: Sequence[EmulatedServo], dt_s: float, now_s: float
+) -> None:
+    """Step `model` by `dt_s` [s] under the servos' tables and store the results."""
+    states = model.step(dt_s, [command_of(servo) for servo in servos])
+    for servo, state in zip(servos, states, strict=True):
+        store_state(servo, state, now_s)
