@@ -55,6 +55,9 @@ class EmulatedServo:
         self.faults = Faults()
         self.registered: tuple[int, bytes] | None = None
         self.reboots = 0
+        # (command bytes, MotionCommand) of hardware.servo_dynamics, so unchanged tables
+        # are not decoded again on every packet.
+        self.command_cache: tuple[bytes, object] | None = None
 
     @property
     def servo_id(self) -> int:

@@ -117,11 +117,18 @@ class Reg(enum.Enum):
 
     @property
     def address(self) -> int:
-        return self.value.address
+        return LAYOUT[self][0]
 
     @property
     def size(self) -> int:
-        return self.value.size
+        return LAYOUT[self][1]
+
+
+# (address, size, signed) per item: a plain dict, because Enum.value is a descriptor call and
+# the emulator reads these tens of thousands of times a second.
+LAYOUT: dict[Reg, tuple[int, int, bool]] = {
+    reg: (reg.value.address, reg.value.size, reg.value.signed) for reg in Reg
+}
 
 
 CONTROL_TABLE_SIZE = 147  # one past Present Temperature; the emulator rejects reads beyond it
@@ -174,8 +181,8 @@ def to_unsigned(value: int, size: int) -> int:
 
 def decode(reg: Reg, data: bytes | bytearray, offset: int = 0) -> int:
     """The value of `reg` from little-endian bytes starting at `offset` (signed if the item is)."""
-    raw = int.from_bytes(bytes(data[offset : offset + reg.size]), "little")
-    return to_signed(raw, reg.size) if reg.value.signed else raw
+    _, size, signed = LAYOUT[reg]
+    return int.from_bytes(data[offset : offset + size], "little", signed=signed)
 
 
 def encode(reg: Reg, value: int) -> bytes:

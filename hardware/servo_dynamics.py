@@ -26,8 +26,23 @@ INPUT_VOLTAGE_UNITS = 120  # 12.0 V supply
 TEMPERATURE_C = 30
 
 
+# Bytes 11 .. 119 hold every item a MotionCommand depends on (mode, limits, torque, gains,
+# goals, profiles); rebuilding the command only when they change keeps the emulator fast.
+_COMMAND_BYTES = slice(Reg.OPERATING_MODE.address, Reg.GOAL_POSITION.address + 4)
+
+
 def command_of(servo: EmulatedServo) -> MotionCommand:
-    """The MotionCommand one servo's control table expresses."""
+    """The MotionCommand one servo's control table expresses (cached per table contents)."""
+    key = bytes(servo.table.memory[_COMMAND_BYTES])
+    cached = servo.command_cache
+    if cached is not None and cached[0] == key:
+        return cached[1]  # type: ignore[return-value]
+    command = _build_command(servo)
+    servo.command_cache = (key, command)
+    return command
+
+
+def _build_command(servo: EmulatedServo) -> MotionCommand:
     t = servo.table
     mode = t.get(Reg.OPERATING_MODE)
     return MotionCommand(

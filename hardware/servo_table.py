@@ -9,7 +9,15 @@ Error) and inside the limits other items set (Data Limit Error).
 from __future__ import annotations
 
 from hardware.protocol import StatusError
-from hardware.registers import CONTROL_TABLE_SIZE, Access, Area, OperatingMode, Reg, decode
+from hardware.registers import (
+    CONTROL_TABLE_SIZE,
+    LAYOUT,
+    Access,
+    Area,
+    OperatingMode,
+    Reg,
+    decode,
+)
 
 _VALID_MODES = {int(mode) for mode in OperatingMode}
 _POSITION_LIMITED_MODES = {OperatingMode.POSITION, OperatingMode.CURRENT_BASED_POSITION}
@@ -58,12 +66,14 @@ class ControlTable:
 
     def get(self, reg: Reg) -> int:
         """The value of `reg` (signed items decoded as signed)."""
-        return decode(reg, self.memory, reg.address)
+        address, size, signed = LAYOUT[reg]
+        return int.from_bytes(self.memory[address : address + size], "little", signed=signed)
 
     def set(self, reg: Reg, value: int) -> None:
         """Store `value` without any check (the servo's own updates of R items)."""
-        raw = int(value) & ((1 << (8 * reg.size)) - 1)
-        self.memory[reg.address : reg.address + reg.size] = raw.to_bytes(reg.size, "little")
+        address, size, _ = LAYOUT[reg]
+        raw = int(value) & ((1 << (8 * size)) - 1)
+        self.memory[address : address + size] = raw.to_bytes(size, "little")
 
     def read(self, address: int, length: int) -> tuple[StatusError, bytes]:
         """`length` bytes from `address`; gaps between items read as 0, as on the servo."""
