@@ -66,6 +66,10 @@ class DeltaKinematics(ABC):
     def _leg_signed_distance(self, leg: int, x: Any, y: Any, z: Any) -> Any:
         """Distance [m] to one leg's workspace boundary, negative inside."""
 
+    def _fk_branch_ok(self, q: Any, x: Any, y: Any, z: Any) -> Any:
+        """Whether an FK solution is on the robot's physical branch (all are, by default)."""
+        return True
+
     # ---- inverse kinematics ----
     def ik(self, points: Any, near: Any = None) -> IKResult:
         """Joint values that put the platform centre at ``points``.
@@ -136,8 +140,10 @@ class DeltaKinematics(ABC):
             for a in range(0, len(flat_q), CHUNK):
                 chunk = flat_q[a : a + CHUNK]
                 centres = [self._leg_centre(leg, chunk[:, leg], ARRAYS) for leg in range(3)]
-                for axis, column in enumerate(intersect_below(*centres, self.l)):
-                    points[a : a + CHUNK, axis] = column
+                columns = intersect_below(*centres, self.l)
+                valid = self._fk_branch_ok(chunk.T, *columns)
+                for axis, column in enumerate(columns):
+                    points[a : a + CHUNK, axis] = np.where(valid, column, np.nan)
         return _masked(points, flat_q, array.shape[:-1], FKResult)
 
     def _fk_point(self, joints: Any) -> FKResult | None:
@@ -147,6 +153,8 @@ class DeltaKinematics(ABC):
         except (OverflowError, ValueError):
             return None  # inf joints: let the NumPy path answer it
         point = intersect_below_point(*centres, self.l)
+        if not self._fk_branch_ok(q, *point):
+            point = _NAN3
         return _single(point, (*q, *point), FKResult)
 
     # ---- legs ----

@@ -14,7 +14,7 @@ taking the carriage on the far side of the platform along a_i.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -22,7 +22,6 @@ import numpy as np
 from ._xp import LEG_COS, LEG_SIN
 from .delta import DeltaKinematics
 from .errors import InvalidGeometryError
-from .results import FKResult
 from .rotary import _check_length
 
 
@@ -41,6 +40,7 @@ class LinearDelta(DeltaKinematics):
     R: float
     r: float
     incline: float = math.pi / 2
+    _rails: tuple = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         _check_length("l", self.l)
@@ -50,10 +50,12 @@ class LinearDelta(DeltaKinematics):
             raise InvalidGeometryError(f"r = {self.r} m: must be less than R = {self.R} m")
         if not (math.isfinite(self.incline) and 0.0 <= self.incline <= math.pi / 2):
             raise InvalidGeometryError(f"incline = {self.incline!r} rad: must be in [0, pi/2]")
+        c, s = math.cos(self.incline), math.sin(self.incline)
+        rails = tuple((LEG_COS[i] * c, LEG_SIN[i] * c, s) for i in range(3))
+        object.__setattr__(self, "_rails", rails)  # unit rail directions a_i (eq. 8)
 
     def _rail(self, leg: int) -> tuple[float, float, float]:
-        c = math.cos(self.incline)
-        return LEG_COS[leg] * c, LEG_SIN[leg] * c, math.sin(self.incline)
+        return self._rails[leg]
 
     def _along_and_norm(self, leg: int, x: Any, y: Any, z: Any) -> tuple[Any, Any]:
         Rbar = self.R - self.r
@@ -70,19 +72,12 @@ class LinearDelta(DeltaKinematics):
         along, k2 = self._along_and_norm(leg, x, y, z)
         return along + xp.sqrt(along * along - k2 + self.l * self.l)
 
-    def fk(self, joints: Any) -> FKResult:
-        """Platform centre for carriage positions [m], shape (*, 3) (see DeltaKinematics.fk).
-
-        Also ok=False where the lower sphere intersection would put a carriage on the
-        platform's side (the other root of eq. 14): no physical pose has those joints.
-        """
-        result = super().fk(joints)
-        points, q = result.points, np.asarray(joints, dtype=np.float64)
-        x, y, z = points[..., 0], points[..., 1], points[..., 2]
-        with np.errstate(invalid="ignore"):
-            beyond = [q[..., i] - self._along_and_norm(i, x, y, z)[0] >= -1e-12 for i in range(3)]
-        ok = result.ok & beyond[0] & beyond[1] & beyond[2]
-        return FKResult(np.where(ok[..., None], points, np.nan), ok)
+    def _fk_branch_ok(self, q: Any, x: Any, y: Any, z: Any) -> Any:
+        """The lower sphere intersection can put a carriage on the platform's side of it
+        (the other root of eq. 14): no physical pose has those joints, so FK says not ok."""
+        tolerance = -1e-12
+        beyond = [q[i] - self._along_and_norm(i, x, y, z)[0] >= tolerance for i in range(3)]
+        return beyond[0] & beyond[1] & beyond[2]
 
     def _leg_centre(self, leg: int, q: Any, xp: Any) -> tuple[Any, Any, Any]:
         Rbar = self.R - self.r
