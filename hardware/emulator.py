@@ -173,8 +173,13 @@ class ServoEmulator:
         servo = self._listening(packet.packet_id)
         if servo is None:
             return
+        # The status goes out under the id and Status Return Level the packet arrived under,
+        # so a write that changes either still gets its answer.
+        servo_id, answers = servo.servo_id, servo.answers(packet.instruction)
         reply = servo.handle(packet.instruction, packet.params)
-        self._reply(servo, packet.instruction, reply)
+        if answers:
+            error = servo.error_byte(reply.error)
+            self.send(servo, _status_packet(servo_id, error, reply.params))
         servo.finish(packet.instruction, packet.params)
 
     def _broadcast(self, packet: Packet) -> None:
