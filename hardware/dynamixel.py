@@ -1,13 +1,14 @@
 """ServoBus on ROBOTIS Dynamixel X-series servos (XM430-W210), through dynamixel-sdk.
 
 Per control tick: one GroupSyncWrite of Goal Position (116) for all joints, and one
-GroupSyncRead of the block Present Current (126) .. Present Temperature (146). The sync read
-is sent with the SDK's GroupSyncRead and its replies taken one per servo with readRx, so
-each servo's error byte is seen: when its alert bit (0x80) is set, Hardware Error Status
-(70) is read and reported by name. A read in which any servo is missing, late, corrupt or
-answers as another id is retried whole (up to `max_tries`) and otherwise raises CommError
-naming the servos; no state is ever assembled from a partial reply. Configuration writes
-go one servo at a time and wait for each status packet.
+GroupSyncRead of the block Moving (122) .. Present Temperature (146): the issue's Present
+Current (126) .. Present Temperature block, widened by four bytes so the Moving flag comes
+in the same packet. The sync read is sent with the SDK's GroupSyncRead and its replies
+taken one per servo with readRx, so each servo's error byte is seen: when its alert bit
+(0x80) is set, Hardware Error Status (70) is read and reported by name. A read in which
+any servo is missing, late, corrupt or answers as another id is retried whole (up to
+`max_tries`) and otherwise raises CommError naming the servos; no state is ever assembled
+from a partial reply. Configuration writes go one servo at a time and wait for each status.
 """
 
 from __future__ import annotations
@@ -219,7 +220,7 @@ class DynamixelBus:
     def _read_block(self) -> tuple[dict[int, bytes], dict[int, tuple[str, ...]]]:
         """State-block bytes per servo id, and the hardware errors of servos that alert."""
         reader = self._state_reader
-        instruction = "sync read PRESENT_CURRENT..PRESENT_TEMPERATURE"
+        instruction = "sync read MOVING..PRESENT_TEMPERATURE"
         if reader is None:
             self.link.require_port(instruction)
         with self.link.lock:

@@ -99,10 +99,15 @@ class ServoEmulator:
 
     # -- test and demo hooks -----------------------------------------------------------
     def servo(self, servo_id: int) -> EmulatedServo:
-        """The servo that currently has `servo_id` (KeyError if none)."""
-        for servo in self.servos:
-            if servo.servo_id == servo_id:
-                return servo
+        """The servo that currently has `servo_id` (KeyError if none).
+
+        Takes the lock, so after a status packet has arrived the servo's after-effects
+        (reboot, factory reset) are complete when this returns.
+        """
+        with self.lock:
+            for servo in self.servos:
+                if servo.servo_id == servo_id:
+                    return servo
         raise KeyError(f"no emulated servo with id {servo_id}")
 
     def inject(self, servo_id: int, **faults: object) -> None:

@@ -133,8 +133,9 @@ LAYOUT: dict[Reg, tuple[int, int, bool]] = {
 
 CONTROL_TABLE_SIZE = 147  # one past Present Temperature; the emulator rejects reads beyond it
 
-# The per-tick state block: Present Current 126 .. Present Temperature 146, 21 bytes.
-STATE_BLOCK_START = Reg.PRESENT_CURRENT.address
+# The per-tick state block: Moving 122 .. Present Temperature 146, 25 bytes. It starts four
+# bytes before Present Current (126) so the Moving flag comes in the same read.
+STATE_BLOCK_START = Reg.MOVING.address
 STATE_BLOCK_SIZE = Reg.PRESENT_TEMPERATURE.address + 1 - STATE_BLOCK_START
 
 

@@ -109,7 +109,8 @@ def test_reboot_clears_a_hardware_error(sdk_port, emulator: ServoEmulator) -> No
 def test_factory_reset_all_returns_to_id_1(sdk_port, emulator: ServoEmulator) -> None:
     port, ph = sdk_port
     assert ph.factoryReset(port, 3, 0xFF) == (OK, 0)
-    assert emulator.servos[2].servo_id == 1
+    with emulator.lock:  # the reset follows its status packet; the lock waits for it
+        assert emulator.servos[2].servo_id == 1
     assert ph.factoryReset(port, 2, 0x07) == (OK, StatusError.DATA_RANGE)
 
 

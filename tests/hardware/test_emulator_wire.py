@@ -44,6 +44,7 @@ def test_sync_read_answers_each_servo_in_order(emulator: ServoEmulator, raw: Raw
 
 def test_sync_write_is_silent_and_applies(emulator: ServoEmulator, raw: RawPort) -> None:
     assert raw.exchange(packet("sync write 150, 170"), 1, timeout_s=0.1) == b""
+    assert len(raw.exchange(packet("ping"), 14)) == 14  # answered after the write was applied
     assert emulator.servo(1).table.get(Reg.GOAL_POSITION) == 150
     assert emulator.servo(2).table.get(Reg.GOAL_POSITION) == 170
 

@@ -94,7 +94,7 @@ def test_factory_defaults_of_the_xm430_w210() -> None:
     assert Reg.OPERATING_MODE.value.default == 3
     assert Reg.POSITION_P_GAIN.value.default == 800
     assert Reg.CURRENT_LIMIT.value.default == 1193
-    assert (STATE_BLOCK_START, STATE_BLOCK_SIZE) == (126, 21)
+    assert (STATE_BLOCK_START, STATE_BLOCK_SIZE) == (122, 25)
 
 
 @given(st.integers(-(2**31), 2**31 - 1))
