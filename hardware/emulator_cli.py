@@ -11,6 +11,7 @@ import signal
 import sys
 import threading
 from collections.abc import Sequence
+from typing import TextIO
 
 from hardware.emulator import ServoEmulator
 from hardware.registers import Reg
@@ -50,16 +51,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return configure(parser)
 
 
-def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
-    """Serve until `stop` is set or SIGINT/SIGTERM arrives; prints the pty path first."""
+def run(
+    args: argparse.Namespace, stop: threading.Event | None = None, out: TextIO | None = None
+) -> int:
+    """Serve until `stop` is set or SIGINT/SIGTERM arrives; prints the pty path to `out`."""
     stop = stop or threading.Event()
+    out = out or sys.stdout
     with ServoEmulator(args.ids) as emulator:
         if args.return_delay_us is not None:
             with emulator.lock:
                 for servo in emulator.servos:
                     servo.table.set(Reg.RETURN_DELAY_TIME, max(0, args.return_delay_us) // 2)
         ids = ",".join(str(i) for i in args.ids)
-        print(f"{emulator.port}", flush=True)
+        print(emulator.port, file=out, flush=True)
         print(f"XM430-W210 x{len(args.ids)} (ids {ids}) on {emulator.port}", file=sys.stderr)
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):

@@ -132,12 +132,15 @@ class SimpleServoModel:
             return MotionState(state.position_rad + v_new * h, v_new, current)
         v_target = self._velocity_target(state, cmd)
         accel = (v_target - v) / h
-        a_max = p.torque_constant_nm_a * cmd.current_limit_a / p.inertia_kg_m2
+        a_max = math.inf
         if cmd.profile_acceleration_rad_s2 > 0:
-            a_max = min(a_max, cmd.profile_acceleration_rad_s2)
+            a_max = cmd.profile_acceleration_rad_s2
         accel = max(-a_max, min(a_max, accel))
+        # The motor supplies inertia plus damping torque, within the Current Limit.
+        current = (p.inertia_kg_m2 * accel + p.damping_nm_s * v) / p.torque_constant_nm_a
+        current = max(-cmd.current_limit_a, min(cmd.current_limit_a, current))
+        accel = (p.torque_constant_nm_a * current - p.damping_nm_s * v) / p.inertia_kg_m2
         v_new = v + accel * h
-        current = (p.inertia_kg_m2 * accel + p.damping_nm_s * v_new) / p.torque_constant_nm_a
         return MotionState(state.position_rad + v_new * h, v_new, current)
 
     def _velocity_target(self, state: MotionState, cmd: MotionCommand) -> float:
