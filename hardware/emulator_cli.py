@@ -57,17 +57,19 @@ def run(
     """Serve until `stop` is set or SIGINT/SIGTERM arrives; prints the pty path to `out`."""
     stop = stop or threading.Event()
     out = out or sys.stdout
+    if threading.current_thread() is threading.main_thread():
+        # Before the path is printed: a client may signal as soon as it has read it.
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: stop.set())
     with ServoEmulator(args.ids) as emulator:
         if args.return_delay_us is not None:
+            units = min(254, max(0, args.return_delay_us) // 2)  # 2 us per unit
             with emulator.lock:
                 for servo in emulator.servos:
-                    servo.table.set(Reg.RETURN_DELAY_TIME, max(0, args.return_delay_us) // 2)
+                    servo.table.set(Reg.RETURN_DELAY_TIME, units)
         ids = ",".join(str(i) for i in args.ids)
         print(emulator.port, file=out, flush=True)
         print(f"XM430-W210 x{len(args.ids)} (ids {ids}) on {emulator.port}", file=sys.stderr)
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                signal.signal(sig, lambda *_: stop.set())
         stop.wait()
     return 0
 

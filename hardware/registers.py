@@ -115,20 +115,21 @@ class Reg(enum.Enum):
     PRESENT_INPUT_VOLTAGE = Register(144, 2, _R, _M, 120)
     PRESENT_TEMPERATURE = Register(146, 1, _R, _M, 30)
 
+    layout: tuple[int, int, bool]  # (address, size, signed), set below
+
     @property
     def address(self) -> int:
-        return LAYOUT[self][0]
+        return self.layout[0]
 
     @property
     def size(self) -> int:
-        return LAYOUT[self][1]
+        return self.layout[1]
 
 
-# (address, size, signed) per item: a plain dict, because Enum.value is a descriptor call and
-# the emulator reads these tens of thousands of times a second.
-LAYOUT: dict[Reg, tuple[int, int, bool]] = {
-    reg: (reg.value.address, reg.value.size, reg.value.signed) for reg in Reg
-}
+# A plain attribute per member: Enum.value and Enum.__hash__ are Python-level calls, and the
+# emulator reads these items tens of thousands of times a second.
+for _reg in Reg:
+    _reg.layout = (_reg.value.address, _reg.value.size, _reg.value.signed)
 
 
 CONTROL_TABLE_SIZE = 147  # one past Present Temperature; the emulator rejects reads beyond it
@@ -182,7 +183,7 @@ def to_unsigned(value: int, size: int) -> int:
 
 def decode(reg: Reg, data: bytes | bytearray, offset: int = 0) -> int:
     """The value of `reg` from little-endian bytes starting at `offset` (signed if the item is)."""
-    _, size, signed = LAYOUT[reg]
+    _, size, signed = reg.layout
     return int.from_bytes(data[offset : offset + size], "little", signed=signed)
 
 

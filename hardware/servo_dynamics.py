@@ -7,6 +7,7 @@ ticks), Velocity, Current, Moving and the trajectory items back into the tables.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
 
 from hardware.emulated_servo import EmulatedServo
@@ -63,20 +64,36 @@ def _build_command(servo: EmulatedServo) -> MotionCommand:
     )
 
 
+# Moving 122 .. Present Temperature 146 in one pack: Moving, Moving Status, Present PWM,
+# Current, Velocity, Position, Velocity Trajectory, Position Trajectory, Voltage, Temperature.
+_PRESENT = struct.Struct("<BBhhiiiiHB")
+_PRESENT_START = Reg.MOVING.address
+
+
 def store_state(servo: EmulatedServo, state: MotionState, now_s: float) -> None:
     """Write a model state into the servo's present-value items."""
     t = servo.table
     velocity = rad_s_to_velocity(state.velocity_rad_s)
-    current = ampere_to_current(state.current_a)
     limit = t.get(Reg.CURRENT_LIMIT)
-    t.set(Reg.PRESENT_POSITION, round(state.position_rad / RAD_PER_TICK))
-    t.set(Reg.PRESENT_VELOCITY, velocity)
-    t.set(Reg.PRESENT_CURRENT, max(-limit, min(limit, current)))
-    t.set(Reg.MOVING, int(abs(velocity) > t.get(Reg.MOVING_THRESHOLD)))
-    t.set(Reg.VELOCITY_TRAJECTORY, velocity)
-    t.set(Reg.POSITION_TRAJECTORY, t.get(Reg.GOAL_POSITION))
-    t.set(Reg.PRESENT_INPUT_VOLTAGE, INPUT_VOLTAGE_UNITS)
-    t.set(Reg.PRESENT_TEMPERATURE, TEMPERATURE_C)
+    current = max(-limit, min(limit, ampere_to_current(state.current_a)))
+    moving = int(abs(velocity) > t.get(Reg.MOVING_THRESHOLD))
+    # Clamped to the register's int32 so a runaway model cannot crash the emulator thread.
+    position = max(-(2**31), min(2**31 - 1, round(state.position_rad / RAD_PER_TICK)))
+    goal = t.get(Reg.GOAL_POSITION)
+    _PRESENT.pack_into(
+        t.memory,
+        _PRESENT_START,
+        moving,
+        0,  # Moving Status: profile details are not modelled
+        0,  # Present PWM: not modelled
+        current,
+        velocity,
+        position,
+        velocity,
+        goal,
+        INPUT_VOLTAGE_UNITS,
+        TEMPERATURE_C,
+    )
     t.set(Reg.REALTIME_TICK, int(now_s * 1000) % 32768)
 
 

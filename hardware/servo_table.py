@@ -11,7 +11,6 @@ from __future__ import annotations
 from hardware.protocol import StatusError
 from hardware.registers import (
     CONTROL_TABLE_SIZE,
-    LAYOUT,
     Access,
     Area,
     OperatingMode,
@@ -66,12 +65,12 @@ class ControlTable:
 
     def get(self, reg: Reg) -> int:
         """The value of `reg` (signed items decoded as signed)."""
-        address, size, signed = LAYOUT[reg]
+        address, size, signed = reg.layout
         return int.from_bytes(self.memory[address : address + size], "little", signed=signed)
 
     def set(self, reg: Reg, value: int) -> None:
         """Store `value` without any check (the servo's own updates of R items)."""
-        address, size, _ = LAYOUT[reg]
+        address, size, _ = reg.layout
         raw = int(value) & ((1 << (8 * size)) - 1)
         self.memory[address : address + size] = raw.to_bytes(size, "little")
 
