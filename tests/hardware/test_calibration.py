@@ -18,6 +18,7 @@ from hardware.calibration import (
     save,
 )
 from hardware.errors import CalibrationError
+from hardware.homing import home_bus
 from hardware.registers import RAD_PER_TICK
 
 calibrations = st.builds(
@@ -109,3 +110,12 @@ def test_load_refuses_a_config_without_joints(tmp_path: Path) -> None:
     path.write_text("[[hardware.joints]]\nservo_id = 1\ncolour = 'red'\n")
     with pytest.raises(CalibrationError, match="bad"):
         load(path)
+
+
+def test_home_bus_saves_offsets_that_read_zero(bus, emulator, tmp_path: Path) -> None:
+    emulator.place({1: 1000, 2: 2000, 3: 3000})
+    path = tmp_path / "deltadash.toml"
+    homed = home_bus(bus, path, 0.0, confirm=lambda prompt: None)
+    assert [c.zero_offset_ticks for c in homed] == [1000, 2000, 3000]
+    assert load(path) == homed
+    assert bus.read_state().position_rad.tolist() == [0.0, 0.0, 0.0]
