@@ -13,7 +13,7 @@ $(BIN)/.installed: pyproject.toml
 	touch $@
 
 run: $(BIN)/.installed
-	$(BIN)/deltadash ik 0 0 -0.24
+	$(BIN)/deltadash serve
 
 test: $(BIN)/.installed
 	$(BIN)/ruff check .

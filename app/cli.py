@@ -7,6 +7,8 @@ import json
 import math
 import sys
 
+from app import serve
+from hardware import emulator_cli
 from kinematics import THESIS_DELTA, DeltaError
 
 
@@ -52,6 +54,8 @@ def _fk(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="deltadash", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
+    serve.add_parser(commands)
+    emulator_cli.add_parser(commands)
     ik = commands.add_parser("ik", help="inverse kinematics of the thesis robot (metres)")
     ik.add_argument("x", type=float)
     ik.add_argument("y", type=float)

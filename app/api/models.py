@@ -1,0 +1,46 @@
+"""Request and response bodies of the API (SI units, base frame)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Vector3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+
+
+class _Body(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class GoalRequest(_Body):
+    position_m: Vector3 = Field(description="platform goal [m], 3 finite numbers")
+    frame: Literal["base"] = Field("base", description="only the base frame for now")
+
+
+class JogRequest(_Body):
+    delta_m: Vector3 = Field(description="relative step [m]; clamped onto the workspace")
+
+
+class MoveRequest(_Body):
+    position_m: Vector3 | None = Field(None, description="Cartesian target [m]")
+    joints_rad: Vector3 | None = Field(None, description="joint target [rad]")
+    space: Literal["cartesian", "joint"] = Field("cartesian", description="path shape")
+    duration_s: Annotated[float, Field(gt=0, le=60, allow_inf_nan=False)] | None = Field(
+        None, description="at least this long [s]; default: as fast as the limits allow"
+    )
+
+
+class TorqueRequest(_Body):
+    enabled: bool
+
+
+class LeaseRequest(_Body):
+    client: Annotated[str, Field(min_length=1, max_length=64)]
+    take_over: bool = Field(False, description="take control from the current holder")
+
+
+class Accepted(BaseModel):
+    accepted: bool = True
+    result: object = None

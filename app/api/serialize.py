@@ -1,0 +1,89 @@
+"""Snapshots to JSON-ready dicts: NaN becomes null, arrays become lists."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+
+from app.control.controller import Controller
+from app.control.state import Snapshot
+
+
+def floats(values: Any) -> list[float | None]:
+    """A vector as a list, with null where the value is unknown (NaN)."""
+    return [None if not math.isfinite(v) else float(v) for v in np.asarray(values).tolist()]
+
+
+def status(controller: Controller) -> dict[str, Any]:
+    """Everything GET /api/status reports."""
+    snap = controller.snapshot()
+    return {
+        "mode": snap.mode,
+        "backend": controller.backend,
+        "backend_description": controller.backend_description,
+        "torque": snap.torque,
+        "estopped": snap.estopped,
+        "faults": [f.as_dict() for f in snap.faults],
+        "warning": snap.warning,
+        "time_s": snap.time_s,
+        "joints": {
+            "servo_ids": list(controller.servo_ids),
+            "position_rad": floats(snap.joints_measured_rad),
+            "commanded_rad": floats(snap.joints_commanded_rad),
+            "velocity_rad_s": floats(snap.velocity_rad_s),
+            "current_a": floats(snap.current_a),
+            "voltage_v": floats(snap.voltage_v),
+            "temperature_c": floats(snap.temperature_c),
+            "moving": list(snap.moving),
+            "hardware_errors": [list(e) for e in snap.hardware_errors],
+        },
+        "ee": {
+            "position_m": floats(snap.point_measured_m),
+            "commanded_m": floats(snap.point_commanded_m),
+            "error_m": floats(snap.tracking_error_m),
+        },
+        "goal": {"position_m": floats(snap.goal_m)},
+        "loop": loop_timing(controller),
+        "bus": {"missed_reads": snap.missed_reads, **asdict(controller.bus.stats)},
+    }
+
+
+def loop_timing(controller: Controller) -> dict[str, Any]:
+    total, window = controller.timing.since_start(), controller.timing.last_window()
+    return {
+        "target_hz": total.target_hz,
+        "measured_hz": window.measured_hz,
+        "period_mean_ms": window.period_mean_ms,
+        "jitter_p50_ms": window.jitter_p50_ms,
+        "jitter_p99_ms": window.jitter_p99_ms,
+        "worst_ms": window.worst_ms,
+        "overruns": total.overruns,
+        "ticks": total.ticks,
+        "since_start": asdict(total),
+        "last_10s": asdict(window),
+    }
+
+
+def telemetry(snap: Snapshot, controller: Controller) -> dict[str, Any]:
+    """One telemetry WebSocket message."""
+    window = controller.timing.last_window()
+    return {
+        "t": snap.time_s,
+        "tick": snap.tick,
+        "mode": snap.mode,
+        "goal_m": floats(snap.goal_m),
+        "commanded_joints_rad": floats(snap.joints_commanded_rad),
+        "measured_joints_rad": floats(snap.joints_measured_rad),
+        "commanded_m": floats(snap.point_commanded_m),
+        "measured_m": floats(snap.point_measured_m),
+        "error_m": floats(snap.tracking_error_m),
+        "loop": {
+            "measured_hz": window.measured_hz,
+            "jitter_p99_ms": window.jitter_p99_ms,
+            "overruns": controller.timing.overruns,
+        },  # fmt: skip
+        "faults": [f.as_dict() for f in snap.faults],
+    }

@@ -1,0 +1,194 @@
+"""Settings of ``deltadash serve``: one TOML file, environment variables, CLI flags.
+
+Precedence, highest first: command-line flags, ``DELTADASH_<SECTION>__<KEY>`` environment
+variables, the TOML file given with ``--config``, the defaults below. Every field is
+documented; a bad value fails at start with its dotted name and the reason.
+
+Example file::
+
+    [robot]
+    type = "rotary"
+    L = 0.1558
+    l = 0.2430
+    R = 0.0844
+    r = 0.038
+
+    [hardware]
+    backend = "dynamixel"
+    port = "/dev/ttyUSB0"
+    baud = 4000000
+
+    [[hardware.joints]]
+    servo_id = 1
+    zero_offset_ticks = 2048
+    direction = 1
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from contextvars import ContextVar
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
+
+from kinematics import DeltaError, LinearDelta, RotaryDelta
+
+_TOML_PATH: ContextVar[Path | None] = ContextVar("deltadash_config_path", default=None)
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class RobotSettings(_Section):
+    """Geometry [m]; defaults are the thesis robot (eq. 4.11)."""
+
+    type: Literal["rotary", "linear"] = Field("rotary", description="rotary or linear Delta")
+    L: float = Field(0.1558, description="upper link length [m] (rotary)")
+    l: float = Field(0.2430, description="parallelogram length [m]")
+    R: float = Field(0.0844, description="base radius to the motor axis / rail [m]")
+    r: float = Field(0.038, description="platform radius [m]")
+    incline_rad: float = Field(math.pi / 2, description="rail angle above the base [rad] (linear)")
+
+    @model_validator(mode="after")
+    def _buildable(self) -> RobotSettings:
+        try:
+            self.build()
+        except DeltaError as exc:
+            raise ValueError(str(exc)) from exc
+        return self
+
+    def build(self) -> RotaryDelta | LinearDelta:
+        """The kinematics object these settings describe."""
+        if self.type == "linear":
+            return LinearDelta(l=self.l, R=self.R, r=self.r, incline=self.incline_rad)
+        return RotaryDelta(L=self.L, l=self.l, R=self.R, r=self.r)
+
+
+class JointSettings(_Section):
+    """Calibration of one joint (see hardware/calibration.py and docs/hardware.md)."""
+
+    servo_id: int = Field(ge=0, le=252, description="Dynamixel id")
+    zero_offset_ticks: int = Field(2048, description="raw position at theta = 0 [ticks]")
+    direction: Literal[1, -1] = Field(1, description="+1 if ticks grow with theta, else -1")
+    min_angle_rad: float = Field(-0.6, description="lowest joint angle [rad] (link up)")
+    max_angle_rad: float = Field(1.5, description="highest joint angle [rad] (link down)")
+
+
+def _default_joints() -> list[JointSettings]:
+    return [JointSettings(servo_id=i) for i in (1, 2, 3)]
+
+
+class HardwareSettings(_Section):
+    """Which servo bus drives the robot."""
+
+    backend: Literal["sim", "emulated", "dynamixel"] = Field(
+        "emulated",
+        description="emulated: pty emulator through the real driver; dynamixel: real servos",
+    )
+    port: str = Field("/dev/ttyUSB0", description="serial port of the bus (dynamixel)")
+    baud: int = Field(1_000_000, ge=9600, le=10_500_000, description="bus baud rate [bit/s]")
+    max_tries: int = Field(3, ge=1, le=10, description="tries per bus transaction")
+    joints: list[JointSettings] = Field(default_factory=_default_joints, min_length=3, max_length=3)
+
+
+class LoopSettings(_Section):
+    rate_hz: float = Field(200.0, gt=0, le=2000, description="control loop rate [Hz]")
+    spin_s: float = Field(
+        3e-4, ge=0, le=2e-3, description="busy-wait before each deadline [s] (timer slack)"
+    )
+
+
+class LimitSettings(_Section):
+    joint_speed_rad_s: float = Field(6.0, gt=0, description="largest commanded joint speed")
+    workspace_margin_m: float = Field(0.002, ge=0, description="distance kept from the boundary")
+    z_max_m: float = Field(-0.06, description="highest platform position allowed [m]")
+    min_dexterity: float = Field(0.02, ge=0, lt=1, description="1/cond(J) kept above this")
+
+
+class JogSettings(_Section):
+    max_velocity_m_s: float = Field(0.5, gt=0, description="jog speed per axis [m/s]")
+    max_acceleration_m_s2: float = Field(4.0, gt=0, description="per axis [m/s^2]")
+    max_jerk_m_s3: float = Field(100.0, gt=0, description="per axis [m/s^3]")
+    step_m: float = Field(0.005, gt=0, le=0.1, description="default jog step [m]")
+
+
+class SafetySettings(_Section):
+    following_error_rad: float = Field(0.35, gt=0, description="trip above this |cmd - meas|")
+    following_error_time_s: float = Field(0.5, ge=0, description="... held this long [s]")
+    max_missed_reads: int = Field(10, ge=1, description="fault after this many failed reads")
+    estop_action: Literal["hold", "release"] = Field("hold", description="torque on e-stop")
+    torque_off_on_exit: bool = Field(True, description="relax the servos on shutdown")
+
+
+class ServerSettings(_Section):
+    host: str = Field("127.0.0.1", description="bind address; others need a token")
+    http_port: int = Field(8000, ge=0, le=65535, description="HTTP/WebSocket port")
+    viser_port: int = Field(8080, ge=0, le=65535, description="3D scene port")
+    token: str | None = Field(None, min_length=8, description="required for control if set")
+    telemetry_hz: float = Field(50.0, gt=0, le=200, description="WebSocket telemetry rate")
+    lease_timeout_s: float = Field(30.0, gt=0, description="control lease lapses when idle")
+
+
+class _TomlSource(PydanticBaseSettingsSource):
+    """The TOML file named by the current ``load_settings`` call."""
+
+    def get_field_value(self, field: Any, field_name: str) -> tuple[Any, str, bool]:
+        return None, field_name, False
+
+    def __call__(self) -> dict[str, Any]:
+        path = _TOML_PATH.get()
+        if path is None:
+            return {}
+        with open(path, "rb") as file:
+            return tomllib.load(file)
+
+
+class Settings(BaseSettings):
+    """Everything ``deltadash serve`` can be told."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="DELTADASH_", env_nested_delimiter="__", extra="forbid", frozen=True
+    )
+    robot: RobotSettings = RobotSettings()
+    hardware: HardwareSettings = HardwareSettings()
+    loop: LoopSettings = LoopSettings()
+    limits: LimitSettings = LimitSettings()
+    jog: JogSettings = JogSettings()
+    safety: SafetySettings = SafetySettings()
+    server: ServerSettings = ServerSettings()
+
+    @classmethod
+    def settings_customise_sources(
+        cls, settings_cls: type[BaseSettings], init_settings: Any, env_settings: Any, **_: Any
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        return init_settings, env_settings, _TomlSource(settings_cls)
+
+
+class ConfigError(ValueError):
+    """A config that cannot be used; the message lists each bad field and why."""
+
+
+def load_settings(path: str | Path | None = None, **overrides: Any) -> Settings:
+    """Settings from defaults, the TOML file at ``path``, the environment and ``overrides``.
+
+    ``overrides`` are nested dicts per section, e.g. ``hardware={"backend": "dynamixel"}``.
+
+    Raises:
+        ConfigError: naming every bad field (``hardware.baud: ...``) or an unreadable file.
+    """
+    toml_path = Path(path) if path is not None else None
+    token = _TOML_PATH.set(toml_path)
+    try:
+        return Settings(**overrides)
+    except ValidationError as exc:
+        lines = [f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors()]
+        raise ConfigError("bad config:\n  " + "\n  ".join(lines)) from None
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ConfigError(f"cannot read config {toml_path}: {exc}") from None
+    finally:
+        _TOML_PATH.reset(token)

@@ -1,0 +1,138 @@
+"""The one gate every goal passes before it can reach a servo (like Klipper's check_move).
+
+Order of checks: finite -> inside the workspace with margin and below the ceiling ->
+IK on the branch nearest the current joints -> joint limits -> distance from singularity.
+REST goals that fail are refused with the reason (and the nearest reachable point when
+the workspace is the problem); jog goals are clamped onto the workspace instead. Joint
+speed is limited per tick, so even a gated goal reaches the servos gradually.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from kinematics import DeltaError, LinearDelta, RotaryDelta
+
+FAR_M = 10.0  # goals beyond this are scaled back before projecting (still refused)
+
+
+class GoalRejected(ValueError):
+    """A goal failed the gate; ``nearest`` is the closest acceptable point when known."""
+
+    def __init__(self, reason: str, nearest: np.ndarray | None = None) -> None:
+        if nearest is not None:
+            mm = ", ".join(f"{v:.4f}" for v in nearest)
+            reason = f"{reason}; nearest reachable point [{mm}] m"
+        super().__init__(reason)
+        self.nearest = nearest
+
+
+@dataclass(frozen=True)
+class Gate:
+    """Checks and limits for one robot; pure (no state), safe from any thread.
+
+    joint_min_rad / joint_max_rad: per-joint limits, shape (3,); margin_m: distance kept
+    from the workspace boundary; z_max_m: ceiling for the platform; min_dexterity: lowest
+    1/cond(J) accepted; max_step_rad: largest joint change per tick (speed * period).
+    """
+
+    robot: RotaryDelta | LinearDelta
+    joint_min_rad: tuple[float, float, float]
+    joint_max_rad: tuple[float, float, float]
+    margin_m: float
+    z_max_m: float
+    min_dexterity: float
+    max_step_rad: float
+
+    def inside(self, point: np.ndarray) -> bool:
+        """Within the workspace margin and below the ceiling."""
+        if not point[2] <= self.z_max_m:
+            return False
+        return bool(self.robot.reachable(point, margin=self.margin_m))
+
+    def nearest(self, point: np.ndarray) -> np.ndarray:
+        """The closest point that passes :meth:`inside` (``point`` itself if it does)."""
+        largest = float(np.abs(point).max())
+        if largest > FAR_M:  # same direction, without squaring 1e300
+            direction = point / largest
+            point = direction * (FAR_M / float(np.linalg.norm(direction)))
+        return self.robot.project(point, margin=self.margin_m, z_max=self.z_max_m).point
+
+    def check_point(self, point: Any) -> np.ndarray:
+        """A finite (3,) goal inside the workspace, or GoalRejected naming the problem."""
+        goal = np.asarray(point, dtype=np.float64)
+        if goal.shape != (3,):
+            raise GoalRejected(f"position_m: expected 3 numbers, got shape {goal.shape}")
+        if not np.isfinite(goal).all():
+            raise GoalRejected(f"position_m: must be finite, got {goal.tolist()}")
+        if not self.inside(goal):
+            raise GoalRejected("position_m: outside the workspace", self.nearest(goal))
+        return goal
+
+    def clamp_point(self, point: np.ndarray) -> np.ndarray:
+        """Jog semantics: a goal outside the workspace moves to the nearest inside point."""
+        return point if self.inside(point) else self.nearest(point)
+
+    def clamp_towards(self, start: np.ndarray, target: np.ndarray, near: np.ndarray) -> np.ndarray:
+        """Jog semantics: the point nearest ``target`` that passes every check.
+
+        The workspace projection first; if that point breaks a joint limit or comes too
+        close to a singularity, the furthest passing point on the way from ``start`` (which
+        passes) towards it. Raises GoalRejected only if ``start`` itself fails.
+        """
+        clamped = self.clamp_point(target)
+        if self._passes(clamped, near):
+            return clamped
+        if not self._passes(start, near):
+            raise GoalRejected("the current position fails the gate; move it back first")
+        good, bad = start, clamped
+        for _ in range(40):  # ~1e-12 of the jog length
+            middle = 0.5 * (good + bad)
+            good, bad = (middle, bad) if self._passes(middle, near) else (good, middle)
+        return good
+
+    def _passes(self, point: np.ndarray, near: np.ndarray) -> bool:
+        try:
+            self.solve(point, near)
+        except GoalRejected:
+            return False
+        return self.inside(point)
+
+    def solve(self, point: np.ndarray, near: np.ndarray) -> np.ndarray:
+        """Joints for a point that passed :meth:`check_point`; GoalRejected if unusable."""
+        joints, ok = self.robot.ik(point, near=near)
+        if not ok:
+            raise GoalRejected("position_m: no joint solution", self.nearest(point))
+        return self.check_joints(joints)
+
+    def check_joints(self, joints: np.ndarray) -> np.ndarray:
+        """Joint limits and the singularity margin; returns ``joints`` or raises."""
+        for i, (value, low, high) in enumerate(
+            zip(joints, self.joint_min_rad, self.joint_max_rad, strict=True)
+        ):
+            if not low <= value <= high:
+                raise GoalRejected(
+                    f"joint {i + 1}: {math.degrees(value):.1f} deg outside its limits "
+                    f"[{math.degrees(low):.1f}, {math.degrees(high):.1f}] deg"
+                )
+        try:
+            dexterity = float(self.robot.dexterity(joints))
+        except DeltaError as exc:
+            raise GoalRejected(f"joints: {exc}") from exc
+        if not dexterity >= self.min_dexterity:
+            raise GoalRejected(
+                f"too close to a singularity (1/cond(J) = {dexterity:.3f} < {self.min_dexterity})"
+            )
+        return joints
+
+    def limit_step(self, joints: np.ndarray, previous: np.ndarray) -> np.ndarray:
+        """``joints`` or, if any joint would move faster than allowed, a scaled-down step."""
+        step = joints - previous
+        largest = float(np.abs(step).max())
+        if largest <= self.max_step_rad:
+            return joints
+        return previous + step * (self.max_step_rad / largest)

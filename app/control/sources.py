@@ -1,0 +1,128 @@
+"""Goal sources: what the loop asks of the robot each tick, in the active mode.
+
+A source returns a ``Setpoint`` per tick: a platform point (base frame) or joint angles,
+with the velocity it carries. Jog follows an operator target that may jump, along an
+online jerk-limited path (ruckig); move-to runs one precomputed ruckig trajectory in
+Cartesian or joint space. Test trajectories and hold-in-world plug in the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from ruckig import InputParameter, OutputParameter, Result, Ruckig
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """One tick's request: exactly one of ``point_m`` (3,) or ``joints_rad`` (3,)."""
+
+    point_m: np.ndarray | None = None
+    joints_rad: np.ndarray | None = None
+    finished: bool = False
+
+
+class GoalSource(Protocol):
+    """A mode's goal generator; called from the control thread only."""
+
+    name: str
+
+    def next(self, dt_s: float) -> Setpoint:
+        """The setpoint for the tick ``dt_s`` [s] after the previous one."""
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Per-axis velocity, acceleration and jerk limits [units/s, /s^2, /s^3]."""
+
+    velocity: float
+    acceleration: float
+    jerk: float
+
+
+def _ruckig_input(start: np.ndarray, limits: Limits) -> InputParameter:
+    inp = InputParameter(3)
+    inp.current_position = start.tolist()
+    inp.current_velocity = [0.0, 0.0, 0.0]
+    inp.current_acceleration = [0.0, 0.0, 0.0]
+    inp.target_position = start.tolist()
+    inp.max_velocity = [limits.velocity] * 3
+    inp.max_acceleration = [limits.acceleration] * 3
+    inp.max_jerk = [limits.jerk] * 3
+    return inp
+
+
+class JogSource:
+    """Follows an operator target along a jerk-limited path recomputed every tick."""
+
+    name = "jog"
+
+    def __init__(self, start_m: np.ndarray, limits: Limits, dt_s: float) -> None:
+        self._otg = Ruckig(3, dt_s)
+        self._inp = _ruckig_input(np.asarray(start_m, dtype=np.float64), limits)
+        self._out = OutputParameter(3)
+
+    @property
+    def target_m(self) -> np.ndarray:
+        return np.array(self._inp.target_position)
+
+    @property
+    def commanded_m(self) -> np.ndarray:
+        return np.array(self._inp.current_position)
+
+    def set_target(self, target_m: np.ndarray) -> None:
+        """New target (already gated); the path bends towards it from where it is now."""
+        self._inp.target_position = np.asarray(target_m, dtype=np.float64).tolist()
+
+    def next(self, dt_s: float) -> Setpoint:
+        result = self._otg.update(self._inp, self._out)
+        if result not in (Result.Working, Result.Finished):
+            raise RuntimeError(f"ruckig could not plan the jog path: {result}")
+        self._out.pass_to_input(self._inp)
+        return Setpoint(point_m=np.array(self._out.new_position))
+
+
+class MoveSource:
+    """One smooth point-to-point move (thesis ch. 5.2), Cartesian or in joint space."""
+
+    def __init__(
+        self,
+        start: np.ndarray,
+        target: np.ndarray,
+        limits: Limits,
+        duration_s: float | None,
+        joint_space: bool,
+    ) -> None:
+        self.name = "move-joints" if joint_space else "move"
+        self.joint_space = joint_space
+        inp = _ruckig_input(np.asarray(start, dtype=np.float64), limits)
+        inp.target_position = np.asarray(target, dtype=np.float64).tolist()
+        if duration_s is not None:
+            inp.minimum_duration = duration_s
+        self._trajectory = _plan(inp)
+        self._t = 0.0
+
+    @property
+    def duration_s(self) -> float:
+        return float(self._trajectory.duration)
+
+    def next(self, dt_s: float) -> Setpoint:
+        self._t = min(self._t + dt_s, self.duration_s)
+        position, _, _ = self._trajectory.at_time(self._t)
+        value = np.array(position)
+        done = self._t >= self.duration_s
+        if self.joint_space:
+            return Setpoint(joints_rad=value, finished=done)
+        return Setpoint(point_m=value, finished=done)
+
+
+def _plan(inp: InputParameter):
+    from ruckig import Trajectory
+
+    trajectory = Trajectory(3)
+    result = Ruckig(3).calculate(inp, trajectory)
+    if result not in (Result.Working, Result.Finished):
+        raise ValueError(f"no smooth path to the target ({result})")
+    return trajectory

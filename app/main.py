@@ -1,0 +1,106 @@
+"""The FastAPI application: its lifespan owns the bus and the control loop.
+
+Startup opens the configured backend (simulator, emulator or real servos) and starts the
+controller's thread; shutdown stops motion, relaxes the servos per config and closes the
+bus. Errors map to HTTP codes in one place: a bad goal is 422, a robot that cannot move
+now is 409, a bus that does not answer is 503; never a 500 for operator input.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator, Callable
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from fastapi.staticfiles import StaticFiles
+
+from app.api import robot, telemetry
+from app.api.deps import Lease
+from app.api.serialize import floats
+from app.backends import open_backend
+from app.config import Settings
+from app.control.commands import MotionRefused
+from app.control.controller import Controller
+from app.control.gate import GoalRejected
+from hardware.errors import BusError
+
+STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
+
+
+def _error(status: int, detail: str, **extra: Any) -> JSONResponse:
+    return JSONResponse({"detail": detail, **extra}, status_code=status)
+
+
+def _field_errors(exc: RequestValidationError) -> str:
+    """'position_m.1: Input should be a finite number' per error; never echoes raw input."""
+    parts = []
+    for error in exc.errors():
+        location = ".".join(str(p) for p in error["loc"] if p != "body") or "body"
+        parts.append(f"{location}: {error['msg']}")
+    return "; ".join(parts)
+
+
+def _install_error_handlers(app: FastAPI) -> None:
+    @app.exception_handler(RequestValidationError)
+    async def invalid_request(_: Request, exc: RequestValidationError) -> JSONResponse:
+        return _error(422, _field_errors(exc))
+
+    @app.exception_handler(GoalRejected)
+    async def goal_rejected(_: Request, exc: GoalRejected) -> JSONResponse:
+        nearest = None if exc.nearest is None else floats(exc.nearest)
+        return _error(422, str(exc), nearest_m=nearest)
+
+    @app.exception_handler(MotionRefused)
+    async def motion_refused(_: Request, exc: MotionRefused) -> JSONResponse:
+        return _error(409, str(exc))
+
+    @app.exception_handler(BusError)
+    async def bus_error(_: Request, exc: BusError) -> JSONResponse:
+        return _error(503, f"servo bus: {exc}")
+
+    @app.exception_handler(TimeoutError)
+    async def timeout(_: Request, exc: TimeoutError) -> JSONResponse:
+        return _error(503, "the control loop did not answer in time")
+
+    @app.exception_handler(RuntimeError)
+    async def runtime(_: Request, exc: RuntimeError) -> JSONResponse:
+        return _error(503, str(exc))
+
+    @app.exception_handler(ValueError)
+    async def value_error(_: Request, exc: ValueError) -> JSONResponse:
+        return _error(422, str(exc))
+
+
+def create_app(settings: Settings, backend_opener: Callable = open_backend) -> FastAPI:
+    """The app for ``settings``; ``backend_opener`` is swappable for tests."""
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        with backend_opener(settings) as backend:
+            controller = Controller(settings, backend.bus, backend.kind, backend.description)
+            controller.start()
+            app.state.controller = controller
+            app.state.backend = backend
+            try:
+                yield
+            finally:
+                await asyncio.to_thread(controller.stop)
+
+    app = FastAPI(
+        title="deltadash",
+        description="Teleoperation API of a Delta robot. SI units (m, rad, s), base frame.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.lease = Lease()
+    _install_error_handlers(app)
+    app.include_router(robot.router, prefix="/api")
+    app.include_router(telemetry.router, prefix="/api")
+    if (STATIC_DIR / "index.html").exists():
+        app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
+    return app

@@ -1,0 +1,76 @@
+"""``deltadash serve``: start the control server (and print where to find it)."""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import os
+import sys
+from typing import Any
+
+from app.config import ConfigError, Settings, load_settings
+
+
+def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = commands.add_parser(
+        "serve",
+        help="start the control server (simulator by default)",
+        description="Start the HTTP/WebSocket control server and its 200 Hz control loop.",
+    )
+    parser.add_argument("--config", help="TOML config file (see app/config.py)")
+    parser.add_argument("--backend", choices=["sim", "emulated", "dynamixel"])
+    parser.add_argument("--port", help="serial port of the servo bus, e.g. /dev/ttyUSB0")
+    parser.add_argument("--baud", type=int, help="bus baud rate [bit/s], e.g. 4000000")
+    parser.add_argument("--host", help="bind address (default 127.0.0.1)")
+    parser.add_argument("--http-port", type=int, help="HTTP port (default 8000)")
+    parser.add_argument(
+        "--token",
+        default=os.environ.get("DELTADASH_TOKEN"),
+        help="control token ($DELTADASH_TOKEN)",
+    )
+    parser.set_defaults(handler=run)
+    return parser
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    hardware = {k: v for k, v in (("backend", args.backend), ("port", args.port),
+                                  ("baud", args.baud)) if v is not None}  # fmt: skip
+    server = {k: v for k, v in (("host", args.host), ("http_port", args.http_port),
+                                ("token", args.token)) if v is not None}  # fmt: skip
+    return {key: value for key, value in (("hardware", hardware), ("server", server)) if value}
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def check_exposure(settings: Settings) -> None:
+    """Binding beyond loopback without a token would hand the robot to the network."""
+    if not _is_loopback(settings.server.host) and settings.server.token is None:
+        raise ConfigError(
+            f"server.host = {settings.server.host!r} is reachable from other machines: "
+            "set a token (--token or DELTADASH_TOKEN, 8+ characters)"
+        )
+
+
+def run(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from app.main import create_app
+
+    try:
+        settings = load_settings(args.config, **_overrides(args))
+        check_exposure(settings)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    server = settings.server
+    print(f"deltadash: dashboard and API on http://{server.host}:{server.http_port}/ "
+          f"(API docs at /docs), backend {settings.hardware.backend}", flush=True)  # fmt: skip
+    uvicorn.run(create_app(settings), host=server.host, port=server.http_port, log_level="info")
+    return 0

@@ -1,0 +1,117 @@
+"""The loop on the emulated bus: reaching goals, jogging, moves, e-stop, faults."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .conftest import wait_for
+
+
+def _status(client):
+    return client.get("/api/status").json()
+
+
+def _near(client, target, tol_m=1e-3) -> bool:
+    measured = _status(client)["ee"]["position_m"]
+    return None not in measured and np.linalg.norm(np.subtract(measured, target)) < tol_m
+
+
+def test_status_has_the_fixed_fields(client):
+    status = _status(client)
+    for key in ("mode", "backend", "faults"):
+        assert key in status
+    assert len(status["joints"]["position_rad"]) == 3
+    assert len(status["ee"]["position_m"]) == 3 and len(status["goal"]["position_m"]) == 3
+    for key in ("target_hz", "measured_hz", "jitter_p99_ms", "overruns"):
+        assert key in status["loop"]
+    assert status["loop"]["target_hz"] == 200.0
+
+
+def test_goal_is_reached_and_the_loop_keeps_counting(fresh):
+    assert fresh.post("/api/torque", json={"enabled": True}).status_code == 200
+    goal = [0.03, -0.02, -0.23]
+    assert fresh.post("/api/goal", json={"position_m": goal}).status_code == 200
+    wait_for(lambda: _near(fresh, goal), "the platform to reach the goal")
+    status = _status(fresh)
+    assert status["mode"] == "jog" and status["faults"] == []
+    assert status["goal"]["position_m"] == goal
+    before = status["loop"]["ticks"]
+    wait_for(lambda: _status(fresh)["loop"]["ticks"] > before + 20, "more ticks")
+
+
+def test_jog_steps_add_up_and_clamp_at_the_boundary(fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    start = np.array([0.0, 0.0, -0.22])
+    fresh.post("/api/goal", json={"position_m": start.tolist()})
+    for _ in range(3):
+        assert fresh.post("/api/jog", json={"delta_m": [0.01, 0.0, 0.0]}).status_code == 200
+    target = start + [0.03, 0.0, 0.0]
+    wait_for(lambda: _near(fresh, target), "three jog steps")
+    response = fresh.post("/api/jog", json={"delta_m": [1.0, 0.0, 0.0]})
+    assert response.status_code == 200  # clamped, not refused
+    clamped = response.json()["result"]
+    from kinematics import THESIS_DELTA
+
+    assert THESIS_DELTA.reachable(clamped) and clamped[0] < 1.0
+
+
+def test_move_cartesian_and_joint_space(fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    goal = [-0.02, 0.02, -0.25]
+    response = fresh.post("/api/move", json={"position_m": goal, "duration_s": 0.5})
+    assert response.status_code == 200 and response.json()["result"]["duration_s"] >= 0.5
+    wait_for(lambda: _near(fresh, goal), "the Cartesian move")
+    wait_for(lambda: _status(fresh)["mode"] == "idle", "the move to finish")
+    joints = [0.4, 0.5, 0.6]
+    assert fresh.post("/api/move", json={"joints_rad": joints}).status_code == 200
+
+    def at_joints() -> bool:
+        measured = _status(fresh)["joints"]["position_rad"]
+        return np.allclose(measured, joints, atol=0.01)
+
+    wait_for(at_joints, "the joint-space move")
+
+
+def test_estop_stops_and_nothing_moves_until_reset(fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    fresh.post("/api/goal", json={"position_m": [0.0, 0.04, -0.2]})
+    assert fresh.post("/api/estop").status_code == 200
+    status = _status(fresh)
+    assert status["mode"] == "estop" and status["estopped"]
+    for path, body in (("/api/goal", {"position_m": [0, 0, -0.22]}),
+                       ("/api/jog", {"delta_m": [0.01, 0, 0]}),
+                       ("/api/move", {"position_m": [0, 0, -0.22]}),
+                       ("/api/torque", {"enabled": True})):  # fmt: skip
+        response = fresh.post(path, json=body)
+        assert response.status_code == 409 and "reset" in response.json()["detail"]
+    held = _status(fresh)["joints"]["commanded_rad"]
+    assert fresh.post("/api/reset").status_code == 200
+    assert _status(fresh)["mode"] == "idle"
+    assert _status(fresh)["joints"]["commanded_rad"] == held  # reset moves nothing
+
+
+def test_hardware_error_faults_with_servo_and_reason_and_reset_reboots(client, fresh):
+    emulator = client.app.state.backend.emulator
+    fresh.post("/api/torque", json={"enabled": True})
+    emulator.raise_hardware_error(2, 0x04)  # overheating
+    wait_for(lambda: _status(fresh)["mode"] == "fault", "the hardware error fault")
+    fault = _status(fresh)["faults"][0]
+    assert fault["servo_id"] == 2 and "overheat" in fault["reason"].lower()
+    assert fresh.post("/api/goal", json={"position_m": [0, 0, -0.22]}).status_code == 409
+    result = fresh.post("/api/reset").json()["result"]
+    assert result["rebooted"] == [2]
+    wait_for(lambda: _status(fresh)["faults"] == [], "the fault to clear")
+    assert _status(fresh)["mode"] == "idle" and not _status(fresh)["torque"]
+
+
+def test_missed_reads_fault_after_the_limit(client, fresh):
+    emulator = client.app.state.backend.emulator
+    emulator.inject(3, unplugged=True)
+    try:
+        wait_for(lambda: _status(fresh)["mode"] == "fault", "the bus fault")
+        fault = _status(fresh)["faults"][0]
+        assert fault["source"] == "bus" and "3" in fault["reason"]
+    finally:
+        emulator.clear_faults()
+    fresh.post("/api/reset")
+    wait_for(lambda: _status(fresh)["faults"] == [], "the bus to recover")

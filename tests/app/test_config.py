@@ -1,0 +1,52 @@
+"""Config loading: defaults, TOML, environment, overrides and clear errors."""
+
+from __future__ import annotations
+
+import pytest
+
+from app.cli import main
+from app.config import ConfigError, load_settings
+from kinematics import THESIS_DELTA
+
+
+def test_defaults_are_the_thesis_robot_on_localhost():
+    settings = load_settings()
+    assert settings.robot.build() == THESIS_DELTA
+    assert settings.server.host == "127.0.0.1" and settings.loop.rate_hz == 200.0
+
+
+def test_toml_then_env_then_overrides(tmp_path, monkeypatch):
+    path = tmp_path / "robot.toml"
+    path.write_text('[hardware]\nport = "/dev/ttyACM0"\nbaud = 57600\n[loop]\nrate_hz = 100\n')
+    settings = load_settings(path)
+    assert settings.hardware.port == "/dev/ttyACM0" and settings.loop.rate_hz == 100
+    monkeypatch.setenv("DELTADASH_LOOP__RATE_HZ", "250")
+    assert load_settings(path).loop.rate_hz == 250
+    merged = load_settings(path, hardware={"baud": 4_000_000})
+    assert merged.hardware.baud == 4_000_000 and merged.hardware.port == "/dev/ttyACM0"
+
+
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        ("[robot]\nl = 0.1\n", "robot"),
+        ("[hardware]\nbaud = 5\n", "hardware.baud"),
+        ("[loop]\nrate_hz = -1\n", "loop.rate_hz"),
+        ("[loop]\nrate = 100\n", "loop.rate"),
+        ('[hardware]\nbackend = "usb"\n', "hardware.backend"),
+        ("[[hardware.joints]]\nservo_id = 1\n", "hardware.joints"),
+        ("[server\n", "cannot read"),
+    ],
+)
+def test_bad_config_names_the_field(tmp_path, text, field):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
+        load_settings(path)
+
+
+def test_serve_refuses_a_bad_config_at_start(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text("[loop]\nrate_hz = 0\n")
+    assert main(["serve", "--config", str(path)]) == 2
+    assert "loop.rate_hz" in capsys.readouterr().err
