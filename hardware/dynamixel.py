@@ -76,6 +76,7 @@ class DynamixelBus:
 
     # -- ServoBus ------------------------------------------------------------------------
     def connect(self) -> None:
+        self.disconnect()  # reconnecting must not leak the previous port
         self.link.open()
         port = self.link.port
         goal = Reg.GOAL_POSITION
@@ -211,11 +212,12 @@ class DynamixelBus:
         if writer is None:
             self.link.require_port("sync write GOAL_POSITION")
             return
-        for servo_id, value in zip(self.ids, ticks, strict=True):
-            writer.changeParam(servo_id, list(int(value).to_bytes(4, "little", signed=True)))
-        self.link.transact(
-            self.ids, "sync write GOAL_POSITION", lambda: (None, writer.txPacket(), 0)
-        )
+        with self.link.lock:  # the parameters and the packet they build belong together
+            for servo_id, value in zip(self.ids, ticks, strict=True):
+                writer.changeParam(servo_id, list(int(value).to_bytes(4, "little", signed=True)))
+            self.link.transact(
+                self.ids, "sync write GOAL_POSITION", lambda: (None, writer.txPacket(), 0)
+            )
 
     def _read_block(self) -> tuple[dict[int, bytes], dict[int, tuple[str, ...]]]:
         """State-block bytes per servo id, and the hardware errors of servos that alert."""
