@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import sys
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
@@ -29,6 +30,7 @@ from app.control.controller import Controller
 from app.control.gate import GoalRejected
 from hardware.errors import BusError
 
+GIL_SWITCH_S = 2.5e-4
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 
 
@@ -81,6 +83,9 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        # The control thread must get the GIL back within a fraction of a tick when it wakes;
+        # CPython's default switch interval (5 ms) let other threads delay ticks that long.
+        sys.setswitchinterval(GIL_SWITCH_S)
         with backend_opener(settings) as backend:
             controller = Controller(settings, backend.bus, backend.kind, backend.description)
             controller.start()

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Iterator
 
 import pytest
 from fastapi.testclient import TestClient
 
+from app.backends import open_backend
 from app.config import load_settings
 from app.main import create_app
 
@@ -25,8 +27,10 @@ def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = WAIT_S
 
 
 def make_client(**overrides) -> TestClient:
+    """A client of an app on the emulated bus, the emulator in-process for fault injection."""
     settings = load_settings(hardware={"backend": "emulated"}, **overrides)
-    return TestClient(create_app(settings))
+    opener = functools.partial(open_backend, emulator_in_process=True)
+    return TestClient(create_app(settings, backend_opener=opener))
 
 
 @pytest.fixture(scope="module")

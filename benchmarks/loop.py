@@ -1,0 +1,127 @@
+"""Control-loop timing under load: `deltadash serve` with WebSocket telemetry clients.
+
+Usage: python benchmarks/loop.py [--backend emulated] [--seconds 60] [--clients 5]
+                                 [--rates 200,500,1000] [--torque]
+
+Starts the server as a subprocess per loop rate, connects telemetry clients at 50 Hz
+(and with --torque enables torque and jogs the robot in a circle), and after the run
+prints the loop's own figures from /api/status (rate, lateness p50/p99, worst tick,
+overruns) and the server's CPU use. Lateness is how far a tick started after its deadline.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+import urllib.request
+
+import websockets
+
+PORT = 8765
+
+
+def _http(method: str, path: str, body: dict | None = None) -> dict:
+    data = None if body is None else json.dumps(body).encode()
+    request = urllib.request.Request(
+        f"http://127.0.0.1:{PORT}{path}", data=data, method=method,
+        headers={"content-type": "application/json"},
+    )  # fmt: skip
+    with urllib.request.urlopen(request, timeout=5) as response:
+        return json.load(response)
+
+
+def _wait_up(timeout_s: float = 30.0) -> None:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        try:
+            _http("GET", "/api/status")
+            return
+        except OSError:
+            time.sleep(0.2)
+    raise RuntimeError("server did not come up")
+
+
+async def _client(seconds: float) -> int:
+    count = 0
+    async with websockets.connect(f"ws://127.0.0.1:{PORT}/api/telemetry?hz=50") as ws:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            await ws.recv()
+            count += 1
+    return count
+
+
+async def _jog_circle(seconds: float) -> None:
+    end, t = time.monotonic() + seconds, 0.0
+    while time.monotonic() < end:
+        goal = [0.04 * math.cos(t), 0.04 * math.sin(t), -0.23]
+        await asyncio.to_thread(_http, "POST", "/api/goal", {"position_m": goal})
+        t += 0.2
+        await asyncio.sleep(0.1)
+
+
+def _cpu_s(pid: int) -> float:
+    with open(f"/proc/{pid}/stat") as file:
+        fields = file.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+async def _load(args: argparse.Namespace) -> list[int]:
+    tasks = [_client(args.seconds) for _ in range(args.clients)]
+    if args.torque:
+        tasks.append(_jog_circle(args.seconds))
+    return await asyncio.gather(*tasks)
+
+
+def run_once(args: argparse.Namespace, rate_hz: float) -> None:
+    env = {
+        **os.environ,
+        "DELTADASH_HARDWARE__BACKEND": args.backend,
+        "DELTADASH_LOOP__RATE_HZ": str(rate_hz),
+        "DELTADASH_SERVER__HTTP_PORT": str(PORT),
+    }
+    server = subprocess.Popen([sys.executable, "-m", "app.cli", "serve"], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    try:
+        _wait_up()
+        if args.torque:
+            _http("POST", "/api/torque", {"enabled": True})
+        cpu0, wall0 = _cpu_s(server.pid), time.monotonic()
+        received = asyncio.run(_load(args))
+        cpu = (_cpu_s(server.pid) - cpu0) / (time.monotonic() - wall0)
+        loop = _http("GET", "/api/status")["loop"]["since_start"]
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+    messages = min(r for r in received if r is not None)
+    print(
+        f"{args.backend:9} {rate_hz:6.0f} Hz target: measured {loop['measured_hz']:7.1f} Hz, "
+        f"lateness p50 {loop['jitter_p50_ms']:.2f} ms p99 {loop['jitter_p99_ms']:.2f} ms, "
+        f"worst {loop['worst_ms']:.2f} ms, overruns {loop['overruns']}/{loop['ticks']}, "
+        f"server CPU {100 * cpu:.0f} % of a core, telemetry msgs/client {messages}"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--backend", default="emulated", choices=["sim", "emulated"])
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--clients", type=int, default=5)
+    parser.add_argument("--rates", default="200")
+    parser.add_argument("--torque", action="store_true", help="enable torque and jog meanwhile")
+    args = parser.parse_args()
+    print(f"python {platform.python_version()}, {os.cpu_count()} cores, {platform.machine()}, "
+          f"load average {os.getloadavg()[0]:.2f}")  # fmt: skip
+    for rate in args.rates.split(","):
+        run_once(args, float(rate))
+
+
+if __name__ == "__main__":
+    main()
