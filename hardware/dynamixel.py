@@ -250,6 +250,7 @@ class DynamixelBus:
         try:
             result = reader.txPacket()
         except (OSError, IndexError, ValueError) as exc:
+            self.link.release_port()
             return {}, {i: repr(exc) for i in self.ids}
         if result != sdk.COMM_SUCCESS:
             return {}, {i: comm_reason(result) for i in self.ids}
@@ -261,7 +262,7 @@ class DynamixelBus:
             try:
                 data, result, error = packets.readRx(port, servo_id, STATE_BLOCK_SIZE)
             except (OSError, IndexError, ValueError) as exc:
-                data, result, error = [], sdk.COMM_RX_CORRUPT, 0
+                self.link.release_port()
                 failed[servo_id] = repr(exc)
                 continue
             if result != sdk.COMM_SUCCESS:

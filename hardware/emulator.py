@@ -11,6 +11,7 @@ packets. Faults are injected per servo through `inject` (see emulated_servo.Faul
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import select
 import threading
@@ -33,6 +34,8 @@ from hardware.protocol import (
 from hardware.protocol import status_packet as _status_packet
 from hardware.registers import RAD_PER_TICK, Reg
 from hardware.servo_dynamics import advance_servos
+
+_log = logging.getLogger(__name__)
 
 _GROUP = {
     Instruction.SYNC_READ,
@@ -60,8 +63,12 @@ class ServoEmulator:
         self.lock = threading.RLock()
         self.packets_received = 0
         self.crc_errors = 0
+        self.internal_errors = 0
+        self.unread_replies = 0
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)  # no echo, no line editing: bytes pass as sent
+        # Never block on a client that stopped reading: a real bus does not wait either.
+        os.set_blocking(self._master, False)
         self.port = os.ttyname(self._slave)
         self._wake_r, self._wake_w = os.pipe()
         self._running = False
@@ -160,7 +167,11 @@ class ServoEmulator:
                 continue
             for packet in self._reader.feed(data):
                 with self.lock:
-                    self.handle(packet)
+                    try:
+                        self.handle(packet)
+                    except Exception:  # a bug must cost one packet, not the whole bus
+                        self.internal_errors += 1
+                        _log.exception("emulator failed on %r", packet)
 
     def handle(self, packet: Packet) -> None:
         """Answer one instruction packet as the bus of servos would."""
@@ -227,7 +238,10 @@ class ServoEmulator:
         delay = servo.return_delay_s + faults.delay_s
         if delay > 0:
             time.sleep(delay)
-        os.write(self._master, packet)
+        try:
+            os.write(self._master, packet)
+        except BlockingIOError:  # nobody reads the pty and its buffer is full: bytes lost
+            self.unread_replies += 1
 
     def _advance(self) -> None:
         now = time.monotonic()

@@ -13,6 +13,9 @@ from typing import TYPE_CHECKING
 from hardware.emulated_servo import Reply
 from hardware.protocol import BROADCAST_ID, HEADER, Instruction, Packet, StatusError, crc16
 
+# dynamixel-sdk's receive buffer (RXPACKET_MAX_LEN); no real reply is longer.
+MAX_PACKET_BYTES = 1024
+
 if TYPE_CHECKING:
     from hardware.emulated_servo import EmulatedServo
     from hardware.emulator import ServoEmulator
@@ -63,6 +66,8 @@ def _read_each(emulator: ServoEmulator, inst: int, requests: list[tuple[int, int
 
 def _fast_read(emulator: ServoEmulator, requests: list[tuple[int, int, int]]) -> None:
     total = 1 + sum(length + 4 for _, _, length in requests)  # INST + blocks (last CRC = CRC)
+    if total + 9 > MAX_PACKET_BYTES:
+        return  # longer than any servo's packet buffer: the request is not answered
     packet = bytearray(HEADER + bytes([BROADCAST_ID]) + total.to_bytes(2, "little") + b"\x55")
     senders: list[EmulatedServo] = []
     for servo_id, address, length in requests:

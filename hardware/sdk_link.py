@@ -109,6 +109,7 @@ class SdkLink:
                     value, result, error = attempt()
                 except _SDK_FAULTS as exc:
                     value, result, error, reason = None, sdk.COMM_RX_CORRUPT, 0, repr(exc)
+                    self.release_port()
                 else:
                     reason = comm_reason(result)
                 if result == sdk.COMM_SUCCESS:
@@ -123,6 +124,11 @@ class SdkLink:
                     self._counters.retries += 1
             self._counters.failures += 1
             raise CommError(ids, instruction, reason, self.max_tries)
+
+    def release_port(self) -> None:
+        """Clear the SDK's busy flag, which an exception mid-packet leaves set for good."""
+        if self.port is not None:
+            self.port.is_using = False
 
     def count_failure(self) -> None:
         """Record a give-up decided by the caller (e.g. a group read with a bad member)."""

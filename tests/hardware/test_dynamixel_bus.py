@@ -227,3 +227,12 @@ def test_stats_count_transactions(bus: DynamixelBus) -> None:
     stats = bus.stats
     assert stats.transactions == before + 2
     assert (stats.failed_tries, stats.retries, stats.failures) == (0, 0, 0)
+
+
+def test_bad_ids_are_named(bus: DynamixelBus) -> None:
+    with pytest.raises(CommError, match="read ID on servo 42 failed after 3 tries"):
+        bus.read_register(42, Reg.ID)
+    with pytest.raises(CommError, match="servo 42"):
+        bus.reboot([42])
+    with pytest.raises(ValueError, match="distinct"):
+        make_config("/dev/null", joints=(JointCalibration(1), JointCalibration(1)))

@@ -1,0 +1,104 @@
+"""The Delta's mass model for the simulator, and its gravity torques (Lagrangian statics).
+
+Defaults are the thesis's components (ch. 4.2): a 29 g nylon upper link, two CFRP rods of
+10.5 g each (with their ball joints) per leg, a 25 g platform and 82 g servos on the base.
+The lower link of each leg is treated as one uniform rod of both rods' mass (the thesis's
+model, ch. 3.2); the upper link as a uniform rod about the motor axis plus the servo's
+rotor inertia reflected through the gearbox.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from kinematics import RotaryDelta
+
+GRAVITY_M_S2 = 9.81
+
+
+@dataclass(frozen=True)
+class DeltaMasses:
+    """Masses [kg] and inertias [kg m^2] of the moving parts; all configurable.
+
+    upper_kg: one upper link; upper_inertia_kgm2: its inertia about the motor axis (None:
+    uniform rod, m L^2 / 3); rod_kg: one rod with its two ball joints; rods_per_leg: 2 for
+    a parallelogram; platform_kg: the moving platform; payload_kg: tool and load on the
+    platform (the thesis designs for up to 0.2 kg); servo_kg: one servo (on the base, so it
+    adds nothing to the arm's dynamics); rotor_inertia_kgm2: the motor's rotor about its own
+    axis, reflected to the output as rotor * gear_ratio^2 (ROBOTIS does not publish it:
+    0.4 g cm^2 is typical of a 13 mm coreless motor, an estimate).
+    """
+
+    upper_kg: float = 0.029
+    upper_inertia_kgm2: float | None = None
+    rod_kg: float = 0.0105
+    rods_per_leg: int = 2
+    platform_kg: float = 0.025
+    payload_kg: float = 0.0
+    servo_kg: float = 0.082
+    rotor_inertia_kgm2: float = 0.4e-7
+    gear_ratio: float = 212.6
+
+    def __post_init__(self) -> None:
+        for name in ("upper_kg", "rod_kg", "platform_kg", "payload_kg", "servo_kg"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} = {value!r} kg: must be finite and >= 0")
+        if self.platform_kg + self.payload_kg <= 0 or self.rods_per_leg < 1:
+            raise ValueError("the platform needs a mass and each leg at least one rod")
+
+    @property
+    def lower_kg(self) -> float:
+        """Mass of one leg's lower link (all its rods) [kg]."""
+        return self.rod_kg * self.rods_per_leg
+
+    @property
+    def platform_total_kg(self) -> float:
+        """Platform plus payload [kg]."""
+        return self.platform_kg + self.payload_kg
+
+    def upper_inertia(self, L: float) -> float:
+        """Upper link inertia about the motor axis [kg m^2] for link length `L` [m]."""
+        if self.upper_inertia_kgm2 is not None:
+            return self.upper_inertia_kgm2
+        return self.upper_kg * L * L / 3.0
+
+    @property
+    def armature_kgm2(self) -> float:
+        """The rotor's inertia seen at the output shaft [kg m^2]."""
+        return self.rotor_inertia_kgm2 * self.gear_ratio**2
+
+
+THESIS_MASSES = DeltaMasses()
+
+
+def gravity_torques(
+    robot: RotaryDelta,
+    masses: DeltaMasses,
+    joints: np.ndarray,
+    gravity: np.ndarray | tuple[float, float, float] = (0.0, 0.0, -GRAVITY_M_S2),
+) -> np.ndarray:
+    """Motor torques [N m] that hold the arm at rest at `joints` [rad], shape (3,).
+
+    Virtual work: the platform, payload and half of each lower link act at the platform
+    centre through the Jacobian (tau = -J^T F); each upper link's own weight at L/2 and the
+    other half of its lower link at the knee act on its motor directly. Positive torque
+    turns theta positive (upper link down). `gravity`: acceleration in the base frame.
+    """
+    g = np.asarray(gravity, dtype=float)
+    q = np.asarray(joints, dtype=float)
+    J = robot.jacobian(q)  # dP/dtheta, (3, 3)
+    platform_weight = (masses.platform_total_kg + 1.5 * masses.lower_kg) * g
+    taus = -(J.T @ platform_weight)
+    for i in range(3):
+        # d(knee)/d(theta_i) and d(centre of the upper link)/d(theta_i) in the base frame
+        alpha = 2.0 * math.pi * i / 3.0
+        dknee = robot.L * np.array(
+            [-math.cos(alpha) * math.sin(q[i]), -math.sin(alpha) * math.sin(q[i]), -math.cos(q[i])]
+        )
+        link_weight = (0.5 * masses.upper_kg + 0.5 * masses.lower_kg) * g
+        taus[i] -= dknee @ link_weight
+    return taus
