@@ -149,7 +149,8 @@ class ServoEmulator:
             present[i] = ticks.get(servo.servo_id, present[i])
             servo.table.set(Reg.PRESENT_POSITION, present[i])
             servo.table.set(Reg.GOAL_POSITION, present[i])
-        self.model.reset([p * RAD_PER_TICK for p in present])
+        offsets = [s.table.get(Reg.HOMING_OFFSET) for s in self.servos]
+        self.model.reset([(p - o) * RAD_PER_TICK for p, o in zip(present, offsets, strict=True)])
         self._last_step = time.monotonic()
 
     # -- serving -----------------------------------------------------------------------

@@ -49,7 +49,8 @@ def _build_command(servo: EmulatedServo) -> MotionCommand:
     return MotionCommand(
         torque_enabled=t.get(Reg.TORQUE_ENABLE) == 1,
         mode=OperatingMode(mode) if mode in OperatingMode._value2member_map_ else OperatingMode.PWM,
-        goal_position_rad=t.get(Reg.GOAL_POSITION) * RAD_PER_TICK,
+        # Present Position = shaft + Homing Offset, so the shaft's goal is the goal minus it.
+        goal_position_rad=(t.get(Reg.GOAL_POSITION) - t.get(Reg.HOMING_OFFSET)) * RAD_PER_TICK,
         goal_velocity_rad_s=velocity_to_rad_s(t.get(Reg.GOAL_VELOCITY)),
         goal_current_a=current_to_ampere(t.get(Reg.GOAL_CURRENT)),
         profile_velocity_rad_s=velocity_to_rad_s(t.get(Reg.PROFILE_VELOCITY)),
@@ -78,7 +79,8 @@ def store_state(servo: EmulatedServo, state: MotionState, now_s: float) -> None:
     current = max(-limit, min(limit, ampere_to_current(state.current_a)))
     moving = int(abs(velocity) > t.get(Reg.MOVING_THRESHOLD))
     # Clamped to the register's int32 so a runaway model cannot crash the emulator thread.
-    position = max(-(2**31), min(2**31 - 1, round(state.position_rad / RAD_PER_TICK)))
+    shaft = round(state.position_rad / RAD_PER_TICK)
+    position = max(-(2**31), min(2**31 - 1, shaft + t.get(Reg.HOMING_OFFSET)))
     goal = t.get(Reg.GOAL_POSITION)
     _PRESENT.pack_into(
         t.memory,

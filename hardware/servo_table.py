@@ -19,7 +19,9 @@ from hardware.registers import (
 )
 
 _VALID_MODES = {int(mode) for mode in OperatingMode}
-_POSITION_LIMITED_MODES = {OperatingMode.POSITION, OperatingMode.CURRENT_BASED_POSITION}
+# The e-manual: Min/Max Position Limit bound Goal Position in Position Control Mode only
+# (not in Extended Position nor Current-based Position Control Mode).
+_POSITION_LIMITED_MODES = {OperatingMode.POSITION}
 # Goal item -> (limit item, the goal must lie within +-limit or [min, max])
 _LIMITS = {
     Reg.GOAL_PWM: Reg.PWM_LIMIT,

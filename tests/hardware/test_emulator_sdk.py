@@ -184,3 +184,21 @@ def test_bulk_write_then_bulk_and_fast_bulk_read(sdk_port, emulator: ServoEmulat
     assert [reader.getData(i, r.address, r.size) for i, r in items] == expected
     assert reader.fastBulkRead() == OK
     assert [reader.getData(i, r.address, r.size) for i, r in items] == expected
+
+
+def test_homing_offset_shifts_present_position(sdk_port, emulator: ServoEmulator) -> None:
+    port, ph = sdk_port
+    emulator.place({1: 1000})
+    assert ph.write4ByteTxRx(port, 1, Reg.HOMING_OFFSET.address, 500) == (OK, 0)
+    assert ph.read4ByteTxRx(port, 1, Reg.PRESENT_POSITION.address) == (1500, OK, 0)
+    assert ph.write4ByteTxRx(port, 1, Reg.HOMING_OFFSET.address, (-200) & 0xFFFFFFFF) == (OK, 0)
+    value, result, _ = ph.read4ByteTxRx(port, 1, Reg.PRESENT_POSITION.address)
+    assert (value, result) == (800, OK)
+
+
+def test_position_limits_bind_position_mode_only(sdk_port) -> None:
+    port, ph = sdk_port
+    assert ph.write1ByteTxRx(port, 1, Reg.OPERATING_MODE.address, 5) == (OK, 0)
+    assert ph.write4ByteTxRx(port, 1, Reg.GOAL_POSITION.address, 9000) == (OK, 0)
+    assert ph.write1ByteTxRx(port, 2, Reg.OPERATING_MODE.address, 4) == (OK, 0)
+    assert ph.write4ByteTxRx(port, 2, Reg.GOAL_POSITION.address, (-9000) & 0xFFFFFFFF) == (OK, 0)
