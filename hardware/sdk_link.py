@@ -24,6 +24,7 @@ from hardware.registers import Reg, decode, hardware_error_names, to_unsigned
 
 T = TypeVar("T")
 PROTOCOL_VERSION = 2.0
+EXTRA_BAUDRATES = (4_500_000,)  # X-series rates dynamixel-sdk's PortHandler does not list
 # What can escape the SDK on a bad packet or a vanished port: serial errors are OSErrors,
 # malformed packets surface as IndexError/ValueError deep in its parsing.
 _SDK_FAULTS = (OSError, IndexError, ValueError, TypeError)
@@ -71,9 +72,16 @@ class SdkLink:
         port = sdk.PortHandler(self.port_name)
         try:
             opened = port.openPort() and port.setBaudRate(self.baudrate)
+            if not opened and self.baudrate in EXTRA_BAUDRATES:
+                # The SDK's list of rates stops at 4 Mbps; pyserial sets the X series' 4.5 Mbps
+                # as a custom rate, through the SDK's own setupPort.
+                port.baudrate = self.baudrate
+                opened = port.setupPort(self.baudrate)
         except _SDK_FAULTS as exc:
             raise CommError([], "open", f"cannot open {self.port_name}: {exc}") from exc
         if not opened:
+            with contextlib.suppress(*_SDK_FAULTS, AttributeError):
+                port.closePort()  # openPort opened it at the SDK's default rate
             raise CommError([], "open", f"{self.port_name} refused baud rate {self.baudrate}")
         self.port = port
         self._counters = _Counters()

@@ -236,3 +236,15 @@ def test_bad_ids_are_named(bus: DynamixelBus) -> None:
         bus.reboot([42])
     with pytest.raises(ValueError, match="distinct"):
         make_config("/dev/null", joints=(JointCalibration(1), JointCalibration(1)))
+
+
+def test_baud_rates_beyond_the_sdk_list(emulator: ServoEmulator) -> None:
+    bus = DynamixelBus(make_config(emulator.port, baudrate=4_500_000))
+    bus.connect()
+    try:
+        assert bus.link.port.getBaudRate() == 4_500_000
+        assert len(bus.scan()) == 3
+    finally:
+        bus.disconnect()
+    with pytest.raises(CommError, match="refused baud rate 12345"):
+        DynamixelBus(make_config(emulator.port, baudrate=12345)).connect()
