@@ -17,7 +17,7 @@ import select
 import threading
 import time
 import tty
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 
 from hardware import emulator_groups
 from hardware.emulated_servo import EmulatedServo, Faults, Reply
@@ -249,7 +249,3 @@ class ServoEmulator:
         advance_servos(self.model, self.servos, now - self._last_step, now)
         self._last_step = now
 
-
-def emulate(ids: Sequence[int] = (1, 2, 3)) -> ServoEmulator:
-    """A started emulator with `ids` (remember to stop() it, or use `with`)."""
-    return ServoEmulator(ids).start()
