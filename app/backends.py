@@ -57,7 +57,9 @@ def _emulator_process(ids: list[int]) -> Iterator[str]:
     """
     command = [sys.executable, "-m", "hardware.emulator_cli", "--return-delay-us", "0",
                "--ids", ",".join(map(str, ids))]  # fmt: skip
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
+    process = subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
+    )
     try:
         port = process.stdout.readline().strip() if process.stdout else ""
         if not port:

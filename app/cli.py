@@ -7,7 +7,7 @@ import json
 import math
 import sys
 
-from app import serve
+from app import run_cli, serve
 from hardware import emulator_cli
 from kinematics import THESIS_DELTA, DeltaError
 
@@ -55,6 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="deltadash", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
     serve.add_parser(commands)
+    run_cli.add_parser(commands)
     emulator_cli.add_parser(commands)
     ik = commands.add_parser("ik", help="inverse kinematics of the thesis robot (metres)")
     ik.add_argument("x", type=float)

@@ -104,7 +104,9 @@ class LoopSettings(_Section):
 
 
 class LimitSettings(_Section):
-    joint_speed_rad_s: float = Field(6.0, gt=0, description="largest commanded joint speed")
+    joint_speed_rad_s: float = Field(
+        7.5, gt=0, description="largest commanded joint speed [rad/s] (XM430-W210: 8.1 no-load)"
+    )
     workspace_margin_m: float = Field(0.002, ge=0, description="distance kept from the boundary")
     z_max_m: float = Field(-0.06, description="highest platform position allowed [m]")
     min_dexterity: float = Field(0.02, ge=0, lt=1, description="1/cond(J) kept above this")
@@ -134,6 +136,21 @@ class ServerSettings(_Section):
     lease_timeout_s: float = Field(30.0, gt=0, description="control lease lapses when idle")
 
 
+class RunSettings(_Section):
+    folder: str = Field("runs", description="where run logs and reports go (created)")
+
+    @property
+    def folder_path(self) -> Path:
+        return Path(self.folder).expanduser()
+
+    feedforward_lead_s: float = Field(
+        0.02, ge=0, le=0.5, description="feed-forward: command the trajectory this far ahead [s]"
+    )
+    stats_skip_s: float = Field(
+        0.5, ge=0, description="tracking stats leave out the first seconds of the timed part"
+    )
+
+
 class _TomlSource(PydanticBaseSettingsSource):
     """The TOML file named by the current ``load_settings`` call."""
 
@@ -161,6 +178,7 @@ class Settings(BaseSettings):
     jog: JogSettings = JogSettings()
     safety: SafetySettings = SafetySettings()
     server: ServerSettings = ServerSettings()
+    runs: RunSettings = RunSettings()
 
     @classmethod
     def settings_customise_sources(

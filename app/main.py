@@ -20,7 +20,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 
-from app.api import robot, telemetry
+from app.api import robot, runs, telemetry
 from app.api.deps import Lease
 from app.api.serialize import floats
 from app.backends import open_backend
@@ -28,6 +28,7 @@ from app.config import Settings
 from app.control.commands import MotionRefused
 from app.control.controller import Controller
 from app.control.gate import GoalRejected
+from app.runs.manager import RunManager
 from hardware.errors import BusError
 
 GIL_SWITCH_S = 2.5e-4
@@ -91,9 +92,11 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
             controller.start()
             app.state.controller = controller
             app.state.backend = backend
+            app.state.runs = RunManager(controller, settings.runs.folder_path)
             try:
                 yield
             finally:
+                await asyncio.to_thread(app.state.runs.close)
                 await asyncio.to_thread(controller.stop)
 
     app = FastAPI(
@@ -106,6 +109,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
     _install_error_handlers(app)
     app.include_router(robot.router, prefix="/api")
     app.include_router(telemetry.router, prefix="/api")
+    app.include_router(runs.router, prefix="/api")
     if (STATIC_DIR / "index.html").exists():
         app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
     return app

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.control.gate import GoalRejected
-from app.control.sources import JogSource, Limits, MoveSource
+from app.control.sources import GoalSource, JogSource, Limits, MoveSource
 from hardware.errors import BusError
 
 if TYPE_CHECKING:
@@ -62,6 +62,22 @@ class CommandsMixin:
         if joint_space:
             return self.submit(lambda: self._move(target, duration_s, True))
         return self.submit(lambda: self._move(goal, duration_s, False))
+
+    def run_source(
+        self: Controller,
+        source: GoalSource,
+        expected_start_m: np.ndarray,
+        tolerance_m: float = 2e-3,
+    ) -> Future:
+        """Hand the loop a planned source that starts at ``expected_start_m`` [m].
+
+        The plan was checked from that point; if the robot has moved since, it is refused.
+        """
+        return self.submit(lambda: self._run_source(source, expected_start_m, tolerance_m))
+
+    def stop_source(self: Controller, source: GoalSource) -> Future:
+        """Stop ``source`` if it is still the active one; the robot holds where it is."""
+        return self.submit(lambda: self._stop_source(source))
 
     def set_torque(self: Controller, enabled: bool) -> Future:
         return self.submit(lambda: self._torque_to(enabled))
@@ -123,6 +139,20 @@ class CommandsMixin:
         source = MoveSource(start, target, limits, duration_s, joint_space=joints)
         self._source = source
         return {"duration_s": source.duration_s}
+
+    def _run_source(self: Controller, source: GoalSource, start: np.ndarray, tol: float) -> str:
+        self._require_motion()
+        moved = float(np.linalg.norm(self._start_point() - start))
+        if not moved <= tol:
+            raise MotionRefused(f"the robot moved {moved * 1e3:.1f} mm since the plan; start again")
+        self._source = source
+        return source.name
+
+    def _stop_source(self: Controller, source: GoalSource) -> bool:
+        if self._source is not source:
+            return False
+        self._source = None
+        return True
 
     def _torque_to(self: Controller, enabled: bool) -> bool:
         if enabled:

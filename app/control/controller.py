@@ -76,6 +76,9 @@ class Controller(CommandsMixin):
         self._commanded_point = np.full(3, np.nan)
         self._goal = np.full(3, np.nan)
         self._tick = 0
+        self._phase = ""
+        self._lateness_s = 0.0
+        self._dt_s = self.period_s
         self._t0 = time.monotonic()
         self._snapshot = Snapshot()
 
@@ -126,8 +129,13 @@ class Controller(CommandsMixin):
     # ---- the loop ----
     def _run(self) -> None:
         clock = TickClock(self.settings.loop.rate_hz, self.settings.loop.spin_s)
+        previous: float | None = None
         while not self._stop.is_set():
             deadline, lateness = clock.wait_next()
+            # sources advance by the scheduled time elapsed, which includes skipped slots
+            self._dt_s = self.period_s if previous is None else deadline - previous
+            previous = deadline
+            self._lateness_s = lateness
             started = time.perf_counter()
             try:
                 self._step()
@@ -182,7 +190,10 @@ class Controller(CommandsMixin):
     def _advance(self) -> None:
         if self._source is None or not self._motion_allowed() or self._state is None:
             return
-        setpoint = self._source.next(self.period_s)
+        setpoint = self._source.next(self._dt_s)
+        self._phase = setpoint.phase
+        if setpoint.goal_m is not None:
+            self._goal = setpoint.goal_m
         joints = self._setpoint_joints(setpoint)
         if joints is not None:
             self._write(joints, setpoint)
@@ -245,10 +256,16 @@ class Controller(CommandsMixin):
             temperature_c=state.temperature_c if state else nan3,
             moving=tuple(bool(m) for m in state.moving) if state else (False,) * 3,
             hardware_errors=state.hardware_errors if state else ((),) * 3,
-            missed_reads=self._misses.total,
+            missed_reads=self._misses.total, phase=self._phase if self._source else "",
+            lateness_ms=self._lateness_s * 1e3,
         )  # fmt: skip
-        for listener in self._listeners:
+        for listener in tuple(self._listeners):  # a listener may remove itself
             listener(self._snapshot)
+
+    @property
+    def current_source(self) -> GoalSource | None:
+        """The active goal source (read it from the control thread, e.g. in a listener)."""
+        return self._source
 
     @property
     def mode(self) -> str:

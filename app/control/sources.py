@@ -17,11 +17,17 @@ from ruckig import InputParameter, OutputParameter, Result, Ruckig
 
 @dataclass(frozen=True)
 class Setpoint:
-    """One tick's request: exactly one of ``point_m`` (3,) or ``joints_rad`` (3,)."""
+    """One tick's request: exactly one of ``point_m`` (3,) or ``joints_rad`` (3,).
+
+    goal_m: the nominal goal this tick (a test run's trajectory point, when feed-forward
+    commands a point ahead of it); phase: the run's phase for logs (approach, timed, stop).
+    """
 
     point_m: np.ndarray | None = None
     joints_rad: np.ndarray | None = None
     finished: bool = False
+    goal_m: np.ndarray | None = None
+    phase: str = ""
 
 
 class GoalSource(Protocol):

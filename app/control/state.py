@@ -49,6 +49,8 @@ class Snapshot:
     moving: tuple[bool, ...] = (False, False, False)
     hardware_errors: tuple[tuple[str, ...], ...] = ((), (), ())
     missed_reads: int = 0
+    phase: str = ""
+    lateness_ms: float = 0.0
 
     @property
     def tracking_error_m(self) -> np.ndarray:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 
@@ -26,9 +27,11 @@ def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = WAIT_S
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def make_client(**overrides) -> TestClient:
+def make_client(runs_folder=None, **overrides) -> TestClient:
     """A client of an app on the emulated bus, the emulator in-process for fault injection."""
-    settings = load_settings(hardware={"backend": "emulated"}, **overrides)
+    folder = runs_folder or tempfile.mkdtemp(prefix="deltadash-runs-")
+    settings = load_settings(hardware={"backend": "emulated"}, runs={"folder": str(folder)},
+                             **overrides)  # fmt: skip
     opener = functools.partial(open_backend, emulator_in_process=True)
     return TestClient(create_app(settings, backend_opener=opener))
 

@@ -1,0 +1,89 @@
+"""Runs resource: start the thesis's sinusoid test, list runs, their stats and files."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Annotated, Any
+
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.responses import FileResponse
+from pydantic import BaseModel, ConfigDict, Field
+
+from app.api.deps import ControlClient
+from app.runs.manager import Run, RunManager
+from app.runs.trajectories import SinusoidParams
+
+router = APIRouter(tags=["runs"])
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Triple = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+_DEFAULT = SinusoidParams()
+FILES = {"log.mcap": "application/octet-stream", "log.csv": "text/csv", "report.png": "image/png"}
+
+
+class SinusoidRequest(BaseModel):
+    """Per-axis sinusoid; every field optional, defaults are the thesis test (ch. 6.1)."""
+
+    model_config = ConfigDict(extra="forbid")
+    amplitude_m: Triple = list(_DEFAULT.amplitude_m)
+    frequency_hz: Annotated[
+        list[Annotated[float, Field(ge=0, le=20)]], Field(min_length=3, max_length=3)
+    ] = list(_DEFAULT.frequency_hz)
+    phase_rad: Triple = list(_DEFAULT.phase_rad)
+    offset_m: Triple = list(_DEFAULT.offset_m)
+    duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = _DEFAULT.duration_s
+    feedforward: bool = False
+
+    def params(self) -> SinusoidParams:
+        return SinusoidParams(
+            tuple(self.amplitude_m), tuple(self.frequency_hz), tuple(self.phase_rad),
+            tuple(self.offset_m), self.duration_s, self.feedforward,
+        )  # type: ignore[arg-type]  # fmt: skip
+
+
+def _runs(request: Request) -> RunManager:
+    return request.app.state.runs
+
+
+def _run(request: Request, run_id: str) -> Run:
+    run = _runs(request).get(run_id)
+    if run is None:
+        raise HTTPException(404, f"no run {run_id!r}")
+    return run
+
+
+@router.post("/tests/sinusoid")
+async def start_sinusoid(body: SinusoidRequest, request: Request, _: ControlClient):
+    """Check the whole path, then run it; 422 names the first infeasible time and point."""
+    run = await asyncio.to_thread(_runs(request).start_sinusoid, body.params())
+    return {"run_id": run.run_id}
+
+
+@router.get("/runs")
+def list_runs(request: Request) -> list[dict[str, Any]]:
+    """All runs, newest first, with state and stats."""
+    return [run.as_dict() for run in _runs(request).list()]
+
+
+@router.get("/runs/{run_id}")
+def get_run(run_id: str, request: Request) -> dict[str, Any]:
+    """One run: state, parameters, conditions, stats.tracking.{x,y,z}.{mean_m, rmse_m, ...}."""
+    return _run(request, run_id).as_dict()
+
+
+@router.post("/runs/{run_id}/abort")
+async def abort_run(run_id: str, request: Request, _: ControlClient) -> dict[str, Any]:
+    """Stop a running run; the robot holds where it is and the log stays readable."""
+    run = _run(request, run_id)
+    await asyncio.to_thread(_runs(request).abort, run_id)
+    return run.as_dict()
+
+
+@router.get("/runs/{run_id}/{name}")
+def run_file(run_id: str, name: str, request: Request) -> FileResponse:
+    """log.mcap, log.csv (written as the run goes) or report.png (when it has ended)."""
+    if name not in FILES:
+        raise HTTPException(404, f"no file {name!r}; files are {', '.join(FILES)}")
+    path = _run(request, run_id).folder / name
+    if not path.exists():
+        raise HTTPException(404, f"{name} is not written yet")
+    return FileResponse(path, media_type=FILES[name], filename=f"{run_id}-{name}")

@@ -1,0 +1,128 @@
+"""``deltadash run sinusoid``: the thesis's tracking test from the command line.
+
+Against a running server (``--url``), or headless: an in-process controller on the
+simulated robot, no server needed. Prints the per-axis statistics and where the log and
+report are.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import urllib.error
+import urllib.request
+from typing import Any
+
+from app.runs.trajectories import SinusoidParams
+
+_D = SinusoidParams()
+
+
+def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    run = commands.add_parser("run", help="run a test trajectory and print its error stats")
+    kinds = run.add_subparsers(dest="kind", required=True)
+    sine = kinds.add_parser("sinusoid", help="per-axis sinusoid (thesis ch. 6.1 defaults)")
+    options = [
+        ("amplitude", _D.amplitude_m, "m"),
+        ("frequency", _D.frequency_hz, "Hz"),
+        ("phase", _D.phase_rad, "rad"),
+        ("offset", _D.offset_m, "m"),
+    ]
+    for name, default, unit in options:
+        sine.add_argument(
+            f"--{name}",
+            type=float,
+            nargs=3,
+            default=list(default),
+            metavar=("X", "Y", "Z"),
+            help=f"per axis [{unit}] (default {default})",
+        )
+    sine.add_argument("--duration", type=float, default=_D.duration_s, help="timed part [s]")
+    sine.add_argument("--feedforward", action="store_true", help="command the path ahead")
+    sine.add_argument("--url", help="a running server, e.g. http://127.0.0.1:8000")
+    sine.add_argument("--backend", default="emulated", help="headless backend (default emulated)")
+    sine.add_argument("--json", action="store_true", help="print the run as JSON")
+    sine.set_defaults(handler=run_sinusoid)
+    return run
+
+
+def _params(args: argparse.Namespace) -> SinusoidParams:
+    return SinusoidParams(tuple(args.amplitude), tuple(args.frequency), tuple(args.phase),
+                          tuple(args.offset), args.duration, args.feedforward)  # fmt: skip
+
+
+def _http(url: str, method: str = "GET", body: dict | None = None) -> Any:
+    data = None if body is None else json.dumps(body).encode()
+    request = urllib.request.Request(url, data=data, method=method,
+                                     headers={"content-type": "application/json"})  # fmt: skip
+    with urllib.request.urlopen(request, timeout=10) as response:
+        return json.load(response)
+
+
+def _remote(url: str, params: SinusoidParams) -> dict[str, Any]:
+    _http(f"{url}/api/torque", "POST", {"enabled": True})
+    body = {"amplitude_m": params.amplitude_m, "frequency_hz": params.frequency_hz,
+            "phase_rad": params.phase_rad, "offset_m": params.offset_m,
+            "duration_s": params.duration_s, "feedforward": params.feedforward}  # fmt: skip
+    run_id = _http(f"{url}/api/tests/sinusoid", "POST", body)["run_id"]
+    while (run := _http(f"{url}/api/runs/{run_id}"))["state"] == "running":
+        time.sleep(0.25)
+    base = f"{url}/api/runs/{run_id}"
+    run["files"] = {name: f"{base}/{name}" for name in ("log.mcap", "log.csv", "report.png")}
+    return run
+
+
+def _headless(params: SinusoidParams, backend: str) -> dict[str, Any]:
+    from app.backends import open_backend
+    from app.config import load_settings
+    from app.control.controller import Controller
+    from app.runs.manager import RunManager
+
+    settings = load_settings(hardware={"backend": backend})
+    with open_backend(settings) as opened:
+        controller = Controller(settings, opened.bus, opened.kind, opened.description)
+        controller.start()
+        try:
+            controller.set_torque(True).result(timeout=2.0)
+            runs = RunManager(controller, settings.runs.folder_path)
+            run = runs.start_sinusoid(params)
+            run.done.wait()
+        finally:
+            controller.stop()
+    result = run.as_dict()
+    result["files"] = {name: str(run.folder / name) for name in ("log.mcap", "log.csv",
+                                                                  "report.png")}  # fmt: skip
+    return result
+
+
+def print_stats(run: dict[str, Any]) -> None:
+    print(f"run {run['run_id']}: {run['state']}" + (f" ({run['reason']})" if run["reason"] else ""))
+    tracking = run.get("stats", {}).get("tracking")
+    if tracking:
+        print(f"{'axis':>4} {'mean mm':>9} {'RMSE mm':>9} {'std mm':>9} {'max mm':>9} {'<1mm':>6}")
+        for axis in "xyz":
+            s = tracking[axis]
+            print(f"{axis:>4} {s['mean_m'] * 1e3:9.3f} {s['rmse_m'] * 1e3:9.3f} "
+                  f"{s['std_m'] * 1e3:9.3f} {s['max_abs_m'] * 1e3:9.3f} "
+                  f"{s['share_under_1mm']:6.1%}")  # fmt: skip
+    for name, where in run["files"].items():
+        print(f"{name:>10}: {where}")
+
+
+def run_sinusoid(args: argparse.Namespace) -> int:
+    from app.control.commands import MotionRefused
+    from app.control.gate import GoalRejected
+
+    try:
+        params = _params(args)
+        run = _remote(args.url.rstrip("/"), params) if args.url else _headless(params, args.backend)
+    except (GoalRejected, MotionRefused, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except urllib.error.HTTPError as exc:
+        print(f"error: {exc.code} {json.load(exc).get('detail')}", file=sys.stderr)
+        return 2
+    print(json.dumps(run, indent=1)) if args.json else print_stats(run)
+    return 0 if run["state"] == "done" else 1

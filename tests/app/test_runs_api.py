@@ -1,0 +1,87 @@
+"""Runs end to end on the emulated bus: start, finish, stats, logs, report, abort, refusal."""
+
+from __future__ import annotations
+
+import csv
+import io
+
+import numpy as np
+from mcap.reader import make_reader
+
+from app.runs.logs import read_messages
+
+from .conftest import wait_for
+
+SHORT = {"duration_s": 1.5}
+
+
+def _state(client, run_id):
+    return client.get(f"/api/runs/{run_id}").json()["state"]
+
+
+def test_sinusoid_run_end_to_end(fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    response = fresh.post("/api/tests/sinusoid", json=SHORT)
+    assert response.status_code == 200, response.text
+    run_id = response.json()["run_id"]
+    wait_for(lambda: _state(fresh, run_id) != "running", "the run to end")
+    run = fresh.get(f"/api/runs/{run_id}").json()
+    assert run["state"] == "done" and run["params"]["duration_s"] == 1.5
+    for axis in "xyz":
+        stats = run["stats"]["tracking"][axis]
+        assert all(np.isfinite(stats[k]) for k in ("mean_m", "rmse_m", "std_m", "max_abs_m"))
+        assert 0.0 < stats["rmse_m"] < 0.05
+    mcap = fresh.get(f"/api/runs/{run_id}/log.mcap")
+    assert mcap.status_code == 200
+    messages = list(make_reader(io.BytesIO(mcap.content)).iter_messages())
+    assert len(messages) == run["samples"] > 200
+    rows = list(csv.DictReader(io.StringIO(fresh.get(f"/api/runs/{run_id}/log.csv").text)))
+    assert len(rows) == run["samples"] and {r["phase"] for r in rows} >= {"approach", "timed"}
+    png = fresh.get(f"/api/runs/{run_id}/report.png")
+    assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
+    assert run_id in [r["run_id"] for r in fresh.get("/api/runs").json()]
+
+
+def test_infeasible_sinusoid_is_refused_before_any_motion(fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    before = fresh.get("/api/status").json()["joints"]["commanded_rad"]
+    response = fresh.post("/api/tests/sinusoid", json={"amplitude_m": [0.3, 0.0, 0.0]})
+    assert response.status_code == 422
+    assert "infeasible" in response.json()["detail"] and "t = " in response.json()["detail"]
+    status = fresh.get("/api/status").json()
+    assert status["mode"] == "idle" and status["joints"]["commanded_rad"] == before
+
+
+def test_bad_sinusoid_bodies_are_422(fresh):
+    for body in ({"duration_s": -1}, {"amplitude_m": [0.01, 0.01]}, {"frequency_hz": [1, 1, 99]},
+                 {"offset_m": [0, 0, float("nan")]}, {"wobble": 1}):  # fmt: skip
+        import json
+
+        response = fresh.post("/api/tests/sinusoid", content=json.dumps(body),
+                              headers={"content-type": "application/json"})  # fmt: skip
+        assert response.status_code == 422, body
+
+
+def test_aborted_run_leaves_a_readable_log(client, fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    run_id = fresh.post("/api/tests/sinusoid", json={"duration_s": 20}).json()["run_id"]
+    wait_for(lambda: fresh.get("/api/status").json()["mode"] == "test", "the run to start")
+    wait_for(lambda: fresh.get(f"/api/runs/{run_id}/log.csv").text.count("\n") > 50, "samples")
+    assert fresh.post(f"/api/runs/{run_id}/abort").status_code == 200
+    wait_for(lambda: _state(fresh, run_id) == "aborted", "the run to be marked aborted")
+    run = fresh.get(f"/api/runs/{run_id}").json()
+    assert "operator" in run["reason"] and run["samples"] > 50
+    folder = client.app.state.runs.get(run_id).folder
+    assert len(read_messages(folder / "log.mcap")) == run["samples"]
+    assert fresh.get("/api/status").json()["mode"] == "idle"
+
+
+def test_estop_during_a_run_aborts_it(fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    run_id = fresh.post("/api/tests/sinusoid", json={"duration_s": 20}).json()["run_id"]
+    wait_for(lambda: fresh.get("/api/status").json()["mode"] == "test", "the run to start")
+    fresh.post("/api/estop")
+    wait_for(lambda: _state(fresh, run_id) == "aborted", "the run to be marked aborted")
+    assert fresh.get(f"/api/runs/{run_id}").json()["reason"] == "e-stop"
+    assert fresh.get("/api/runs/nope").status_code == 404
+    assert fresh.get(f"/api/runs/{run_id}/secrets.txt").status_code == 404
