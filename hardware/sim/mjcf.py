@@ -1,0 +1,160 @@
+"""MJCF of a rotary Delta generated from its geometry and mass model (any design).
+
+Tree: base -> three upper links on hinges (the motor axes) -> one lower link per leg on a
+universal joint at the knee (two hinges: one parallel to the motor axis, one perpendicular
+to it and the rod); the platform hangs off the base on three slide joints, which keeps its
+orientation fixed exactly as the parallelograms do, with no extra constraint rows. Each
+leg's chain is closed by a `connect` equality between the rod's end and the platform's
+ball-joint site. The file is written in an assembled pose with joint `ref` values, so
+qpos of the motor hinges is the thesis's theta and qpos of the slides is the platform
+centre in the base frame [m].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hardware.sim.masses import THESIS_MASSES, DeltaMasses
+from kinematics import RotaryDelta
+
+MOTOR_JOINTS = ("motor_1", "motor_2", "motor_3")
+PLATFORM_JOINTS = ("platform_x", "platform_y", "platform_z")
+
+
+@dataclass(frozen=True)
+class SimOptions:
+    """Solver settings of the generated model.
+
+    timestep_s: physics step [s]; home_m: the assembled platform centre [m] (must be
+    reachable); eq_timeconst_s: the connect constraints' solref time constant [s] (MuJoCo's
+    default 0.02 lets the chain stretch by millimetres; it is raised to 2 timesteps if set
+    below); eq_solimp: constraint impedance (d0, dwidth); rod_radius_m: display only.
+    """
+
+    timestep_s: float = 0.001
+    home_m: tuple[float, float, float] = (0.0, 0.0, -0.24)
+    eq_timeconst_s: float = 0.002
+    eq_solimp: tuple[float, float] = (0.99, 0.999)
+    rod_radius_m: float = 0.003
+
+
+def _quat_of(matrix: np.ndarray) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z) of a rotation matrix (det +1)."""
+    m = matrix
+    w = math.sqrt(max(0.0, 1.0 + m[0, 0] + m[1, 1] + m[2, 2])) / 2.0
+    x = math.sqrt(max(0.0, 1.0 + m[0, 0] - m[1, 1] - m[2, 2])) / 2.0
+    y = math.sqrt(max(0.0, 1.0 - m[0, 0] + m[1, 1] - m[2, 2])) / 2.0
+    z = math.sqrt(max(0.0, 1.0 - m[0, 0] - m[1, 1] + m[2, 2])) / 2.0
+    x = math.copysign(x, m[2, 1] - m[1, 2])
+    y = math.copysign(y, m[0, 2] - m[2, 0])
+    z = math.copysign(z, m[1, 0] - m[0, 1])
+    return w, x, y, z
+
+
+def _fmt(values) -> str:
+    return " ".join(f"{float(v):.12g}" for v in values)
+
+
+def _upper_frame(alpha: float, theta: float) -> np.ndarray:
+    """Upper link frame in the base: x along the link, y along the motor axis (Rz Ry)."""
+    ca, sa, ct, st = math.cos(alpha), math.sin(alpha), math.cos(theta), math.sin(theta)
+    rz = np.array([[ca, -sa, 0.0], [sa, ca, 0.0], [0.0, 0.0, 1.0]])
+    ry = np.array([[ct, 0.0, st], [0.0, 1.0, 0.0], [-st, 0.0, ct]])
+    return rz @ ry
+
+
+def _lower_frame(rod_dir_upper: np.ndarray) -> np.ndarray:
+    """Lower link frame in the upper link's: x along the rod, z the universal joint's 2nd axis."""
+    e1 = rod_dir_upper / np.linalg.norm(rod_dir_upper)
+    e3 = np.cross(e1, [0.0, 1.0, 0.0])
+    e3 /= np.linalg.norm(e3)
+    return np.column_stack([e1, np.cross(e3, e1), e3])
+
+
+def _leg_xml(robot: RotaryDelta, masses: DeltaMasses, leg: int, theta: float, home) -> str:
+    alpha = 2.0 * math.pi * leg / 3.0
+    L, l, n = robot.L, robot.l, leg + 1
+    hip = robot.R * np.array([math.cos(alpha), math.sin(alpha), 0.0])
+    upper = _upper_frame(alpha, theta)
+    knee = hip + upper @ [L, 0.0, 0.0]
+    ankle = np.asarray(home) + robot.r * np.array([math.cos(alpha), math.sin(alpha), 0.0])
+    lower = _lower_frame(upper.T @ (ankle - knee))
+    m_up = masses.upper_kg
+    # about the link's centre of mass (MuJoCo's convention); the hinge adds m (L/2)^2
+    i_up = max(masses.upper_inertia(L) - m_up * L * L / 4.0, 1e-9)
+    m_lo = masses.lower_kg
+    i_lo = m_lo * l * l / 12.0
+    axis_a = lower.T @ [0.0, 1.0, 0.0]  # the motor-axis-parallel hinge, in the lower frame
+    return f"""
+    <body name="upper_{n}" pos="{_fmt(hip)}" quat="{_fmt(_quat_of(upper))}">
+      <joint name="motor_{n}" type="hinge" axis="0 1 0" ref="{theta:.12g}"
+             armature="{masses.armature_kgm2:.6g}"/>
+      <inertial pos="{L / 2:.12g} 0 0" mass="{max(m_up, 1e-6):.6g}"
+                diaginertia="{i_up / 100:.6g} {i_up:.6g} {i_up:.6g}"/>
+      <geom type="capsule" fromto="0 0 0 {L:.12g} 0 0" size="0.006" mass="0" rgba=".3 .5 .8 1"/>
+      <body name="lower_{n}" pos="{L:.12g} 0 0" quat="{_fmt(_quat_of(lower))}">
+        <joint name="knee_{n}_a" type="hinge" axis="{_fmt(axis_a)}"/>
+        <joint name="knee_{n}_b" type="hinge" axis="0 0 1"/>
+        <inertial pos="{l / 2:.12g} 0 0" mass="{max(m_lo, 1e-6):.6g}"
+                  diaginertia="{i_lo / 1000:.6g} {i_lo:.6g} {i_lo:.6g}"/>
+        <geom type="capsule" fromto="0 0 0 {l:.12g} 0 0" size="{{rod}}" mass="0" rgba=".2 .2 .2 1"/>
+        <site name="rod_end_{n}" pos="{l:.12g} 0 0"/>
+      </body>
+    </body>"""
+
+
+def build_mjcf(
+    robot: RotaryDelta,
+    masses: DeltaMasses = THESIS_MASSES,
+    options: SimOptions | None = None,
+) -> str:
+    """The MJCF text of `robot` with `masses`, assembled at `options.home_m`."""
+    opt = options or SimOptions()
+    joints, ok = robot.ik(np.asarray(opt.home_m, dtype=float))
+    if not bool(ok):
+        raise ValueError(f"home {opt.home_m} m is outside the workspace of {robot}")
+    legs = "".join(
+        _leg_xml(robot, masses, i, float(joints[i]), opt.home_m) for i in range(3)
+    ).replace("{rod}", f"{opt.rod_radius_m:.6g}")
+    x, y, z = opt.home_m
+    alphas = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)
+    ankle_xy = [robot.r * np.array([math.cos(a), math.sin(a), 0.0]) for a in alphas]
+    ankles = "".join(
+        f'\n      <site name="ankle_{i + 1}" pos="{_fmt(xy)}"/>' for i, xy in enumerate(ankle_xy)
+    )
+    connects = "".join(f'\n    <connect site1="rod_end_{i}" site2="ankle_{i}"/>' for i in (1, 2, 3))
+    motors = "".join(f'\n    <motor name="{j}" joint="{j}" gear="1"/>' for j in MOTOR_JOINTS)
+    timeconst = max(opt.eq_timeconst_s, 2.0 * opt.timestep_s)
+    m_plat = masses.platform_total_kg
+    i_plat = m_plat * robot.r**2 / 2.0
+    return f"""<mujoco model="delta">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{opt.timestep_s:.9g}" integrator="implicitfast" gravity="0 0 -9.81"/>
+  <default>
+    <geom contype="0" conaffinity="0"/>
+    <equality solref="{timeconst:.6g} 1" solimp="{opt.eq_solimp[0]} {opt.eq_solimp[1]} 0.001"/>
+  </default>
+  <worldbody>
+    <body name="base">
+      <inertial pos="0 0 0" mass="{3 * masses.servo_kg + 1e-3:.6g}" diaginertia="1e-3 1e-3 1e-3"/>
+      <geom type="cylinder" size="{robot.R:.6g} 0.004" mass="0" rgba=".7 .7 .7 .5"/>{legs}
+      <body name="platform" pos="{x:.12g} {y:.12g} {z:.12g}">
+        <joint name="platform_x" type="slide" axis="1 0 0" ref="{x:.12g}"/>
+        <joint name="platform_y" type="slide" axis="0 1 0" ref="{y:.12g}"/>
+        <joint name="platform_z" type="slide" axis="0 0 1" ref="{z:.12g}"/>
+        <inertial pos="0 0 0" mass="{m_plat:.6g}"
+                  diaginertia="{i_plat / 2:.6g} {i_plat / 2:.6g} {i_plat:.6g}"/>
+        <geom type="cylinder" size="{max(robot.r, 0.01):.6g} 0.003" mass="0" rgba=".8 .4 .2 1"/>
+        <site name="platform_centre" pos="0 0 0"/>{ankles}
+      </body>
+    </body>
+  </worldbody>
+  <equality>{connects}
+  </equality>
+  <actuator>{motors}
+  </actuator>
+</mujoco>
+"""

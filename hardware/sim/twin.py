@@ -1,0 +1,204 @@
+"""The MuJoCo twin: the Delta's mechanism stepped together with three XM430-W210 models.
+
+Every physics step the servos read their shafts (joint angle mapped through the joint
+calibration: shaft = zero offset + direction * theta), run their firmware and motor for one
+control period, and the torques they produce drive the motor hinges for the next step.
+The twin knows nothing of wall time; hardware.sim.sim_bus runs it in real time, tests and
+benchmarks run it as fast as it goes.
+
+A moving base (the drone) is simulated in the base frame: gravity is replaced by the
+effective acceleration R^T (g - a_base), R the base's attitude (body to world) and a_base
+its acceleration in the world. Tilt and linear acceleration act exactly; the terms of the
+base's angular velocity and acceleration (Euler, centrifugal, Coriolis) are left out.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from hardware.calibration import JointCalibration
+from hardware.motion import MotionCommand
+from hardware.registers import RAD_PER_TICK, OperatingMode
+from hardware.sim.masses import GRAVITY_M_S2, THESIS_MASSES, DeltaMasses
+from hardware.sim.mjcf import MOTOR_JOINTS, PLATFORM_JOINTS, SimOptions, build_mjcf
+from hardware.sim.servo_model import XM430_W210, ServoOutput, Xm430, Xm430Params
+from kinematics import THESIS_DELTA, RotaryDelta
+
+DEFAULT_JOINTS = tuple(JointCalibration(servo_id=i) for i in (1, 2, 3))
+SETTLE_STEPS = 200
+
+
+def _rotation(quaternion_wxyz: Sequence[float]) -> np.ndarray:
+    w, x, y, z = np.asarray(quaternion_wxyz, dtype=float) / np.linalg.norm(quaternion_wxyz)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+@dataclass(frozen=True)
+class TwinConfig:
+    """What to simulate: the design, its masses, solver options, servos and calibrations.
+
+    The servo's control period is the physics timestep (sim.timestep_s), so one step runs
+    the firmware once. joints: one calibration per leg, leg order.
+    """
+
+    robot: RotaryDelta = THESIS_DELTA
+    masses: DeltaMasses = THESIS_MASSES
+    sim: SimOptions = field(default_factory=SimOptions)
+    servo: Xm430Params = XM430_W210
+    joints: tuple[JointCalibration, ...] = DEFAULT_JOINTS
+
+    def __post_init__(self) -> None:
+        if len(self.joints) != 3:
+            raise ValueError(f"{len(self.joints)} joint calibrations for a 3-leg Delta")
+
+
+def hold_command(shaft_rad: float) -> MotionCommand:
+    """Factory settings, torque on, holding `shaft_rad` [rad]."""
+    return MotionCommand(True, OperatingMode.POSITION, goal_position_rad=shaft_rad)
+
+
+class DeltaTwin:
+    """The simulated robot. Not thread-safe: one owner steps it (see SimBus)."""
+
+    def __init__(self, config: TwinConfig | None = None) -> None:
+        self.config = cfg = config or TwinConfig()
+        servo = cfg.servo
+        if abs(servo.control_period_s - cfg.sim.timestep_s) > 1e-12:
+            from dataclasses import replace
+
+            servo = replace(servo, control_period_s=cfg.sim.timestep_s)
+        self.model = mujoco.MjModel.from_xml_string(build_mjcf(cfg.robot, cfg.masses, cfg.sim))
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._motor_q = np.array([m.joint(j).qposadr[0] for j in MOTOR_JOINTS])
+        self._motor_v = np.array([m.joint(j).dofadr[0] for j in MOTOR_JOINTS])
+        m.dof_frictionloss[self._motor_v] = servo.coulomb_friction_nm  # gearbox, sticks at rest
+        self._platform_q = np.array([m.joint(j).qposadr[0] for j in PLATFORM_JOINTS])
+        self._sign = np.array([c.direction for c in cfg.joints], dtype=float)
+        self._zero = np.array([c.zero_offset_ticks * RAD_PER_TICK for c in cfg.joints])
+        self.servos = [Xm430(servo) for _ in range(3)]
+        self.commands: list[MotionCommand] = []
+        self.set_base_motion()
+        self.reset()
+
+    # -- state -------------------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        """Simulated time since reset [s]."""
+        return float(self.data.time)
+
+    @property
+    def joints_rad(self) -> np.ndarray:
+        """Joint angles theta [rad], shape (3,)."""
+        return self.data.qpos[self._motor_q].copy()
+
+    @property
+    def joint_velocity_rad_s(self) -> np.ndarray:
+        """Joint speeds [rad/s], shape (3,)."""
+        return self.data.qvel[self._motor_v].copy()
+
+    @property
+    def platform_m(self) -> np.ndarray:
+        """True platform centre in the base frame [m], shape (3,)."""
+        return self.data.qpos[self._platform_q].copy()
+
+    @property
+    def shaft_rad(self) -> np.ndarray:
+        """Servo shaft angles [rad] (raw ticks * 2 pi / 4096, unquantized), shape (3,)."""
+        return self._zero + self._sign * self.joints_rad
+
+    @property
+    def shaft_rad_s(self) -> np.ndarray:
+        """Servo shaft speeds [rad/s], shape (3,)."""
+        return self._sign * self.joint_velocity_rad_s
+
+    @property
+    def outputs(self) -> list[ServoOutput]:
+        """Each servo's last output: torque, current, PWM, temperature, error bits."""
+        return [s.last for s in self.servos]
+
+    def joints_of_shafts(self, shaft_rad: Sequence[float]) -> np.ndarray:
+        """Joint angles [rad] of shaft angles [rad], through the calibrations."""
+        return self._sign * (np.asarray(shaft_rad, dtype=float) - self._zero)
+
+    # -- control -----------------------------------------------------------------------
+    def reset(self, joints_rad: Sequence[float] | None = None) -> None:
+        """Place the arm at rest at `joints_rad` [rad] (default: the assembled home), every
+        servo holding it with factory settings; temperatures and latched errors are kept."""
+        mujoco.mj_resetData(self.model, self.data)
+        if joints_rad is not None:
+            self._assemble(np.asarray(joints_rad, dtype=float))
+        mujoco.mj_forward(self.model, self.data)
+        shafts = self.shaft_rad
+        for servo, shaft in zip(self.servos, shafts, strict=True):
+            servo.reset(float(shaft))
+        self.commands = [hold_command(float(s)) for s in shafts]
+
+    def set_commands(self, commands: Sequence[MotionCommand]) -> None:
+        """What each servo's control table asks for (shaft angles [rad]), leg order."""
+        if len(commands) != 3:
+            raise ValueError(f"{len(commands)} commands for 3 servos")
+        self.commands = list(commands)
+
+    def set_base_motion(
+        self,
+        attitude_wxyz: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
+        acceleration_m_s2: Sequence[float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        """The base's attitude (quaternion, body to world) and its acceleration in the
+        world [m/s^2]; they hold until set again."""
+        g_world = np.array([0.0, 0.0, -GRAVITY_M_S2]) - np.asarray(acceleration_m_s2, float)
+        self.model.opt.gravity[:] = _rotation(attitude_wxyz).T @ g_world
+
+    def step(self, n: int = 1) -> None:
+        """Advance `n` physics steps, running the servos' firmware once per step."""
+        data, ctrl = self.data, self.data.ctrl
+        servos, commands = self.servos, self.commands
+        for _ in range(n):
+            shafts, speeds = self.shaft_rad, self.shaft_rad_s
+            for k in range(3):
+                out = servos[k].step(commands[k], float(shafts[k]), float(speeds[k]))
+                ctrl[k] = self._sign[k] * out.torque_nm
+            mujoco.mj_step(self.model, data)
+
+    def advance(self, duration_s: float) -> None:
+        """Advance by `duration_s` [s], rounded to whole physics steps."""
+        self.step(max(0, round(duration_s / self.model.opt.timestep)))
+
+    def constraint_error_m(self) -> float:
+        """Largest distance [m] between a rod's end and its platform joint, now."""
+        mujoco.mj_kinematics(self.model, self.data)  # site positions after mj_step are stale
+        gaps = [
+            self.data.site(f"rod_end_{i}").xpos - self.data.site(f"ankle_{i}").xpos
+            for i in (1, 2, 3)
+        ]
+        return float(max(np.linalg.norm(g) for g in gaps))
+
+    def _assemble(self, joints: np.ndarray) -> None:
+        """Close the chains at `joints`: pin motors and platform (FK), let the knees settle."""
+        point, ok = self.config.robot.fk(joints)
+        if not bool(ok):
+            raise ValueError(f"joints {joints.tolist()} rad have no forward kinematics")
+        gravity = self.model.opt.gravity.copy()
+        self.model.opt.gravity[:] = 0.0
+        data = self.data
+        for _ in range(SETTLE_STEPS):
+            data.qpos[self._motor_q] = joints
+            data.qpos[self._platform_q] = point
+            data.qvel[:] = 0.0
+            mujoco.mj_step(self.model, data)
+        data.qpos[self._motor_q] = joints
+        data.qpos[self._platform_q] = point
+        data.qvel[:] = 0.0
+        data.time = 0.0
+        self.model.opt.gravity[:] = gravity
