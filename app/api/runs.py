@@ -5,12 +5,16 @@ from __future__ import annotations
 import asyncio
 from typing import Annotated, Any
 
+import numpy as np
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.api.deps import ControlClient
+from app.runs.logs import read_messages
 from app.runs.manager import Run, RunManager
+from app.runs.paths import ChirpParams, WaypointParams
+from app.runs.stats import error_stats, window_mask
 from app.runs.trajectories import SinusoidParams
 
 router = APIRouter(tags=["runs"])
@@ -40,6 +44,36 @@ class SinusoidRequest(BaseModel):
         )  # type: ignore[arg-type]  # fmt: skip
 
 
+class ChirpRequest(BaseModel):
+    """Linear frequency sweep on one axis, for identifying the servo response."""
+
+    model_config = ConfigDict(extra="forbid")
+    axis: Annotated[int, Field(ge=0, le=2, description="0 = x, 1 = y, 2 = z")] = 2
+    amplitude_m: Annotated[float, Field(gt=0, le=0.2, allow_inf_nan=False)] = 0.02
+    f0_hz: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = 0.2
+    f1_hz: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = 3.0
+    offset_m: Triple = list(_DEFAULT.offset_m)
+    duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = 10.0
+    feedforward: bool = False
+
+    def params(self) -> ChirpParams:
+        return ChirpParams(**{**self.model_dump(), "offset_m": tuple(self.offset_m)})
+
+
+class WaypointsRequest(BaseModel):
+    """Points [m] reached at times [s] (first at 0), resting at each; minimum-jerk between."""
+
+    model_config = ConfigDict(extra="forbid")
+    points_m: Annotated[list[Triple], Field(min_length=2, max_length=1000)]
+    times_s: Annotated[list[Annotated[float, Field(ge=0, allow_inf_nan=False)]],
+                       Field(min_length=2, max_length=1000)]  # fmt: skip
+    feedforward: bool = False
+
+    def params(self) -> WaypointParams:
+        points = tuple(tuple(p) for p in self.points_m)
+        return WaypointParams(points, tuple(self.times_s), self.feedforward)  # type: ignore[arg-type]
+
+
 def _runs(request: Request) -> RunManager:
     return request.app.state.runs
 
@@ -55,6 +89,20 @@ def _run(request: Request, run_id: str) -> Run:
 async def start_sinusoid(body: SinusoidRequest, request: Request, _: ControlClient):
     """Check the whole path, then run it; 422 names the first infeasible time and point."""
     run = await asyncio.to_thread(_runs(request).start_sinusoid, body.params())
+    return {"run_id": run.run_id}
+
+
+@router.post("/tests/chirp")
+async def start_chirp(body: ChirpRequest, request: Request, _: ControlClient):
+    """A frequency sweep f0 -> f1 on one axis; checked like the sinusoid."""
+    run = await asyncio.to_thread(_runs(request).start, body.params(), "chirp")
+    return {"run_id": run.run_id}
+
+
+@router.post("/tests/waypoints")
+async def start_waypoints(body: WaypointsRequest, request: Request, _: ControlClient):
+    """Timed waypoints (pick-and-place, raster); checked like the sinusoid."""
+    run = await asyncio.to_thread(_runs(request).start, body.params(), "waypoints")
     return {"run_id": run.run_id}
 
 
@@ -76,6 +124,22 @@ async def abort_run(run_id: str, request: Request, _: ControlClient) -> dict[str
     run = _run(request, run_id)
     await asyncio.to_thread(_runs(request).abort, run_id)
     return run.as_dict()
+
+
+@router.get("/runs/{run_id}/stats")
+def window_stats(
+    run_id: str, request: Request, start_s: float | None = None, end_s: float | None = None
+) -> dict[str, Any]:
+    """Tracking stats recomputed over [start_s, end_s] of run time (any phase), from the log."""
+    run = _run(request, run_id)
+    rows = read_messages(run.folder / "log.mcap")
+    if not rows:
+        raise HTTPException(404, "the run has no samples")
+    times = np.array([r["t_s"] for r in rows])
+    goal, measured = (np.array([[r[f"{kind}_{a}_m"] for a in "xyz"] for r in rows], dtype=float)
+                      for kind in ("goal", "measured"))  # fmt: skip
+    return {"tracking": error_stats(goal, measured, window_mask(times, start_s, end_s)),
+            "start_s": start_s, "end_s": end_s}  # fmt: skip
 
 
 @router.get("/runs/{run_id}/{name}")

@@ -85,3 +85,23 @@ def test_estop_during_a_run_aborts_it(fresh):
     assert fresh.get(f"/api/runs/{run_id}").json()["reason"] == "e-stop"
     assert fresh.get("/api/runs/nope").status_code == 404
     assert fresh.get(f"/api/runs/{run_id}/secrets.txt").status_code == 404
+
+
+def test_waypoints_run_and_windowed_stats(fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    body = {"points_m": [[0, 0, -0.22], [0.03, 0, -0.22], [0.03, 0.03, -0.24]],
+            "times_s": [0, 0.5, 1.0]}  # fmt: skip
+    run_id = fresh.post("/api/tests/waypoints", json=body).json()["run_id"]
+    wait_for(lambda: _state(fresh, run_id) != "running", "the waypoint run to end")
+    assert fresh.get(f"/api/runs/{run_id}").json()["kind"] == "waypoints"
+    whole = fresh.get(f"/api/runs/{run_id}/stats").json()["tracking"]
+    late = fresh.get(f"/api/runs/{run_id}/stats?start_s=0.5").json()["tracking"]
+    assert 0 < late["samples"] < whole["samples"]
+    bad = {"points_m": [[0, 0, -0.22], [0.03, 0, -0.22]], "times_s": [0, 0]}
+    assert fresh.post("/api/tests/waypoints", json=bad).status_code == 422
+
+
+def test_chirp_too_fast_for_the_joints_is_refused(fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    response = fresh.post("/api/tests/chirp", json={"amplitude_m": 0.08, "f1_hz": 8.0})
+    assert response.status_code == 422 and "infeasible" in response.json()["detail"]

@@ -14,6 +14,7 @@ from app.config import load_settings
 from app.control.gate import Gate, GoalRejected
 from app.runs.feasibility import check_path
 from app.runs.logs import COLUMNS, RunLog, read_messages
+from app.runs.paths import ChirpParams, WaypointParams
 from app.runs.stats import axis_stats, error_stats
 from app.runs.trajectories import SinusoidParams, plan_sinusoid
 from kinematics import THESIS_DELTA
@@ -114,3 +115,34 @@ def test_logs_are_readable_finished_and_cut_short(tmp_path):
     assert len(crashed) == 500 and crashed[-1]["goal_x_m"] == pytest.approx(499 * 0.005)
     lines = log.csv_path.read_text().splitlines()
     assert lines[0].split(",") == COLUMNS and len(lines) == 501
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        SinusoidParams(phase_rad=(0.3, 1.0, -0.5)),
+        ChirpParams(axis=0, f0_hz=0.5, f1_hz=2.5, duration_s=4.0),
+        WaypointParams(((0, 0, -0.22), (0.05, 0, -0.22), (0.05, 0.04, -0.26)), (0.0, 1.0, 2.5)),
+    ],
+)
+def test_path_derivatives_match_differences(path):
+    """Every timed path's velocity and acceleration are the derivatives of its position."""
+    t = np.linspace(0.0, path.duration_s, 40001)
+    dt = t[1] - t[0]
+    position, velocity, acceleration = (path.derivatives(t, k) for k in range(3))
+    speed, accel, _ = path.peaks()
+    np.testing.assert_allclose(np.gradient(position, dt, axis=0)[1:-1], velocity[1:-1],
+                               atol=1e-5 * max(speed, 1))  # fmt: skip
+    np.testing.assert_allclose(np.gradient(velocity, dt, axis=0)[1:-1], acceleration[1:-1],
+                               atol=1e-4 * max(accel, 1))  # fmt: skip
+    assert np.abs(velocity).max() <= speed * (1 + 1e-6)
+    assert np.abs(acceleration).max() <= accel * (1 + 1e-3)
+
+
+def test_waypoints_rest_at_each_point_and_reject_bad_timing():
+    path = WaypointParams(((0, 0, -0.2), (0.02, 0, -0.2), (0.02, 0.02, -0.2)), (0.0, 0.5, 1.0))
+    for t, point in zip(path.times_s, path.points_m, strict=True):
+        np.testing.assert_allclose(path.derivatives(np.array(t), 0), point, atol=1e-15)
+        np.testing.assert_allclose(path.derivatives(np.array(t), 1), 0.0, atol=1e-12)
+    with pytest.raises(ValueError, match="times_s"):
+        WaypointParams(((0, 0, -0.2), (0.02, 0, -0.2)), (0.0, 0.0))
