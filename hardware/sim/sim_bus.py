@@ -1,0 +1,261 @@
+"""The MuJoCo twin as a ServoBus: the in-process simulated backend of `deltadash serve`.
+
+Same units and behaviour as hardware.dynamixel.DynamixelBus: goals clamped to the
+calibrated limits and rounded to whole ticks; present values quantized as the control
+table holds them (position in ticks, velocity in 0.229 rpm, current in 2.69 mA, voltage in
+0.1 V, temperature in whole degC); latched hardware errors reported by name and refusing
+torque until a reboot; EEPROM items refused while torque is on. With `realtime` a thread
+steps the physics to follow the wall clock (the server's case); without, the caller moves
+simulated time with `advance` (tests, headless runs, faster than real time).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
+from hardware.errors import BusError, HardwareError, NotConnectedError
+from hardware.registers import (
+    MODEL_NUMBER_XM430_W210,
+    RAD_PER_TICK,
+    OperatingMode,
+    Reg,
+    acceleration_to_rad_s2,
+    ampere_to_current,
+    current_to_ampere,
+    hardware_error_names,
+    rad_s2_to_acceleration,
+    rad_s_to_velocity,
+    velocity_to_rad_s,
+)
+from hardware.sim.twin import DeltaTwin, TwinConfig
+
+FIRMWARE_VERSION = 46
+MAX_CATCH_UP_S = 0.25  # as the emulator: after a stall, simulated time runs slow, never fast
+
+
+@dataclass(frozen=True)
+class SimBusConfig:
+    """The simulated bus: the twin's design and servos, real-time pacing and the external
+    measurement of the platform (what motion capture reports, thesis ch. 6.1).
+
+    realtime: step physics in a thread to follow the wall clock; marker_offset_m: where the
+    marker sits relative to the platform centre, in the base frame [m]; noise_std_m: white
+    noise on each axis of the measurement [m]; seed: the noise generator's seed;
+    torque_on_at_start: False powers up like the real servos (torque off, the arm hangs);
+    True starts holding the assembled home pose (convenient for demos and tests).
+    """
+
+    twin: TwinConfig = TwinConfig()
+    realtime: bool = True
+    marker_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    noise_std_m: float = 0.0
+    seed: int = 0
+    torque_on_at_start: bool = False
+
+
+class SimBus:
+    """ServoBus on the MuJoCo twin (joint order = the calibrations' order)."""
+
+    def __init__(self, config: SimBusConfig | None = None) -> None:
+        self.config = config or SimBusConfig()
+        self.twin = DeltaTwin(self.config.twin)
+        self.joints = self.config.twin.joints
+        self.ids = tuple(j.servo_id for j in self.joints)
+        self.lock = threading.RLock()  # the twin has one owner at a time
+        self._rng = np.random.default_rng(self.config.seed)
+        self._stats = BusStats()
+        self._connected = False
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self.commands = list(self.twin.commands)
+        if not self.config.torque_on_at_start:
+            self._update(torque_enabled=[False] * 3)
+
+    # -- ServoBus ------------------------------------------------------------------------
+    def connect(self) -> None:
+        self.disconnect()
+        self._connected = True
+        if self.config.realtime:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name="sim-physics", daemon=True)
+            self._thread.start()
+
+    def disconnect(self) -> None:
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join(timeout=5.0)
+            self._thread = None
+        self._connected = False
+
+    def scan(self, ids: Sequence[int] | None = None) -> list[ServoInfo]:
+        self._require("ping")
+        wanted = self.ids if ids is None else ids
+        return [
+            ServoInfo(i, MODEL_NUMBER_XM430_W210, FIRMWARE_VERSION) for i in wanted if i in self.ids
+        ]
+
+    def torque(self, enabled: bool) -> None:
+        with self._transaction("write TORQUE_ENABLE"):
+            if enabled:
+                faulted = {
+                    i: hardware_error_names(s.hardware_error)
+                    for i, s in self._servos()
+                    if s.hardware_error
+                }
+                if faulted:
+                    raise HardwareError(sorted(faulted), "write TORQUE_ENABLE", faulted)
+                # hold where the links are, as the driver does: no jump on enable
+                ticks = np.round(self.twin.shaft_rad / RAD_PER_TICK) * RAD_PER_TICK
+                self._update(goal_position_rad=list(ticks))
+            self._update(torque_enabled=[enabled] * 3)
+
+    def set_operating_mode(self, mode: OperatingMode) -> None:
+        with self._transaction("write OPERATING_MODE"):
+            on = [i for i, c in zip(self.ids, self.commands, strict=True) if c.torque_enabled]
+            if on:
+                raise BusError(on, "write OPERATING_MODE", "EEPROM item: turn torque off first")
+            self._update(mode=[OperatingMode(mode)] * 3)
+
+    def write_goal(self, positions_rad: Sequence[float]) -> None:
+        if len(positions_rad) != len(self.ids):
+            raise ValueError(f"{len(positions_rad)} goals for {len(self.ids)} joints")
+        if not all(math.isfinite(p) for p in positions_rad):
+            raise ValueError(f"non-finite goal {list(positions_rad)} rad")
+        ticks = [
+            cal.to_ticks(cal.clamp(float(p)))
+            for cal, p in zip(self.joints, positions_rad, strict=True)
+        ]
+        with self._transaction("sync write GOAL_POSITION"):
+            self._update(goal_position_rad=[t * RAD_PER_TICK for t in ticks])
+
+    def read_state(self) -> JointState:
+        with self._transaction("sync read MOVING..PRESENT_TEMPERATURE"):
+            return self._state()
+
+    def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
+        if velocity_rad_s < 0 or acceleration_rad_s2 < 0:
+            raise ValueError("profile velocity and acceleration must be >= 0 (0 = unlimited)")
+        # through the register units, so the quantization matches the real servo's
+        velocity = velocity_to_rad_s(rad_s_to_velocity(velocity_rad_s))
+        acceleration = acceleration_to_rad_s2(rad_s2_to_acceleration(acceleration_rad_s2))
+        with self._transaction("write PROFILE"):
+            self._update(
+                profile_velocity_rad_s=[velocity] * 3,
+                profile_acceleration_rad_s2=[acceleration] * 3,
+            )
+
+    def set_gains(self, gains: PositionGains) -> None:
+        with self._transaction("write POSITION_GAINS"):
+            self._update(
+                position_p=[gains.p] * 3,
+                position_i=[gains.i] * 3,
+                position_d=[gains.d] * 3,
+                feedforward_1st=[gains.feedforward_1st] * 3,
+                feedforward_2nd=[gains.feedforward_2nd] * 3,
+            )
+
+    def reboot(self, ids: Sequence[int] | None = None) -> None:
+        targets = set(self.ids if ids is None else ids)
+        with self._transaction("reboot"):
+            off = [
+                i not in targets and c.torque_enabled
+                for i, c in zip(self.ids, self.commands, strict=True)
+            ]
+            for i, servo in self._servos():
+                if i in targets:
+                    servo.reboot()  # a reboot clears the error and comes back with torque off
+            self._update(torque_enabled=off)
+
+    @property
+    def stats(self) -> BusStats:
+        return self._stats
+
+    # -- beyond the ServoBus protocol --------------------------------------------------
+    def advance(self, duration_s: float) -> None:
+        """Step the physics by `duration_s` [s] (only without `realtime`)."""
+        if self._thread is not None:
+            raise RuntimeError("the physics thread owns the clock; advance() is for realtime=False")
+        with self.lock:
+            self.twin.advance(duration_s)
+
+    def measure_platform(self) -> np.ndarray:
+        """The external measurement of the platform in the base frame [m], shape (3,):
+        the true centre plus the marker offset plus noise (motion capture's view)."""
+        with self.lock:
+            true = self.twin.platform_m
+        noise = (
+            self._rng.normal(0.0, self.config.noise_std_m, 3) if self.config.noise_std_m else 0.0
+        )
+        return true + np.asarray(self.config.marker_offset_m) + noise
+
+    def set_base_motion(
+        self, attitude_wxyz: Sequence[float], acceleration_m_s2: Sequence[float]
+    ) -> None:
+        """The drone's attitude (body to world) and acceleration [m/s^2] acting on the arm."""
+        with self.lock:
+            self.twin.set_base_motion(attitude_wxyz, acceleration_m_s2)
+
+    # -- internals -----------------------------------------------------------------------
+    def _require(self, instruction: str) -> None:
+        if not self._connected:
+            raise NotConnectedError(self.ids, instruction, "the simulated bus is not connected")
+
+    def _transaction(self, instruction: str):
+        self._require(instruction)
+        self._stats = replace(self._stats, transactions=self._stats.transactions + 1)
+        return self.lock
+
+    def _servos(self):
+        return zip(self.ids, self.twin.servos, strict=True)
+
+    def _update(self, **columns: Sequence) -> None:
+        """Change fields of every servo's command (one value per servo), under the lock."""
+        self.commands = [
+            replace(cmd, **{name: values[k] for name, values in columns.items()})
+            for k, cmd in enumerate(self.commands)
+        ]
+        self.twin.set_commands(self.commands)
+
+    def _state(self) -> JointState:
+        twin, sign = self.twin, np.array([c.direction for c in self.joints], dtype=float)
+        ticks = np.round(twin.shaft_rad / RAD_PER_TICK)
+        outputs = twin.outputs
+        velocity = [velocity_to_rad_s(rad_s_to_velocity(v)) for v in twin.shaft_rad_s]
+        current = [current_to_ampere(ampere_to_current(o.current_a)) for o in outputs]
+        # Present Velocity's Moving flag: above Moving Threshold (10 units by default)
+        moving = [
+            abs(rad_s_to_velocity(v)) > Reg.MOVING_THRESHOLD.value.default for v in twin.shaft_rad_s
+        ]
+        return JointState(
+            position_rad=np.array(
+                [cal.to_rad(t) for cal, t in zip(self.joints, ticks, strict=True)]
+            ),
+            velocity_rad_s=sign * np.array(velocity),
+            current_a=sign * np.array(current),
+            voltage_v=np.full(3, round(twin.config.servo.supply_voltage_v * 10) / 10),
+            temperature_c=np.array([float(round(o.temperature_c)) for o in outputs]),
+            moving=np.array(moving),
+            hardware_errors=tuple(hardware_error_names(o.hardware_error) for o in outputs),
+            stamp_s=time.monotonic(),
+        )
+
+    def _run(self) -> None:
+        """Follow the wall clock: step whatever simulated time is due, then sleep a little."""
+        dt = self.twin.model.opt.timestep
+        last = time.monotonic()
+        while not self._stop.is_set():
+            now = time.monotonic()
+            due = min(now - last, MAX_CATCH_UP_S)
+            last = now
+            steps = round(due / dt)
+            last -= due - steps * dt  # carry the fraction of a step to the next round
+            with self.lock:
+                self.twin.step(steps)
+            self._stop.wait(0.001)
