@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kinematics import RotaryDelta
+from kinematics.dynamics import MassModel
 
 GRAVITY_M_S2 = 9.81
 
@@ -28,8 +29,9 @@ class DeltaMasses:
     a parallelogram; platform_kg: the moving platform; payload_kg: tool and load on the
     platform (the thesis designs for up to 0.2 kg); servo_kg: one servo (on the base, so it
     adds nothing to the arm's dynamics); rotor_inertia_kgm2: the motor's rotor about its own
-    axis, reflected to the output as rotor * gear_ratio^2 (ROBOTIS does not publish it:
-    0.4 g cm^2 is typical of a 13 mm coreless motor, an estimate).
+    axis, reflected to the output as rotor * gear_ratio^2 (ROBOTIS does not publish it;
+    1.0e-7 kg m^2 is the estimate kinematics.dynamics.THESIS_MASS uses, 4.5e-3 kg m^2 at
+    the output, uncertain by x3).
     """
 
     upper_kg: float = 0.029
@@ -39,7 +41,7 @@ class DeltaMasses:
     platform_kg: float = 0.025
     payload_kg: float = 0.0
     servo_kg: float = 0.082
-    rotor_inertia_kgm2: float = 0.4e-7
+    rotor_inertia_kgm2: float = 1.0e-7
     gear_ratio: float = 212.6
 
     def __post_init__(self) -> None:
@@ -70,6 +72,15 @@ class DeltaMasses:
     def armature_kgm2(self) -> float:
         """The rotor's inertia seen at the output shaft [kg m^2]."""
         return self.rotor_inertia_kgm2 * self.gear_ratio**2
+
+    def mass_model(self, L: float) -> MassModel:
+        """The same masses as kinematics.dynamics.MassModel, for upper link length `L` [m]."""
+        return MassModel(
+            platform_kg=self.platform_total_kg,
+            upper_kg=self.upper_kg,
+            upper_inertia_kgm2=self.upper_inertia(L) + self.armature_kgm2,
+            lower_kg=self.lower_kg,
+        )
 
 
 THESIS_MASSES = DeltaMasses()

@@ -129,6 +129,7 @@ def build_mjcf(
     motors = "".join(f'\n    <motor name="{j}" joint="{j}" gear="1"/>' for j in MOTOR_JOINTS)
     timeconst = max(opt.eq_timeconst_s, 2.0 * opt.timestep_s)
     m_plat = masses.platform_total_kg
+    # a disc; its rotation is locked by the slides, so only A + B >= C must hold
     i_plat = m_plat * robot.r**2 / 2.0
     return f"""<mujoco model="delta">
   <compiler angle="radian" autolimits="true"/>
@@ -146,7 +147,7 @@ def build_mjcf(
         <joint name="platform_y" type="slide" axis="0 1 0" ref="{y:.12g}"/>
         <joint name="platform_z" type="slide" axis="0 0 1" ref="{z:.12g}"/>
         <inertial pos="0 0 0" mass="{m_plat:.6g}"
-                  diaginertia="{i_plat / 2:.6g} {i_plat / 2:.6g} {i_plat:.6g}"/>
+                  diaginertia="{i_plat * 0.51:.6g} {i_plat * 0.51:.6g} {i_plat:.6g}"/>
         <geom type="cylinder" size="{max(robot.r, 0.01):.6g} 0.003" mass="0" rgba=".8 .4 .2 1"/>
         <site name="platform_centre" pos="0 0 0"/>{ankles}
       </body>

@@ -34,12 +34,17 @@ def step_profile(state: ProfileState, cmd: MotionCommand, dt_s: float) -> Profil
     v_max = v_max if v_max > 0 else math.inf
     a_max = a_max if a_max > 0 else math.inf
     error = goal - state.position_rad
-    # the fastest speed from which the profile can still stop at the goal
-    v_stop = math.sqrt(2.0 * a_max * abs(error)) if math.isfinite(a_max) else math.inf
+    # The fastest speed from which braking at a_max, in steps of dt, still stops on the
+    # goal: v (v/(a dt) + 1) dt / 2 = |error| solved for v (the discrete braking distance).
+    if math.isfinite(a_max):
+        step = a_max * dt_s
+        v_stop = step * (math.sqrt(0.25 + 2.0 * abs(error) / (step * dt_s)) - 0.5)
+    else:
+        v_stop = math.inf
     v_target = math.copysign(min(v_max, v_stop, abs(error) / dt_s), error)
     dv = max(-a_max * dt_s, min(a_max * dt_s, v_target - state.velocity_rad_s))
     velocity = state.velocity_rad_s + dv
     position = state.position_rad + velocity * dt_s
-    if (goal - position) * error <= 0 and abs(velocity) <= a_max * dt_s:
-        return ProfileState(goal, 0.0, 0.0)  # arrived: settle exactly on the goal tick
+    if abs(goal - position) < 1e-12 and abs(velocity) < 1e-9:
+        return ProfileState(goal, 0.0, 0.0)  # arrived: settle exactly on the goal
     return ProfileState(position, velocity, dv / dt_s)

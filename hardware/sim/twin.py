@@ -15,7 +15,7 @@ base's angular velocity and acceleration (Euler, centrifugal, Coriolis) are left
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import mujoco
 import numpy as np
@@ -74,8 +74,6 @@ class DeltaTwin:
         self.config = cfg = config or TwinConfig()
         servo = cfg.servo
         if abs(servo.control_period_s - cfg.sim.timestep_s) > 1e-12:
-            from dataclasses import replace
-
             servo = replace(servo, control_period_s=cfg.sim.timestep_s)
         self.model = mujoco.MjModel.from_xml_string(build_mjcf(cfg.robot, cfg.masses, cfg.sim))
         self.data = mujoco.MjData(self.model)
@@ -127,6 +125,10 @@ class DeltaTwin:
         """Each servo's last output: torque, current, PWM, temperature, error bits."""
         return [s.last for s in self.servos]
 
+    def shafts_of_joints(self, joints_rad: Sequence[float]) -> np.ndarray:
+        """Shaft angles [rad] of joint angles [rad], through the calibrations (unrounded)."""
+        return self._zero + self._sign * np.asarray(joints_rad, dtype=float)
+
     def joints_of_shafts(self, shaft_rad: Sequence[float]) -> np.ndarray:
         """Joint angles [rad] of shaft angles [rad], through the calibrations."""
         return self._sign * (np.asarray(shaft_rad, dtype=float) - self._zero)
@@ -170,6 +172,13 @@ class DeltaTwin:
                 out = servos[k].step(commands[k], float(shafts[k]), float(speeds[k]))
                 ctrl[k] = self._sign[k] * out.torque_nm
             mujoco.mj_step(self.model, data)
+
+    def step_torques(self, torques_nm: Sequence[float], n: int = 1) -> None:
+        """Advance `n` physics steps with the motor torques [N m] (joint sign) imposed and
+        the servos bypassed: for checking the mechanism against a dynamics model."""
+        self.data.ctrl[:] = torques_nm
+        for _ in range(n):
+            mujoco.mj_step(self.model, self.data)
 
     def advance(self, duration_s: float) -> None:
         """Advance by `duration_s` [s], rounded to whole physics steps."""
