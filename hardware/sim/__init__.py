@@ -1,0 +1,28 @@
+"""The simulated robot: a MuJoCo twin of the Delta driven by physical XM430-W210 models.
+
+- `mjcf.build_mjcf`: the MJCF of any RotaryDelta and `masses.DeltaMasses`.
+- `servo_model.Xm430`: firmware position loop, PWM, DC motor, heat and overload.
+- `twin.DeltaTwin`: mechanism and servos stepped together (no wall clock).
+- `sim_bus.SimBus`: the twin as a `hardware.bus.ServoBus` (the in-process backend).
+- `motion_model.TwinMotionModel`: the twin as the emulator's `MotionModel`.
+"""
+
+from hardware.sim.masses import THESIS_MASSES, DeltaMasses, gravity_torques
+from hardware.sim.motion_model import TwinMotionModel
+from hardware.sim.servo_model import XM430_W210, Xm430, Xm430Params
+from hardware.sim.sim_bus import SimBus, SimBusConfig
+from hardware.sim.twin import DeltaTwin, TwinConfig
+
+__all__ = [
+    "THESIS_MASSES",
+    "XM430_W210",
+    "DeltaMasses",
+    "DeltaTwin",
+    "SimBus",
+    "SimBusConfig",
+    "TwinConfig",
+    "TwinMotionModel",
+    "Xm430",
+    "Xm430Params",
+    "gravity_torques",
+]

@@ -240,9 +240,9 @@ class SimBus:
             velocity_rad_s=sign * np.array(velocity),
             current_a=sign * np.array(current),
             voltage_v=np.full(3, round(twin.config.servo.supply_voltage_v * 10) / 10),
-            temperature_c=np.array([float(round(o.temperature_c)) for o in outputs]),
+            temperature_c=np.array([float(round(s.temperature_c)) for s in twin.servos]),
             moving=np.array(moving),
-            hardware_errors=tuple(hardware_error_names(o.hardware_error) for o in outputs),
+            hardware_errors=tuple(hardware_error_names(s.hardware_error) for s in twin.servos),
             stamp_s=time.monotonic(),
         )
 

@@ -1,0 +1,46 @@
+"""The twin as the emulator's motion model, driven over the real SDK and driver."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from hardware.bus import PositionGains
+from hardware.calibration import JointCalibration
+from hardware.dynamixel import DynamixelBus, DynamixelConfig
+from hardware.emulator import ServoEmulator
+from hardware.registers import RAD_PER_TICK
+from hardware.sim.motion_model import TwinMotionModel
+from tests.hardware.conftest import fast
+
+
+def test_reset_places_the_arm_at_the_shaft_angles() -> None:
+    model = TwinMotionModel()
+    shafts = [2048 * RAD_PER_TICK + a for a in (0.3, 0.4, 0.5)]
+    model.reset(shafts)
+    assert list(model.twin.shaft_rad) == pytest.approx(shafts, abs=1e-9)
+    states = model.step(0.0, model.twin.commands)
+    assert [s.position_rad for s in states] == pytest.approx(shafts, abs=1e-9)
+
+
+def test_goals_and_gains_written_over_the_sdk_drive_the_twin() -> None:
+    model = TwinMotionModel()
+    joints = tuple(JointCalibration(i) for i in (1, 2, 3))
+    with fast(ServoEmulator((1, 2, 3), model=model)) as emulator:
+        bus = DynamixelBus(DynamixelConfig(joints=joints, port=emulator.port))
+        bus.connect()
+        try:
+            bus.set_gains(PositionGains(p=1200))
+            bus.torque(True)
+            bus.write_goal([0.45, 0.45, 0.45])
+            deadline = time.monotonic() + 10.0
+            while model.twin.time_s < 0.6 and time.monotonic() < deadline:
+                state = bus.read_state()
+                time.sleep(0.01)
+            state = bus.read_state()
+        finally:
+            bus.disconnect()
+    assert all(cmd.position_p == 1200 for cmd in model.twin.commands)
+    assert state.position_rad == pytest.approx([0.45] * 3, abs=0.01)
+    assert model.twin.joints_rad == pytest.approx([0.45] * 3, abs=0.01)
