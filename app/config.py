@@ -131,6 +131,7 @@ class ServerSettings(_Section):
     host: str = Field("127.0.0.1", description="bind address; others need a token")
     http_port: int = Field(8000, ge=0, le=65535, description="HTTP/WebSocket port")
     viser_port: int = Field(8080, ge=0, le=65535, description="3D scene port")
+    scene: bool = Field(True, description="serve the 3D scene (viser) on viser_port")
     token: str | None = Field(None, min_length=8, description="required for control if set")
     telemetry_hz: float = Field(50.0, gt=0, le=200, description="WebSocket telemetry rate")
     lease_timeout_s: float = Field(30.0, gt=0, description="control lease lapses when idle")
@@ -148,6 +149,27 @@ class RunSettings(_Section):
     )
     stats_skip_s: float = Field(
         0.5, ge=0, description="tracking stats leave out the first seconds of the timed part"
+    )
+
+
+class WorldSettings(_Section):
+    """Hold-in-world: the Delta base on the drone, and how drone poses are vetted."""
+
+    mount_position_m: tuple[float, float, float] = Field(
+        (0.0, 0.0, -0.08), description="Delta base origin in the drone body frame [m]"
+    )
+    mount_quaternion: tuple[float, float, float, float] = Field(
+        (1.0, 0.0, 0.0, 0.0), description="base orientation in the body frame (w, x, y, z)"
+    )
+    stale_after_s: float = Field(0.05, gt=0, description="older pose: freeze the goal, warn")
+    lost_after_s: float = Field(0.5, gt=0, description="older pose: fault")
+    max_jump_m: float = Field(0.05, gt=0, description="a sample jumping further is dropped")
+    servo_lag_s: float = Field(
+        0.03, ge=0, le=0.5, description="compensation: predict this far past the pose's age [s]"
+    )
+    udp_port: int | None = Field(None, ge=1, le=65535, description="UDP JSON pose input port")
+    mavlink_url: str | None = Field(
+        None, description="pymavlink connection for ODOMETRY, e.g. udpin:0.0.0.0:14550"
     )
 
 
@@ -179,6 +201,7 @@ class Settings(BaseSettings):
     safety: SafetySettings = SafetySettings()
     server: ServerSettings = ServerSettings()
     runs: RunSettings = RunSettings()
+    world: WorldSettings = WorldSettings()
 
     @classmethod
     def settings_customise_sources(

@@ -29,6 +29,7 @@ from app.control.commands import MotionRefused
 from app.control.controller import Controller
 from app.control.gate import GoalRejected
 from app.runs.manager import RunManager
+from app.scene import start_scene
 from hardware.errors import BusError
 
 GIL_SWITCH_S = 2.5e-4
@@ -93,9 +94,13 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
             app.state.controller = controller
             app.state.backend = backend
             app.state.runs = RunManager(controller, settings.runs.folder_path)
+            runs = lambda: app.state.runs  # noqa: E731
+            app.state.scene = await asyncio.to_thread(start_scene, settings, controller, runs)
             try:
                 yield
             finally:
+                if app.state.scene is not None:
+                    await asyncio.to_thread(app.state.scene.stop)
                 await asyncio.to_thread(app.state.runs.close)
                 await asyncio.to_thread(controller.stop)
 

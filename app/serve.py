@@ -72,5 +72,10 @@ def run(args: argparse.Namespace) -> int:
     server = settings.server
     print(f"deltadash: dashboard and API on http://{server.host}:{server.http_port}/ "
           f"(API docs at /docs), backend {settings.hardware.backend}", flush=True)  # fmt: skip
+    if server.scene:
+        from app.scene.scene import scene_host
+
+        print(f"deltadash: 3D scene on http://{scene_host(server.host)}:{server.viser_port}/",
+              flush=True)  # fmt: skip
     uvicorn.run(create_app(settings), host=server.host, port=server.http_port, log_level="info")
     return 0

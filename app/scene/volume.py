@@ -23,12 +23,22 @@ class VolumeMesh(NamedTuple):
     spacing_m: float
 
 
+def floor_m(robot: RotaryDelta | LinearDelta, z_max_m: float) -> float | None:
+    """Lowest z drawn [m]: a linear Delta's volume is unbounded downwards, so cut it one
+    parallelogram length below the ceiling; a rotary one closes by itself (None)."""
+    return None if isinstance(robot, RotaryDelta) else z_max_m - robot.l - robot.R
+
+
 def volume_field(
     robot: RotaryDelta | LinearDelta, points: np.ndarray, margin_m: float, z_max_m: float
 ) -> np.ndarray:
-    """<= 0 where the gate accepts a point (workspace with margin, below z_max) [m]."""
-    distance = robot.signed_distance(points) + margin_m
-    return np.maximum(distance, points[..., 2] - z_max_m)
+    """<= 0 where the gate accepts a point (workspace with margin, below z_max) [m].
+
+    points: (*, 3) [m]. For a linear Delta the drawn floor (see floor_m) closes it.
+    """
+    field = np.maximum(robot.signed_distance(points) + margin_m, points[..., 2] - z_max_m)
+    floor = floor_m(robot, z_max_m)
+    return field if floor is None else np.maximum(field, floor - points[..., 2])
 
 
 def _extent(robot: RotaryDelta | LinearDelta) -> float:
@@ -45,9 +55,8 @@ def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> tuple[np.ndarray, tupl
 def _bounds(robot, margin_m: float, z_max_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Bounding box of the accepted volume from a coarse grid, padded by one coarse step."""
     extent = _extent(robot)
-    # A linear Delta's volume is unbounded downwards: show one parallelogram length of it.
-    depth = 2.0 * extent if isinstance(robot, RotaryDelta) else robot.l + robot.R
-    lo = np.array([-extent, -extent, z_max_m - depth])
+    floor = floor_m(robot, z_max_m)
+    lo = np.array([-extent, -extent, z_max_m - 2.0 * extent if floor is None else floor])
     hi = np.array([extent, extent, z_max_m])
     step = (hi - lo).max() / 40.0
     points, _ = _grid(lo, hi, step)
@@ -69,5 +78,22 @@ def reachable_volume(
     padded = np.pad(field, 1, constant_values=step_m)
     padded = np.where(np.isfinite(padded), padded, step_m)
     vertices, faces, _, _ = marching_cubes(padded, level=0.0, spacing=(step_m,) * 3)
-    vertices = vertices + (lo - step_m)
-    return VolumeMesh(vertices.astype(np.float64), faces.astype(np.int64), step_m)
+    vertices = _onto_surface(robot, vertices + (lo - step_m), margin_m, z_max_m, step_m)
+    return VolumeMesh(vertices, faces.astype(np.int64), step_m)
+
+
+def _onto_surface(robot, vertices: np.ndarray, margin_m: float, z_max_m: float, step_m: float):
+    """Newton steps along the field's gradient: marching cubes cuts the creases where two
+    tori meet by up to step/4; this puts vertices back on the boundary (gate-exact)."""
+    h = 1e-5
+    v = vertices.astype(np.float64)
+    for _ in range(3):
+        f = volume_field(robot, v, margin_m, z_max_m)
+        grad = np.stack([(volume_field(robot, v + h * e, margin_m, z_max_m) - f) / h
+                         for e in np.eye(3)], axis=-1)  # fmt: skip
+        norm2 = np.maximum(np.sum(grad * grad, axis=-1), 1e-12)
+        move = -(f / norm2)[:, None] * grad
+        # Never further than a grid step: a bad gradient must not throw a vertex away.
+        length = np.linalg.norm(move, axis=-1, keepdims=True)
+        v = v + move * np.minimum(1.0, step_m / np.maximum(length, 1e-300))
+    return v

@@ -1,0 +1,168 @@
+"""The 3D scene: a viser server beside the control server, drawing the robot live.
+
+``Scene`` owns the viser server and every view and panel on it. ``start()`` builds them and
+starts a display thread that, about 30 times a second, reads the controller's latest
+snapshot and sends every change in one ``server.atomic()`` batch; ``stop()`` ends both. The
+display thread only reads snapshots; operator actions go through viser's callbacks to the
+controller's thread-safe methods. Nothing here ever touches the servo bus.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import viser
+
+from app.scene.goal_view import GoalView
+from app.scene.panel import ControlPanel
+from app.scene.robot_view import RobotView
+from app.scene.test_panel import TestPanel
+from app.scene.workspace_view import WorkspaceView
+
+log = logging.getLogger(__name__)
+PANEL_EVERY = 3  # frames per panel refresh: 10 Hz is plenty for text and the plot
+
+
+class Scene:
+    """The operator's 3D view of one controller.
+
+    controller: the running ``Controller``; runs: returns the ``RunManager`` (or None);
+    host, port: where viser listens (port 0 picks a free one); rate_hz: display rate [Hz].
+    """
+
+    def __init__(
+        self,
+        controller: Any,
+        runs: Callable[[], Any] = lambda: None,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        rate_hz: float = 30.0,
+    ) -> None:
+        self.controller = controller
+        self.runs = runs
+        self.host = host
+        self.port = port
+        self.period_s = 1.0 / rate_hz
+        self.server: viser.ViserServer | None = None
+        self.frames = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        """Where the scene is served (the bound port once started)."""
+        port = self.server.get_port() if self.server is not None else self.port
+        return f"http://{self.host}:{port}/"
+
+    def start(self) -> None:
+        """Serve the scene and start the display thread (blocks ~0.5 s while meshing)."""
+        server = viser.ViserServer(host=self.host, port=self.port, label="deltadash",
+                                   verbose=False)  # fmt: skip
+        self.server = server
+        settings, robot = self.controller.settings, self.controller.robot
+        self._frame_camera(server)
+        server.scene.add_frame("/base_frame", axes_length=0.05, axes_radius=0.002)
+        self.workspace = WorkspaceView(server, robot, settings.limits.workspace_margin_m,
+                                       settings.limits.z_max_m)  # fmt: skip
+        floor = float(self.workspace.mesh.vertices[:, 2].min()) - 0.02
+        server.scene.add_grid("/floor", 0.8, 0.8, cell_size=0.05, section_size=0.1,
+                              position=(0.0, 0.0, floor))  # fmt: skip
+        self.robot = RobotView(server, robot, "/robot")
+        self.ghost = RobotView(server, robot, "/ghost", ghost=True)
+        self.goals = GoalView(server, self.controller)
+        self.panel = ControlPanel(server, self.controller, self.goals)
+        self.tests = TestPanel(server, self.runs, self.goals.show_path)
+        self._add_view_toggles(server)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="deltadash-scene", daemon=True)
+        self._thread.start()
+
+    def _frame_camera(self, server: viser.ViserServer) -> None:
+        robot = self.controller.robot
+        reach = robot.R + getattr(robot, "L", 0.0) + robot.l
+        server.initial_camera.position = (1.6 * reach, -1.9 * reach, 0.5 * reach)
+        server.initial_camera.look_at = (0.0, 0.0, -0.45 * reach)
+        server.initial_camera.up = (0.0, 0.0, 1.0)
+        server.scene.set_up_direction("+z")
+
+    def _add_view_toggles(self, server: viser.ViserServer) -> None:
+        gui = server.gui
+        with gui.add_folder("View", expand_by_default=False):
+            self.gui_tori = gui.add_checkbox("Leg tori (Fig. 4.2)", True)
+            self.gui_volume = gui.add_checkbox("Reachable volume", True)
+            self.gui_ghost = gui.add_checkbox("Commanded pose (ghost)", True)
+            self.gui_trail = gui.add_checkbox("Measured trail", True)
+        self.gui_tori.on_update(lambda e: setattr(self.workspace, "tori_visible", e.target.value))
+        self.gui_volume.on_update(
+            lambda e: setattr(self.workspace, "volume_visible", e.target.value))
+        self.gui_ghost.on_update(lambda e: setattr(self.ghost, "visible", e.target.value))
+        self.gui_trail.on_update(lambda e: setattr(self.goals, "show_trail", e.target.value))
+
+    def stop(self) -> None:
+        """Stop the display thread and the viser server."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+
+    # ---- the display thread ----
+    def _run(self) -> None:
+        deadline = time.monotonic()
+        while not self._stop.wait(max(0.0, deadline - time.monotonic())):
+            deadline = max(deadline + self.period_s, time.monotonic() - self.period_s)
+            server = self.server
+            if server is None or not server.get_clients():
+                continue  # nobody is looking: the handles keep the last state for newcomers
+            try:
+                self.update(time.monotonic())
+            except Exception:  # a drawing bug must not end the display (or the app)
+                log.exception("scene update failed")
+
+    def update(self, now_s: float) -> None:
+        """One display frame from the controller's latest snapshot, sent as one batch."""
+        snap = self.controller.snapshot()
+        assert self.server is not None
+        with self.server.atomic():
+            self.robot.update(snap.joints_measured_rad)
+            commanded = np.isfinite(snap.joints_commanded_rad).all()
+            self.ghost.update(snap.joints_commanded_rad)
+            self.ghost.visible = bool(commanded and self.gui_ghost.value)
+            self.goals.update(snap, now_s)
+            self.tests.record(snap, now_s)
+            if self.frames % PANEL_EVERY == 0:
+                self.panel.update(snap)
+                self.tests.update(now_s)
+        self.frames += 1
+
+
+def scene_host(host: str) -> str:
+    """Where the scene may listen: viser has no token check, and every scene client can
+    drive the robot, so beyond loopback it stays on 127.0.0.1 (reach it by SSH tunnel)."""
+    try:
+        loopback = host == "localhost" or ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        loopback = False
+    if not loopback:
+        log.warning("3D scene bound to 127.0.0.1, not %s: it has no token check", host)
+    return host if loopback else "127.0.0.1"
+
+
+def start_scene(settings: Any, controller: Any, runs: Callable[[], Any]) -> Scene | None:
+    """The lifespan's hook: a started Scene per ``settings.server``, or None if disabled."""
+    if not settings.server.scene:
+        return None
+    host = scene_host(settings.server.host)
+    scene = Scene(controller, runs, host, settings.server.viser_port)
+    scene.start()
+    if scene.server is not None and scene.server.get_port() != settings.server.viser_port:
+        print(f"deltadash: port {settings.server.viser_port} is taken: 3D scene on {scene.url}",
+              flush=True)  # fmt: skip
+    return scene
