@@ -58,26 +58,60 @@ def certify_box(
         would need an outside sliver thinner than ~tol.
     """
     lo, hi = as_vectors(lower, "lower"), as_vectors(upper, "upper")
-    centres = (0.5 * (lo + hi))[None, :]
+    return _certify(robot, lo, hi, lambda c: np.clip(c, lo, hi), tol, max_cells)
+
+
+def certify_cylinder(
+    robot: Any, radius: float, z_low: float, z_high: float, tol: float = 1e-4,
+    max_cells: int = 2_000_000,
+) -> Containment:  # fmt: skip
+    """:func:`certify_box` for a vertical cylinder on the z axis, radius and z range [m]."""
+
+    def nearest(c: np.ndarray) -> np.ndarray:
+        rho = np.hypot(c[:, 0], c[:, 1])
+        shrink = np.where(rho > radius, radius / np.maximum(rho, 1e-300), 1.0)[:, None]
+        return np.concatenate([c[:, :2] * shrink, np.clip(c[:, 2:], z_low, z_high)], -1)
+
+    lo, hi = np.array([-radius, -radius, z_low]), np.array([radius, radius, z_high])
+    return _certify(robot, lo, hi, nearest, tol, max_cells)
+
+
+def _first_cells(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Near-cubic starting cells over [lo, hi]: centres (n, 3) and one half-size (3,)."""
     half = 0.5 * (hi - lo)
-    # split the longest edges first so cells stay near cubes
     shortest = half[half > 0].min() if (half > 0).any() else 1.0  # a flat box is fine
     counts = np.maximum(1, np.round(half / shortest)).astype(int)
     grids = [(np.arange(n) + 0.5) / n * 2.0 - 1.0 for n in counts]
     offsets = np.stack(np.meshgrid(*grids, indexing="ij"), -1).reshape(-1, 3)
-    centres, half = centres + offsets * half, half / counts
+    return 0.5 * (lo + hi) + offsets * half, half / counts
+
+
+def _certify(
+    robot: Any, lo: np.ndarray, hi: np.ndarray, nearest: Any, tol: float, max_cells: int
+) -> Containment:
+    """Octree over [lo, hi] for the region whose nearest point to c is nearest(c).
+
+    Each cell is judged at x, the region's point nearest its centre c: if |x - c| > d
+    the cell misses the region; if sd(x) > 0, x is a witness; if sd(x) + |x - c| + d
+    <= tol, every point of the cell is within tol of the workspace (1-Lipschitz).
+    """
+    centres, half = _first_cells(lo, hi)
     evaluated, worst = 0, -np.inf
     while len(centres):
         evaluated += len(centres)
         if evaluated > max_cells:
             return Containment(None, None, float(worst), evaluated)
-        distance = robot.signed_distance(centres)
+        radius = float(np.linalg.norm(half))
+        probe = nearest(centres)
+        offset = np.linalg.norm(probe - centres, axis=-1)
+        meets = offset <= radius * (1 + 1e-12)
+        probe, centres, offset = probe[meets], centres[meets], offset[meets]
+        distance = robot.signed_distance(probe)
         distance = np.where(np.isfinite(distance), distance, np.inf)
-        worst = max(worst, float(distance.max()))
-        outside = distance > 0.0
-        if outside.any():
-            return Containment(False, centres[int(np.argmax(distance))], worst, evaluated)
-        open_cells = distance + np.linalg.norm(half) > tol
+        worst = max(worst, float(distance.max(initial=-np.inf)))
+        if (distance > 0.0).any():
+            return Containment(False, probe[int(np.argmax(distance))], worst, evaluated)
+        open_cells = distance + offset + radius > tol
         half = half / 2.0
         centres = (centres[open_cells][:, None, :] + _CORNERS * half).reshape(-1, 3)
     return Containment(True, None, float(worst), evaluated)

@@ -131,6 +131,7 @@ def size_motors(
     servo: Servo = XM430_W210_12V,
     velocity_directions: int = 64,
     min_dexterity: float = 0.02,
+    margin_m: float = 0.0,
 ) -> Sizing:
     """Worst static torque, peak torque and joint speed over ``points``; the servo check.
 
@@ -144,11 +145,14 @@ def size_motors(
         tilt_deg: gravity within this angle of -z (90: drone plane vertical).
         servo: its torque-speed line; velocity_directions: samples of the speed's
             direction for the velocity terms of the peak.
+        margin_m: skip points nearer than this to the workspace boundary [m], where
+            joint speeds grow without bound.
     """
     loaded = mass.with_payload(payload_kg)
     pts = np.asarray(points, float).reshape(-1, 3)
     q = robot.ik(pts).joints
     usable = robot.fk(q).ok & (np.nan_to_num(robot.dexterity(q)) > min_dexterity)
+    usable &= robot.signed_distance(pts) <= -margin_m
     pts, q = pts[usable], q[usable]
     zero, eye = np.zeros_like(pts), np.eye(3)
     per_gravity = np.stack(

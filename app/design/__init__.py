@@ -1,0 +1,1 @@
+"""Reports and figures of ``deltadash design`` (kept out of the pure kinematics)."""

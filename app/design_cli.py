@@ -1,0 +1,142 @@
+"""``deltadash design``: dynamics, motor sizing, workspace analysis and geometric synthesis.
+
+Defaults reproduce the thesis's design problem (ch. 4): its robot (L 0.1558, l 0.2430,
+R 0.0844, r 0.038 m), payload 0.2 kg, 4 m/s^2, 0.5 m/s, the 22 cm box (20 cm plus 1 cm
+each side) with the landing point (0, 0, -0.075) m, and the bounds of Table 4.2. SI
+units on the command line; tables print mm, N m and rpm; --json prints JSON only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from app.design import report, synth_cmd, workspace_cmd
+from app.design.common import common, emit, mass_args, mass_from, robot_from
+from kinematics.dynamics import MassModel, inverse_dynamics
+from kinematics.sizing import (
+    XM430_W210_11V1,
+    XM430_W210_12V,
+    XM430_W210_THESIS,
+    Servo,
+    region_grid,
+    size_motors,
+)
+
+SERVOS = {"xm430-12v": XM430_W210_12V, "xm430-11v1": XM430_W210_11V1, "thesis": XM430_W210_THESIS}
+_THESIS_CUBE = ([-0.1, -0.1, -0.2903], [0.1, 0.1, -0.0903])  # 20 cm cube centred at -H
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``design`` and its sub-commands on the app's sub-command parsers."""
+    parser = subparsers.add_parser(
+        "design",
+        help="dynamics, motor sizing, workspace and synthesis of a rotary Delta",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    commands = parser.add_subparsers(dest="design_command", required=True)
+    _dynamics_parser(commands)
+    _size_parser(commands)
+    workspace_cmd.add_parser(commands)
+    synth_cmd.add_parser(commands)
+    return parser
+
+
+# ---- dynamics ----
+def _dynamics_parser(commands: argparse._SubParsersAction) -> None:
+    p = commands.add_parser(
+        "dynamics",
+        help="joint torques for a platform motion [N m]",
+        description="Inverse dynamics (thesis eq. 3.89-3.125): the three "
+        "torques, positive towards positive theta (link down).",
+    )
+    p.add_argument("--point", type=float, nargs=3, default=[0.0, 0.0, -0.25], help="P [m]")
+    p.add_argument("--velocity", type=float, nargs=3, default=[0.0, 0.0, 0.0], help="[m/s]")
+    p.add_argument("--acceleration", type=float, nargs=3, default=[0.0, 0.0, 0.0], help="[m/s^2]")
+    p.add_argument(
+        "--gravity",
+        type=float,
+        nargs=3,
+        default=[0.0, 0.0, -9.81],
+        help="gravity in the base frame [m/s^2] (a tilted drone rotates it)",
+    )
+    common(p)
+    mass_args(p)
+    p.set_defaults(handler=_dynamics)
+
+
+def _dynamics(args: argparse.Namespace) -> int:
+    mass = mass_from(args).with_payload(args.payload)
+    torque = inverse_dynamics(
+        robot_from(args), mass, args.point, args.velocity, args.acceleration, args.gravity
+    )
+    ok = bool(np.isfinite(torque).all())
+    payload = {"torques_nm": [float(t) if math.isfinite(t) else None for t in torque],
+               "ok": ok, "point_m": args.point}  # fmt: skip
+    text = (
+        ("torques [N m]: " + "  ".join(f"{t:+.4f}" for t in torque))
+        if ok
+        else ("unreachable or singular point")
+    )
+    emit(args, payload, text)
+    return 0 if ok else 1
+
+
+# ---- size ----
+def _size_parser(commands: argparse._SubParsersAction) -> None:
+    p = commands.add_parser(
+        "size",
+        help="motor sizing over a region vs a servo line",
+        description="Largest static torque (gravity within --tilt of -z), "
+        "peak torque (plus --acceleration in any direction at --speed), "
+        "largest joint speed, against the servo's torque-speed line; the "
+        "thesis's 0.656 N m, 0.905 N m, 48 rpm beside ours.",
+    )
+    p.add_argument(
+        "--region",
+        type=float,
+        nargs=6,
+        metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
+        default=[*_THESIS_CUBE[0], *_THESIS_CUBE[1]],
+        help="box corners [m] (default: 20 cm cube centred at z = -0.1903)",
+    )
+    p.add_argument("--grid", type=int, default=9, help="grid points per axis (9)")
+    p.add_argument("--margin", type=float, default=0.0,
+                   help="skip points nearer than this to the boundary [m] (0)")  # fmt: skip
+    p.add_argument("--acceleration", type=float, default=4.0, help="[m/s^2] (4)")
+    p.add_argument("--speed", type=float, default=0.5, help="[m/s] (0.5)")
+    p.add_argument("--tilt", type=float, default=90.0, help="drone tilt limit [deg] (90)")
+    p.add_argument(
+        "--servo",
+        choices=sorted(SERVOS),
+        default="xm430-12v",
+        help="XM430-W210 datasheet line at 12 V (3.0 N m, 77 rpm), 11.1 V "
+        "(2.7 N m, 70 rpm) or the thesis's (2 N m, 72 rpm)",
+    )
+    p.add_argument("--stall", type=float, help="custom servo stall torque [N m]")
+    p.add_argument("--no-load", type=float, help="custom servo no-load speed [rpm]")
+    common(p)
+    mass_args(p)
+    p.set_defaults(handler=_size)
+
+
+def _size(args: argparse.Namespace) -> int:
+    servo = SERVOS[args.servo]
+    if args.stall or args.no_load:
+        servo = Servo("custom", args.stall or servo.stall_nm, args.no_load or servo.no_load_rpm)
+    robot, mass = robot_from(args), mass_from(args)
+    grid = region_grid(args.region[:3], args.region[3:], args.grid)
+    options = {"payload_kg": args.payload, "acceleration_m_s2": args.acceleration,
+               "speed_m_s": args.speed, "servo": servo, "margin_m": args.margin}  # fmt: skip
+    sized = size_motors(robot, mass, grid, tilt_deg=args.tilt, **options)
+    level = size_motors(robot, mass, grid, tilt_deg=0.0, **options)
+    link_only = MassModel(
+        mass.platform_kg, mass.upper_kg, mass.upper_kg * args.L**2 / 3, mass.lower_kg
+    )
+    bare = size_motors(robot, link_only, grid, tilt_deg=args.tilt, **options)
+    payload = report.sizing_payload(sized, level, bare)
+    emit(args, payload, report.sizing_table(payload))
+    return 0 if sized.passes else 1
