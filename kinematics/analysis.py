@@ -68,7 +68,7 @@ def largest_region(
     z: float = -0.25,
     anchor: Literal["centre", "top"] = "centre",
     shape: Literal["box", "cylinder"] = "box",
-    tol: float = 0.0,
+    tol: float = 1e-5,
     resolution_m: float = 1e-4,
 ) -> Fit:
     """Largest box (edges proportional to ``proportions``) or vertical cylinder
@@ -76,7 +76,8 @@ def largest_region(
 
     Args:
         z: height of the centre, or of the top face with anchor="top" [m].
-        tol: accepted overhang in the certification [m].
+        tol: accepted overhang in the certification [m]; a candidate the octree cannot
+            decide within its budget counts as not fitting (the answer errs small).
         resolution_m: bisection stops when the largest edge is known to this [m].
     """
     ratio = np.asarray(proportions, float) / max(proportions)
@@ -91,9 +92,9 @@ def largest_region(
     def fits(scale: float) -> bool:
         lo, hi = bounds(scale)
         if shape == "cylinder":
-            verdict = certify_cylinder(robot, hi[0], lo[2], hi[2], tol=tol or 1e-6)
+            verdict = certify_cylinder(robot, hi[0], lo[2], hi[2], tol=tol)
         else:
-            verdict = certify_box(robot, lo, hi, tol=tol or 1e-6)
+            verdict = certify_box(robot, lo, hi, tol=tol)
         return verdict.contains is True
 
     good, bad = 0.0, 2.0 * float(np.max(reach_bounds(robot)[1]))
