@@ -20,7 +20,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 
-from app.api import robot, runs, telemetry
+from app.api import dashboard, robot, runs, telemetry
 from app.api.deps import Lease
 from app.api.serialize import floats
 from app.backends import open_backend
@@ -115,6 +115,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
     app.include_router(robot.router, prefix="/api")
     app.include_router(telemetry.router, prefix="/api")
     app.include_router(runs.router, prefix="/api")
+    app.include_router(dashboard.router)  # /api/info, sinusoid check, /vendor for static/
     if (STATIC_DIR / "index.html").exists():
         app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
     return app

@@ -1,0 +1,109 @@
+"""What the dashboard page (static/) needs beyond the robot and runs resources.
+
+- ``GET /api/info``: static facts the page cannot read from status (viser port, whether a
+  token is required, the jog and speed limits it shows next to its controls).
+- ``POST /api/tests/sinusoid/check``: the same planning and whole-path check as starting a
+  run, without moving, plus the peak joint speed, for the test form's preview.
+- ``GET /vendor/plotly.min.js``: plotly.js as shipped inside the ``plotly`` Python package,
+  so the page's plots work offline and the file comes from the install, not from the repo.
+
+Paths are absolute here (the router is included without a prefix) because the vendor file
+lives outside /api.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import plotly
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.responses import FileResponse
+from pydantic import BaseModel
+
+from app.api.deps import ControllerDep, TokenChecked
+from app.api.runs import SinusoidRequest
+from app.control.commands import MotionRefused
+from app.control.controller import Controller
+from app.control.gate import GoalRejected
+from app.runs.trajectories import SinusoidParams, sinusoid_points
+
+router = APIRouter(tags=["dashboard"])
+PLOTLY_JS = Path(plotly.__file__).resolve().parent / "package_data" / "plotly.min.js"
+
+
+class SinusoidCheck(BaseModel):
+    """Preview of a sinusoid run: would it start, and how hard it drives the joints."""
+
+    feasible: bool
+    detail: str | None = None
+    peak_joint_speed_rad_s: float | None = None
+    joint_speed_limit_rad_s: float
+    peak_speed_m_s: float
+    peak_acceleration_m_s2: float
+
+
+@router.get("/api/info")
+def get_info(request: Request) -> dict[str, Any]:
+    """Viser port, token requirement and the limits the page shows beside its controls."""
+    settings = request.app.state.settings
+    return {
+        "viser_port": settings.server.viser_port if settings.server.scene else None,
+        "token_required": settings.server.token is not None,
+        "telemetry_hz": settings.server.telemetry_hz,
+        "jog_max_velocity_m_s": settings.jog.max_velocity_m_s,
+        "jog_step_m": settings.jog.step_m,
+        "joint_speed_limit_rad_s": settings.limits.joint_speed_rad_s,
+        "loop_rate_hz": settings.loop.rate_hz,
+    }
+
+
+def peak_joint_speed(controller: Controller, params: SinusoidParams) -> float | None:
+    """Largest joint speed [rad/s] over the timed sinusoid, on the robot's current IK branch.
+
+    Sampled at the loop period like the feasibility check; None when no sample has a
+    joint solution (the check then names why).
+    """
+    times = np.arange(0.0, params.duration_s, controller.period_s)
+    near = controller.snapshot().joints_measured_rad
+    joints, ok = controller.robot.ik(sinusoid_points(params, times), near=near)
+    if times.size < 2 or not ok.any():
+        return None
+    speed = np.abs(np.diff(joints, axis=0)) / controller.period_s
+    return float(np.nanmax(speed)) if np.isfinite(speed).any() else None
+
+
+def check_sinusoid(request: Request, controller: Controller, params: SinusoidParams) -> dict:
+    try:
+        request.app.state.runs.plan(params)
+        detail = None
+    except (GoalRejected, MotionRefused) as exc:
+        detail = str(exc)
+    speed, acceleration, _ = params.peaks()
+    return SinusoidCheck(
+        feasible=detail is None,
+        detail=detail,
+        peak_joint_speed_rad_s=peak_joint_speed(controller, params),
+        joint_speed_limit_rad_s=controller.settings.limits.joint_speed_rad_s,
+        peak_speed_m_s=speed,
+        peak_acceleration_m_s2=acceleration,
+    ).model_dump()
+
+
+@router.post("/api/tests/sinusoid/check", response_model=SinusoidCheck)
+async def post_sinusoid_check(
+    body: SinusoidRequest, request: Request, controller: ControllerDep, _: TokenChecked
+):
+    """Plan and check a sinusoid from where the robot is, without moving; never starts it."""
+    return await asyncio.to_thread(check_sinusoid, request, controller, body.params())
+
+
+@router.get("/vendor/plotly.min.js", include_in_schema=False)
+def plotly_js() -> FileResponse:
+    """plotly.js from the installed ``plotly`` package (offline, cached by the browser)."""
+    if not PLOTLY_JS.exists():
+        raise HTTPException(404, "plotly.min.js is missing from the plotly package")
+    headers = {"Cache-Control": "public, max-age=86400"}
+    return FileResponse(PLOTLY_JS, media_type="text/javascript", headers=headers)

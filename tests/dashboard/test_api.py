@@ -1,0 +1,76 @@
+"""The API the dashboard adds: /api/info, the sinusoid preview and the vendored plotly.js."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+from fastapi.testclient import TestClient
+
+from tests.app.conftest import make_client, wait_for
+
+
+@pytest.fixture(scope="module")
+def client() -> Iterator[TestClient]:
+    with make_client() as test_client:
+        wait_for(lambda: test_client.get("/api/status").json()["ee"]["position_m"][2] is not None,
+                 "a measured platform position")  # fmt: skip
+        yield test_client
+
+
+def test_info_names_the_viser_port_and_no_token(client: TestClient) -> None:
+    info = client.get("/api/info").json()
+    settings = client.app.state.settings
+    assert info["viser_port"] == (settings.server.viser_port if settings.server.scene else None)
+    assert info["token_required"] is False
+    assert info["jog_step_m"] == settings.jog.step_m
+
+
+def test_check_of_thesis_sinusoid_is_feasible_and_reports_joint_speed(client: TestClient) -> None:
+    body = client.post("/api/tests/sinusoid/check", json={"duration_s": 2}).json()
+    assert body["feasible"] is True, body["detail"]
+    assert 0 < body["peak_joint_speed_rad_s"] <= body["joint_speed_limit_rad_s"]
+    # thesis Z axis: 8 cm at 2 Hz -> 2 pi 2 0.08 ~ 1.005 m/s is the fastest axis
+    assert body["peak_speed_m_s"] == pytest.approx(2 * 3.141592653589793 * 2 * 0.08)
+
+
+def test_check_names_the_infeasible_time_and_starts_nothing(client: TestClient) -> None:
+    runs_before = len(client.get("/api/runs").json())
+    body = client.post(
+        "/api/tests/sinusoid/check", json={"amplitude_m": [0.3, 0, 0], "duration_s": 2}
+    ).json()
+    assert body["feasible"] is False
+    assert "infeasible" in body["detail"] and "t = " in body["detail"]
+    assert len(client.get("/api/runs").json()) == runs_before
+    assert client.get("/api/status").json()["mode"] != "test"
+
+
+def test_faster_sinusoid_previews_a_higher_joint_speed(client: TestClient) -> None:
+    def peak(frequency_hz: float) -> float:
+        body = {"frequency_hz": [frequency_hz, 0, 0], "amplitude_m": [0.02, 0, 0], "duration_s": 2}
+        return client.post("/api/tests/sinusoid/check", json=body).json()["peak_joint_speed_rad_s"]
+
+    assert peak(1.0) > peak(0.5) > 0
+
+
+def test_check_rejects_bad_input_with_422(client: TestClient) -> None:
+    response = client.post("/api/tests/sinusoid/check", json={"duration_s": -1})
+    assert response.status_code == 422
+    assert "duration_s" in response.json()["detail"]
+
+
+def test_plotly_is_served_from_the_installed_package(client: TestClient) -> None:
+    response = client.get("/vendor/plotly.min.js")
+    assert response.status_code == 200
+    assert "javascript" in response.headers["content-type"]
+    assert b"plotly.js" in response.content[:200]
+
+
+def test_with_a_token_info_says_so_and_the_check_needs_it() -> None:
+    token = "a-long-secret-1"
+    with make_client(server={"token": token}) as client:
+        assert client.get("/api/info").json()["token_required"] is True
+        url = "/api/tests/sinusoid/check"
+        assert client.post(url, json={"duration_s": 1}).status_code == 401
+        headers = {"Authorization": f"Bearer {token}"}
+        assert client.post(url, json={"duration_s": 1}, headers=headers).status_code == 200
