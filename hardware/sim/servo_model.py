@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from hardware.motion import MotionCommand
 from hardware.registers import (
@@ -105,8 +106,7 @@ class Xm430Params:
 XM430_W210 = Xm430Params()
 
 
-@dataclass(frozen=True)
-class ServoOutput:
+class ServoOutput(NamedTuple):
     """One control period's result: output torque [N m] on the shaft, motor current [A],
     PWM [register units, +-885], winding temperature [degC], Hardware Error Status bits."""
 
@@ -122,6 +122,11 @@ class Xm430:
 
     def __init__(self, params: Xm430Params = XM430_W210, shaft_rad: float = 0.0) -> None:
         self.params = params
+        # derived constants, computed once: step() runs 3000 times per simulated second
+        self._volt_per_pwm = params.supply_voltage_v / PWM_FULL_SCALE
+        self._ke, self._kt = params.back_emf_v_s, params.torque_constant_nm_a
+        self._ohm = params.resistance_ohm
+        self._mode_cache: tuple[OperatingMode, str] | None = None
         self.temperature_c = params.ambient_c
         self.hardware_error = 0
         self.reset(shaft_rad)
@@ -146,28 +151,45 @@ class Xm430:
         p = self.params
         ticks = round(shaft_rad / RAD_PER_TICK)  # the encoder
         live = cmd.torque_enabled and not self.hardware_error
+        kind = self._kind(cmd.mode)
         if not live:
             self.reset(ticks * RAD_PER_TICK)
             pwm = 0.0
-        elif cmd.mode in _POSITION_MODES:
+        elif kind == "position":
             pwm = self._position_pwm(cmd, ticks)
-        elif cmd.mode == OperatingMode.VELOCITY:
+        elif kind == "velocity":
             pwm = self._velocity_pwm(cmd, shaft_rad_s)
-        elif cmd.mode == OperatingMode.CURRENT:
+        elif kind == "current":
             pwm = self._current_pwm(cmd.goal_current_a, shaft_rad_s)
         else:  # PWM mode: Goal PWM is not part of MotionCommand, so the output is idle
             pwm = 0.0
-        if live and cmd.mode == OperatingMode.CURRENT_BASED_POSITION:
+        if live and cmd.mode is OperatingMode.CURRENT_BASED_POSITION:
             pwm = self._limit_current(pwm, cmd.current_limit_a, shaft_rad_s)
-        pwm = max(-p.pwm_limit, min(p.pwm_limit, pwm))
+        limit = p.pwm_limit
+        pwm = -limit if pwm < -limit else (limit if pwm > limit else pwm)
         current = 0.0
         if live:  # torque off opens the bridge: no current, no back-EMF braking
-            volts = pwm / PWM_FULL_SCALE * p.supply_voltage_v
-            current = (volts - p.back_emf_v_s * shaft_rad_s) / p.resistance_ohm
-        torque = p.torque_constant_nm_a * current
-        self._heat(current, live and abs(pwm) >= p.pwm_limit)
-        self.last = ServoOutput(torque, current, pwm, self.temperature_c, self.hardware_error)
+            current = (pwm * self._volt_per_pwm - self._ke * shaft_rad_s) / self._ohm
+        self._heat(current, live and abs(pwm) >= limit)
+        self.last = ServoOutput(
+            self._kt * current, current, pwm, self.temperature_c, self.hardware_error
+        )
         return self.last
+
+    def _kind(self, mode: OperatingMode) -> str:
+        """position | velocity | current | pwm; cached, as enum hashing is slow per step."""
+        cached = self._mode_cache
+        if cached is not None and cached[0] is mode:
+            return cached[1]
+        kind = (
+            "position"
+            if mode in _POSITION_MODES
+            else {OperatingMode.VELOCITY: "velocity", OperatingMode.CURRENT: "current"}.get(
+                mode, "pwm"
+            )
+        )
+        self._mode_cache = (mode, kind)
+        return kind
 
     def _position_pwm(self, cmd: MotionCommand, ticks: int) -> float:
         p = self.params
@@ -213,11 +235,14 @@ class Xm430:
     def _heat(self, current_a: float, saturated: bool) -> None:
         p = self.params
         dt = p.control_period_s
-        rise = current_a * current_a * p.resistance_ohm * p.thermal_resistance_k_w
+        rise = current_a * current_a * self._ohm * p.thermal_resistance_k_w
         relax = dt / p.thermal_time_constant_s
         self.temperature_c += (p.ambient_c + rise - self.temperature_c) * relax
-        self._saturated_s = self._saturated_s + dt if saturated else 0.0
-        if self._saturated_s > p.overload_time_s:
-            self.hardware_error |= HardwareErrorFlag.OVERLOAD
+        if saturated:
+            self._saturated_s += dt
+            if self._saturated_s > p.overload_time_s:
+                self.hardware_error |= int(HardwareErrorFlag.OVERLOAD)
+        else:
+            self._saturated_s = 0.0
         if self.temperature_c >= p.temperature_limit_c:
-            self.hardware_error |= HardwareErrorFlag.OVERHEATING
+            self.hardware_error |= int(HardwareErrorFlag.OVERHEATING)

@@ -164,14 +164,20 @@ class DeltaTwin:
 
     def step(self, n: int = 1) -> None:
         """Advance `n` physics steps, running the servos' firmware once per step."""
-        data, ctrl = self.data, self.data.ctrl
-        servos, commands = self.servos, self.commands
+        model, data = self.model, self.data
+        qpos, qvel, ctrl = data.qpos, data.qvel, data.ctrl
+        # plain floats: NumPy's per-call overhead would dominate at three servos
+        legs = [
+            (self.servos[k], int(self._motor_q[k]), int(self._motor_v[k]),
+             float(self._sign[k]), float(self._zero[k]))
+            for k in range(3)
+        ]  # fmt: skip
+        commands = self.commands
         for _ in range(n):
-            shafts, speeds = self.shaft_rad, self.shaft_rad_s
-            for k in range(3):
-                out = servos[k].step(commands[k], float(shafts[k]), float(speeds[k]))
-                ctrl[k] = self._sign[k] * out.torque_nm
-            mujoco.mj_step(self.model, data)
+            for k, (servo, iq, iv, sign, zero) in enumerate(legs):
+                out = servo.step(commands[k], zero + sign * qpos[iq], sign * qvel[iv])
+                ctrl[k] = sign * out.torque_nm
+            mujoco.mj_step(model, data)
 
     def step_torques(self, torques_nm: Sequence[float], n: int = 1) -> None:
         """Advance `n` physics steps with the motor torques [N m] (joint sign) imposed and
