@@ -20,7 +20,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 
-from app.api import dashboard, robot, runs, telemetry
+from app.api import dashboard, mav, robot, runs, telemetry
 from app.api.deps import Lease
 from app.api.serialize import floats
 from app.backends import open_backend
@@ -30,6 +30,7 @@ from app.control.controller import Controller
 from app.control.gate import GoalRejected
 from app.runs.manager import RunManager
 from app.scene import start_scene
+from app.world.service import WorldService
 from hardware.errors import BusError
 
 GIL_SWITCH_S = 2.5e-4
@@ -94,6 +95,8 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
             app.state.controller = controller
             app.state.backend = backend
             app.state.runs = RunManager(controller, settings.runs.folder_path)
+            app.state.world = WorldService(controller)
+            controller.pose_status = app.state.world.tracker.status
             runs = lambda: app.state.runs  # noqa: E731
             app.state.scene = await asyncio.to_thread(start_scene, settings, controller, runs)
             try:
@@ -102,6 +105,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
                 if app.state.scene is not None:
                     await asyncio.to_thread(app.state.scene.stop)
                 await asyncio.to_thread(app.state.runs.close)
+                app.state.world.close()
                 await asyncio.to_thread(controller.stop)
 
     app = FastAPI(
@@ -115,6 +119,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
     app.include_router(robot.router, prefix="/api")
     app.include_router(telemetry.router, prefix="/api")
     app.include_router(runs.router, prefix="/api")
+    app.include_router(mav.router, prefix="/api")
     app.include_router(dashboard.router)  # /api/info, sinusoid check, /vendor for static/
     if (STATIC_DIR / "index.html").exists():
         app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")

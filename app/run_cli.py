@@ -49,23 +49,35 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def _params(args: argparse.Namespace) -> SinusoidParams:
-    return SinusoidParams(tuple(args.amplitude), tuple(args.frequency), tuple(args.phase),
-                          tuple(args.offset), args.duration, args.feedforward)  # fmt: skip
+    return SinusoidParams(
+        tuple(args.amplitude),
+        tuple(args.frequency),
+        tuple(args.phase),
+        tuple(args.offset),
+        args.duration,
+        args.feedforward,
+    )
 
 
 def _http(url: str, method: str = "GET", body: dict | None = None) -> Any:
     data = None if body is None else json.dumps(body).encode()
-    request = urllib.request.Request(url, data=data, method=method,
-                                     headers={"content-type": "application/json"})  # fmt: skip
+    request = urllib.request.Request(
+        url, data=data, method=method, headers={"content-type": "application/json"}
+    )
     with urllib.request.urlopen(request, timeout=10) as response:
         return json.load(response)
 
 
 def _remote(url: str, params: SinusoidParams) -> dict[str, Any]:
     _http(f"{url}/api/torque", "POST", {"enabled": True})
-    body = {"amplitude_m": params.amplitude_m, "frequency_hz": params.frequency_hz,
-            "phase_rad": params.phase_rad, "offset_m": params.offset_m,
-            "duration_s": params.duration_s, "feedforward": params.feedforward}  # fmt: skip
+    body = {
+        "amplitude_m": params.amplitude_m,
+        "frequency_hz": params.frequency_hz,
+        "phase_rad": params.phase_rad,
+        "offset_m": params.offset_m,
+        "duration_s": params.duration_s,
+        "feedforward": params.feedforward,
+    }
     run_id = _http(f"{url}/api/tests/sinusoid", "POST", body)["run_id"]
     while (run := _http(f"{url}/api/runs/{run_id}"))["state"] == "running":
         time.sleep(0.25)
@@ -92,8 +104,9 @@ def _headless(params: SinusoidParams, backend: str) -> dict[str, Any]:
         finally:
             controller.stop()
     result = run.as_dict()
-    result["files"] = {name: str(run.folder / name) for name in ("log.mcap", "log.csv",
-                                                                  "report.png")}  # fmt: skip
+    result["files"] = {
+        name: str(run.folder / name) for name in ("log.mcap", "log.csv", "report.png")
+    }
     return result
 
 
@@ -104,9 +117,11 @@ def print_stats(run: dict[str, Any]) -> None:
         print(f"{'axis':>4} {'mean mm':>9} {'RMSE mm':>9} {'std mm':>9} {'max mm':>9} {'<1mm':>6}")
         for axis in "xyz":
             s = tracking[axis]
-            print(f"{axis:>4} {s['mean_m'] * 1e3:9.3f} {s['rmse_m'] * 1e3:9.3f} "
-                  f"{s['std_m'] * 1e3:9.3f} {s['max_abs_m'] * 1e3:9.3f} "
-                  f"{s['share_under_1mm']:6.1%}")  # fmt: skip
+            print(
+                f"{axis:>4} {s['mean_m'] * 1e3:9.3f} {s['rmse_m'] * 1e3:9.3f} "
+                f"{s['std_m'] * 1e3:9.3f} {s['max_abs_m'] * 1e3:9.3f} "
+                f"{s['share_under_1mm']:6.1%}"
+            )
     for name, where in run["files"].items():
         print(f"{name:>10}: {where}")
 

@@ -33,10 +33,16 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def _overrides(args: argparse.Namespace) -> dict[str, Any]:
-    hardware = {k: v for k, v in (("backend", args.backend), ("port", args.port),
-                                  ("baud", args.baud)) if v is not None}  # fmt: skip
-    server = {k: v for k, v in (("host", args.host), ("http_port", args.http_port),
-                                ("token", args.token)) if v is not None}  # fmt: skip
+    hardware = {
+        k: v
+        for k, v in (("backend", args.backend), ("port", args.port), ("baud", args.baud))
+        if v is not None
+    }
+    server = {
+        k: v
+        for k, v in (("host", args.host), ("http_port", args.http_port), ("token", args.token))
+        if v is not None
+    }
     return {key: value for key, value in (("hardware", hardware), ("server", server)) if value}
 
 
@@ -70,8 +76,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     server = settings.server
-    print(f"deltadash: dashboard and API on http://{server.host}:{server.http_port}/ "
-          f"(API docs at /docs), backend {settings.hardware.backend}", flush=True)  # fmt: skip
+    print(
+        f"deltadash: dashboard and API on http://{server.host}:{server.http_port}/ "
+        f"(API docs at /docs), backend {settings.hardware.backend}",
+        flush=True,
+    )
     if server.scene:
         from app.scene.scene import scene_host
 

@@ -30,9 +30,11 @@ PORT = 8765
 def _http(method: str, path: str, body: dict | None = None) -> dict:
     data = None if body is None else json.dumps(body).encode()
     request = urllib.request.Request(
-        f"http://127.0.0.1:{PORT}{path}", data=data, method=method,
+        f"http://127.0.0.1:{PORT}{path}",
+        data=data,
+        method=method,
         headers={"content-type": "application/json"},
-    )  # fmt: skip
+    )
     with urllib.request.urlopen(request, timeout=5) as response:
         return json.load(response)
 
@@ -87,8 +89,12 @@ def run_once(args: argparse.Namespace, rate_hz: float) -> None:
         "DELTADASH_LOOP__RATE_HZ": str(rate_hz),
         "DELTADASH_SERVER__HTTP_PORT": str(PORT),
     }
-    server = subprocess.Popen([sys.executable, "-m", "app.cli", "serve"], env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    server = subprocess.Popen(
+        [sys.executable, "-m", "app.cli", "serve"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         _wait_up()
         if args.torque:
@@ -117,8 +123,10 @@ def main() -> None:
     parser.add_argument("--rates", default="200")
     parser.add_argument("--torque", action="store_true", help="enable torque and jog meanwhile")
     args = parser.parse_args()
-    print(f"python {platform.python_version()}, {os.cpu_count()} cores, {platform.machine()}, "
-          f"load average {os.getloadavg()[0]:.2f}")  # fmt: skip
+    print(
+        f"python {platform.python_version()}, {os.cpu_count()} cores, {platform.machine()}, "
+        f"load average {os.getloadavg()[0]:.2f}"
+    )
     for rate in args.rates.split(","):
         run_once(args, float(rate))
 

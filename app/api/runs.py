@@ -39,9 +39,13 @@ class SinusoidRequest(BaseModel):
 
     def params(self) -> SinusoidParams:
         return SinusoidParams(
-            tuple(self.amplitude_m), tuple(self.frequency_hz), tuple(self.phase_rad),
-            tuple(self.offset_m), self.duration_s, self.feedforward,
-        )  # type: ignore[arg-type]  # fmt: skip
+            tuple(self.amplitude_m),
+            tuple(self.frequency_hz),
+            tuple(self.phase_rad),
+            tuple(self.offset_m),
+            self.duration_s,
+            self.feedforward,
+        )  # type: ignore[arg-type]
 
 
 class ChirpRequest(BaseModel):
@@ -65,8 +69,10 @@ class WaypointsRequest(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     points_m: Annotated[list[Triple], Field(min_length=2, max_length=1000)]
-    times_s: Annotated[list[Annotated[float, Field(ge=0, allow_inf_nan=False)]],
-                       Field(min_length=2, max_length=1000)]  # fmt: skip
+    times_s: Annotated[
+        list[Annotated[float, Field(ge=0, allow_inf_nan=False)]],
+        Field(min_length=2, max_length=1000),
+    ]
     feedforward: bool = False
 
     def params(self) -> WaypointParams:
@@ -136,10 +142,15 @@ def window_stats(
     if not rows:
         raise HTTPException(404, "the run has no samples")
     times = np.array([r["t_s"] for r in rows])
-    goal, measured = (np.array([[r[f"{kind}_{a}_m"] for a in "xyz"] for r in rows], dtype=float)
-                      for kind in ("goal", "measured"))  # fmt: skip
-    return {"tracking": error_stats(goal, measured, window_mask(times, start_s, end_s)),
-            "start_s": start_s, "end_s": end_s}  # fmt: skip
+    goal, measured = (
+        np.array([[r[f"{kind}_{a}_m"] for a in "xyz"] for r in rows], dtype=float)
+        for kind in ("goal", "measured")
+    )
+    return {
+        "tracking": error_stats(goal, measured, window_mask(times, start_s, end_s)),
+        "start_s": start_s,
+        "end_s": end_s,
+    }
 
 
 @router.get("/runs/{run_id}/{name}")

@@ -48,6 +48,8 @@ def status(controller: Controller) -> dict[str, Any]:
         "goal": {"position_m": floats(snap.goal_m)},
         "loop": loop_timing(controller),
         "bus": {"missed_reads": snap.missed_reads, **asdict(controller.bus.stats)},
+        "pose": controller.pose_status() if controller.pose_status else None,
+        "phase": snap.phase,
     }
 
 
@@ -84,6 +86,6 @@ def telemetry(snap: Snapshot, controller: Controller) -> dict[str, Any]:
             "measured_hz": window.measured_hz,
             "jitter_p99_ms": window.jitter_p99_ms,
             "overruns": controller.timing.overruns,
-        },  # fmt: skip
+        },
         "faults": [f.as_dict() for f in snap.faults],
     }

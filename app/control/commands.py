@@ -187,9 +187,10 @@ class CommandsMixin:
 
     def _reset_now(self: Controller) -> dict:
         failing = [
-            sid for sid, errors in zip(self.servo_ids, self._snapshot.hardware_errors, strict=True)
+            sid
+            for sid, errors in zip(self.servo_ids, self._snapshot.hardware_errors, strict=True)
             if errors
-        ]  # fmt: skip
+        ]
         if failing:
             self.bus.reboot(failing)
             self._torque = False  # a reboot leaves torque off

@@ -77,10 +77,12 @@ class Controller(CommandsMixin):
         self._goal = np.full(3, np.nan)
         self._tick = 0
         self._phase = ""
+        self._extra: dict | None = None
         self._lateness_s = 0.0
         self._dt_s = self.period_s
         self._t0 = time.monotonic()
         self._snapshot = Snapshot()
+        self.pose_status: Callable[[], dict] | None = None  # set by the world service
 
     # ---- lifecycle ----
     def start(self) -> None:
@@ -179,8 +181,11 @@ class Controller(CommandsMixin):
             state = self.bus.read_state()
         except BusError as exc:
             if self._misses.miss():
-                self._fault(Fault("bus", f"{self._misses.consecutive} reads failed: {exc}",
-                                  time_s=self._now()))  # fmt: skip
+                self._fault(
+                    Fault(
+                        "bus", f"{self._misses.consecutive} reads failed: {exc}", time_s=self._now()
+                    )
+                )
             return False
         self._misses.ok()
         self._state = state
@@ -190,18 +195,29 @@ class Controller(CommandsMixin):
     def _advance(self) -> None:
         if self._source is None or not self._motion_allowed() or self._state is None:
             return
-        setpoint = self._source.next(self._dt_s)
-        self._phase = setpoint.phase
+        source = self._source
+        setpoint = source.next(self._dt_s)
+        self._phase, self._extra = setpoint.phase, setpoint.extra
+        if setpoint.fault is not None:
+            self._fault(Fault("source", f"{source.name}: {setpoint.fault}", time_s=self._now()))
+            return
         if setpoint.goal_m is not None:
             self._goal = setpoint.goal_m
-        joints = self._setpoint_joints(setpoint)
-        if joints is not None:
-            self._write(joints, setpoint)
-            fault = self._following.check(self._now(), self._commanded, self._state.position_rad)
-            if fault is not None:
-                self._fault(fault)
-        if setpoint.finished:
+        if setpoint.point_m is None and setpoint.joints_rad is None:
+            self._warning = setpoint.warning  # the source asks to hold where we are
+        else:
+            self._follow(setpoint)
+        if setpoint.finished and self._source is source:
             self._source = None
+
+    def _follow(self, setpoint: Setpoint) -> None:
+        joints = self._setpoint_joints(setpoint)
+        if joints is None:
+            return
+        self._write(joints, setpoint)
+        fault = self._following.check(self._now(), self._commanded, self._state.position_rad)
+        if fault is not None:
+            self._fault(fault)
 
     def _setpoint_joints(self, setpoint: Setpoint) -> np.ndarray | None:
         near = self._commanded if self._commanded is not None else self._state.position_rad
@@ -245,22 +261,36 @@ class Controller(CommandsMixin):
         nan3 = np.full(3, np.nan)
         commanded = self._commanded if self._commanded is not None else nan3
         self._snapshot = Snapshot(
-            time_s=self._now(), tick=self._tick, mode=self.mode, torque=self._torque,
-            estopped=self._estopped, faults=tuple(self._faults), warning=self._warning,
+            time_s=self._now(),
+            tick=self._tick,
+            mode=self.mode,
+            torque=self._torque,
+            estopped=self._estopped,
+            faults=tuple(self._faults),
+            warning=self._warning,
             joints_measured_rad=state.position_rad if state else nan3,
-            point_measured_m=self._point, joints_commanded_rad=commanded,
-            point_commanded_m=self._commanded_point, goal_m=self._goal,
+            point_measured_m=self._point,
+            joints_commanded_rad=commanded,
+            point_commanded_m=self._commanded_point,
+            goal_m=self._goal,
             velocity_rad_s=state.velocity_rad_s if state else nan3,
             current_a=state.current_a if state else nan3,
             voltage_v=state.voltage_v if state else nan3,
             temperature_c=state.temperature_c if state else nan3,
             moving=tuple(bool(m) for m in state.moving) if state else (False,) * 3,
             hardware_errors=state.hardware_errors if state else ((),) * 3,
-            missed_reads=self._misses.total, phase=self._phase if self._source else "",
+            missed_reads=self._misses.total,
+            phase=self._phase if self._source else "",
             lateness_ms=self._lateness_s * 1e3,
-        )  # fmt: skip
+            extra=self._extra if self._source else None,
+        )
         for listener in tuple(self._listeners):  # a listener may remove itself
             listener(self._snapshot)
+
+    @property
+    def measured_point(self) -> np.ndarray:
+        """This tick's measured platform position (call from the control thread)."""
+        return self._point
 
     @property
     def current_source(self) -> GoalSource | None:

@@ -28,6 +28,9 @@ class Setpoint:
     finished: bool = False
     goal_m: np.ndarray | None = None
     phase: str = ""
+    extra: dict | None = None  # mode-specific values for logs (e.g. world-frame positions)
+    warning: str | None = None  # shown in status; with no point/joints the robot holds
+    fault: str | None = None  # stop and fault with this reason
 
 
 class GoalSource(Protocol):

@@ -19,8 +19,12 @@ class Fault:
     time_s: float = 0.0
 
     def as_dict(self) -> dict:
-        return {"source": self.source, "reason": self.reason, "servo_id": self.servo_id,
-                "time_s": self.time_s}  # fmt: skip
+        return {
+            "source": self.source,
+            "reason": self.reason,
+            "servo_id": self.servo_id,
+            "time_s": self.time_s,
+        }
 
 
 @dataclass(frozen=True)
@@ -51,6 +55,7 @@ class Snapshot:
     missed_reads: int = 0
     phase: str = ""
     lateness_ms: float = 0.0
+    extra: dict | None = None
 
     @property
     def tracking_error_m(self) -> np.ndarray:

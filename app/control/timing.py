@@ -94,9 +94,15 @@ class TimingRecorder:
         span = (self._last or 0.0) - (self._first or 0.0)
         rate = (self.ticks - 1) / span if span > 0 else 0.0
         return TimingStats(
-            self.target_hz, rate, 1e3 / rate if rate else 0.0, percentile(0.5),
-            percentile(0.99), self.worst_s * 1e3, self.overruns, self.ticks,
-        )  # fmt: skip
+            self.target_hz,
+            rate,
+            1e3 / rate if rate else 0.0,
+            percentile(0.5),
+            percentile(0.99),
+            self.worst_s * 1e3,
+            self.overruns,
+            self.ticks,
+        )
 
     def last_window(self) -> TimingStats:
         """The same figures over the last 10 s (or what there is of it)."""
@@ -105,8 +111,12 @@ class TimingRecorder:
         lateness, periods, work = (np.array(c) for c in zip(*self._recent, strict=True))
         mean_period = float(periods[1:].mean())
         return TimingStats(
-            self.target_hz, 1.0 / mean_period if mean_period else 0.0, mean_period * 1e3,
-            float(np.percentile(lateness, 50)) * 1e3, float(np.percentile(lateness, 99)) * 1e3,
-            float(lateness.max()) * 1e3, int((lateness + work > self._period_s).sum()),
+            self.target_hz,
+            1.0 / mean_period if mean_period else 0.0,
+            mean_period * 1e3,
+            float(np.percentile(lateness, 50)) * 1e3,
+            float(np.percentile(lateness, 99)) * 1e3,
+            float(lateness.max()) * 1e3,
+            int((lateness + work > self._period_s).sum()),
             len(lateness),
-        )  # fmt: skip
+        )

@@ -30,8 +30,9 @@ def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = WAIT_S
 def make_client(runs_folder=None, **overrides) -> TestClient:
     """A client of an app on the emulated bus, the emulator in-process for fault injection."""
     folder = runs_folder or tempfile.mkdtemp(prefix="deltadash-runs-")
-    settings = load_settings(hardware={"backend": "emulated"}, runs={"folder": str(folder)},
-                             **overrides)  # fmt: skip
+    settings = load_settings(
+        hardware={"backend": "emulated"}, runs={"folder": str(folder)}, **overrides
+    )
     opener = functools.partial(open_backend, emulator_in_process=True)
     return TestClient(create_app(settings, backend_opener=opener))
 

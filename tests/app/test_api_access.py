@@ -58,7 +58,16 @@ def test_one_client_holds_control_until_taken_over(client):
 def test_telemetry_streams_the_loop_state(client):
     with client.websocket_connect("/api/telemetry?hz=100") as ws:
         first, second = ws.receive_json(), ws.receive_json()
-    for key in ("t", "mode", "goal_m", "commanded_joints_rad", "measured_joints_rad",
-                "measured_m", "error_m", "loop", "faults"):  # fmt: skip
+    for key in (
+        "t",
+        "mode",
+        "goal_m",
+        "commanded_joints_rad",
+        "measured_joints_rad",
+        "measured_m",
+        "error_m",
+        "loop",
+        "faults",
+    ):
         assert key in first
     assert second["tick"] > first["tick"]

@@ -75,4 +75,4 @@ def test_motion_with_torque_off_is_409(fresh):
 
 def test_unknown_paths_and_methods_are_4xx(fresh):
     assert fresh.get("/api/nope").status_code == 404
-    assert fresh.get("/api/goal").status_code == 405
+    assert fresh.get("/api/goal").status_code in (404, 405)  # the dashboard mount answers GETs

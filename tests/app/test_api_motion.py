@@ -78,10 +78,12 @@ def test_estop_stops_and_nothing_moves_until_reset(fresh):
     assert fresh.post("/api/estop").status_code == 200
     status = _status(fresh)
     assert status["mode"] == "estop" and status["estopped"]
-    for path, body in (("/api/goal", {"position_m": [0, 0, -0.22]}),
-                       ("/api/jog", {"delta_m": [0.01, 0, 0]}),
-                       ("/api/move", {"position_m": [0, 0, -0.22]}),
-                       ("/api/torque", {"enabled": True})):  # fmt: skip
+    for path, body in (
+        ("/api/goal", {"position_m": [0, 0, -0.22]}),
+        ("/api/jog", {"delta_m": [0.01, 0, 0]}),
+        ("/api/move", {"position_m": [0, 0, -0.22]}),
+        ("/api/torque", {"enabled": True}),
+    ):
         response = fresh.post(path, json=body)
         assert response.status_code == 409 and "reset" in response.json()["detail"]
     held = _status(fresh)["joints"]["commanded_rad"]

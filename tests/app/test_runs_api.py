@@ -53,12 +53,20 @@ def test_infeasible_sinusoid_is_refused_before_any_motion(fresh):
 
 
 def test_bad_sinusoid_bodies_are_422(fresh):
-    for body in ({"duration_s": -1}, {"amplitude_m": [0.01, 0.01]}, {"frequency_hz": [1, 1, 99]},
-                 {"offset_m": [0, 0, float("nan")]}, {"wobble": 1}):  # fmt: skip
+    for body in (
+        {"duration_s": -1},
+        {"amplitude_m": [0.01, 0.01]},
+        {"frequency_hz": [1, 1, 99]},
+        {"offset_m": [0, 0, float("nan")]},
+        {"wobble": 1},
+    ):
         import json
 
-        response = fresh.post("/api/tests/sinusoid", content=json.dumps(body),
-                              headers={"content-type": "application/json"})  # fmt: skip
+        response = fresh.post(
+            "/api/tests/sinusoid",
+            content=json.dumps(body),
+            headers={"content-type": "application/json"},
+        )
         assert response.status_code == 422, body
 
 
@@ -89,8 +97,10 @@ def test_estop_during_a_run_aborts_it(fresh):
 
 def test_waypoints_run_and_windowed_stats(fresh):
     fresh.post("/api/torque", json={"enabled": True})
-    body = {"points_m": [[0, 0, -0.22], [0.03, 0, -0.22], [0.03, 0.03, -0.24]],
-            "times_s": [0, 0.5, 1.0]}  # fmt: skip
+    body = {
+        "points_m": [[0, 0, -0.22], [0.03, 0, -0.22], [0.03, 0.03, -0.24]],
+        "times_s": [0, 0.5, 1.0],
+    }
     run_id = fresh.post("/api/tests/waypoints", json=body).json()["run_id"]
     wait_for(lambda: _state(fresh, run_id) != "running", "the waypoint run to end")
     assert fresh.get(f"/api/runs/{run_id}").json()["kind"] == "waypoints"

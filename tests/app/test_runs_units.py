@@ -24,9 +24,17 @@ def test_axis_stats_by_hand():
     stats = axis_stats(np.array([0.001, -0.001, 0.003, 0.02]))
     assert stats["mean_m"] == pytest.approx(0.00575)
     assert stats["rmse_m"] == pytest.approx(np.sqrt((1 + 1 + 9 + 400) / 4) * 1e-3)
-    assert stats["std_m"] == pytest.approx(np.sqrt(((0.001 - 0.00575) ** 2 + (-0.001 - 0.00575) ** 2
-                                                     + (0.003 - 0.00575) ** 2
-                                                     + (0.02 - 0.00575) ** 2) / 4))  # fmt: skip
+    assert stats["std_m"] == pytest.approx(
+        np.sqrt(
+            (
+                (0.001 - 0.00575) ** 2
+                + (-0.001 - 0.00575) ** 2
+                + (0.003 - 0.00575) ** 2
+                + (0.02 - 0.00575) ** 2
+            )
+            / 4
+        )
+    )
     assert stats["max_abs_m"] == pytest.approx(0.02)
     assert stats["share_under_1cm"] == 0.75 and stats["share_under_1mm"] == 0.0
 
@@ -34,8 +42,9 @@ def test_axis_stats_by_hand():
 @given(st.lists(st.floats(-0.1, 0.1), min_size=1, max_size=200))
 def test_rmse_squared_is_mean_squared_plus_variance(errors):
     stats = axis_stats(np.array(errors))
-    assert stats["rmse_m"] ** 2 == pytest.approx(stats["mean_m"] ** 2 + stats["std_m"] ** 2,
-                                                 rel=1e-9, abs=1e-15)  # fmt: skip
+    assert stats["rmse_m"] ** 2 == pytest.approx(
+        stats["mean_m"] ** 2 + stats["std_m"] ** 2, rel=1e-9, abs=1e-15
+    )
 
 
 def test_error_stats_per_axis_and_mask():
@@ -131,10 +140,12 @@ def test_path_derivatives_match_differences(path):
     dt = t[1] - t[0]
     position, velocity, acceleration = (path.derivatives(t, k) for k in range(3))
     speed, accel, _ = path.peaks()
-    np.testing.assert_allclose(np.gradient(position, dt, axis=0)[1:-1], velocity[1:-1],
-                               atol=1e-5 * max(speed, 1))  # fmt: skip
-    np.testing.assert_allclose(np.gradient(velocity, dt, axis=0)[1:-1], acceleration[1:-1],
-                               atol=1e-4 * max(accel, 1))  # fmt: skip
+    np.testing.assert_allclose(
+        np.gradient(position, dt, axis=0)[1:-1], velocity[1:-1], atol=1e-5 * max(speed, 1)
+    )
+    np.testing.assert_allclose(
+        np.gradient(velocity, dt, axis=0)[1:-1], acceleration[1:-1], atol=1e-4 * max(accel, 1)
+    )
     assert np.abs(velocity).max() <= speed * (1 + 1e-6)
     assert np.abs(acceleration).max() <= accel * (1 + 1e-3)
 

@@ -1,0 +1,131 @@
+"""Drone side of the API: pose input (HTTP, WebSocket), hold-in-world, the hold test."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from dataclasses import asdict
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect
+from pydantic import BaseModel, ConfigDict, Field
+
+from app.api.deps import ControlClient, ControllerDep, TokenChecked, websocket_token_ok
+from app.api.models import Accepted, Vector3
+from app.world.drone_sim import DroneSimParams
+from app.world.inputs import sample_from_json
+from kinematics import PoseError
+
+router = APIRouter(tags=["drone"])
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class PoseBody(BaseModel):
+    """One drone pose: source time [s], world position [m], quaternion (w, x, y, z) body to
+    world, optional world velocity [m/s] and body angular velocity [rad/s]."""
+
+    model_config = ConfigDict(extra="forbid")
+    t: Finite
+    position: Vector3
+    quaternion: Annotated[list[Finite], Field(min_length=4, max_length=4)]
+    velocity: Vector3 | None = None
+    angular_velocity: Vector3 | None = None
+
+
+class HoldRequest(BaseModel):
+    """Hold the tool at a world point ("world") or where it is now ("current")."""
+
+    model_config = ConfigDict(extra="forbid")
+    position_m: Vector3 | None = None
+    frame: Literal["world", "current"] = "world"
+    source: Literal["external", "simulated"] = Field(
+        "external", description="external: poses posted / streamed / MAVLink; simulated drone"
+    )
+    latency_compensation: bool = True
+
+
+class HoldTestRequest(BaseModel):
+    """The thesis's MAV compensation routine (ch. 6.2) on the simulated drone, as a run."""
+
+    model_config = ConfigDict(extra="forbid")
+    duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = 20.0
+    latency_compensation: bool = True
+    seed: int = 0
+    drift_m: Annotated[float, Field(ge=0, le=0.2, allow_inf_nan=False)] = DroneSimParams.drift_m
+    tilt_deg: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = DroneSimParams.tilt_deg
+    yaw_deg: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = DroneSimParams.yaw_deg
+    gust_m: Annotated[float, Field(ge=0, le=0.2, allow_inf_nan=False)] = DroneSimParams.gust_m
+    latency_s: Annotated[float, Field(ge=0, le=0.5, allow_inf_nan=False)] = DroneSimParams.latency_s
+    rate_hz: Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)] = DroneSimParams.rate_hz
+
+    def drone(self) -> DroneSimParams:
+        fields = ("seed", "drift_m", "tilt_deg", "yaw_deg", "gust_m", "latency_s", "rate_hz")
+        return DroneSimParams(**{name: getattr(self, name) for name in fields})
+
+
+def _push(request_app: Any, data: dict[str, Any]) -> dict[str, Any]:
+    tracker = request_app.state.world.tracker
+    accepted = tracker.push(sample_from_json(data))
+    return {"accepted": accepted, "input": tracker.status()}
+
+
+@router.post("/mav/pose")
+def post_pose(body: PoseBody, request: Request, _: TokenChecked) -> dict[str, Any]:
+    """One pose sample; out-of-order, duplicate or jumping samples are dropped (accepted=false)."""
+    return _push(request.app, body.model_dump())
+
+
+@router.get("/mav/pose")
+def get_pose_status(request: Request) -> dict[str, Any]:
+    """The pose input's health: state (ok/stale/lost/none), age, rate, counters."""
+    return request.app.state.world.tracker.status()
+
+
+@router.websocket("/mav/pose")
+async def stream_poses(websocket: WebSocket) -> None:
+    """A stream of pose JSON objects (same fields as POST); bad ones are answered with an error."""
+    if not websocket_token_ok(websocket):
+        await websocket.close(code=1008, reason="missing or wrong token (?token=)")
+        return
+    await websocket.accept()
+    try:
+        while True:
+            text = await websocket.receive_text()
+            try:
+                _push(websocket.app, json.loads(text))
+            except (ValueError, KeyError, TypeError, PoseError) as exc:
+                await websocket.send_json({"error": str(exc)})
+    except WebSocketDisconnect:
+        return
+
+
+@router.post("/hold", response_model=Accepted)
+async def post_hold(
+    body: HoldRequest, request: Request, controller: ControllerDep, _: ControlClient
+) -> Accepted:
+    """Start mode hold-world: the tool stays at a world point while the drone drifts."""
+    world = request.app.state.world
+    if body.frame == "world" and body.position_m is None:
+        raise ValueError("position_m: required with frame 'world'")
+    provider = world.provider(DroneSimParams() if body.source == "simulated" else None)
+    goal = None if body.frame == "current" else np.asarray(body.position_m)
+    source = world.hold_source(goal, provider, body.latency_compensation)
+    start = controller.snapshot().point_commanded_m
+    if not np.isfinite(start).all():
+        start = controller.snapshot().point_measured_m
+    await asyncio.wait_for(asyncio.wrap_future(controller.run_source(source, start)), 2.0)
+    return Accepted(result={"goal_world_m": source.goal_world.tolist()})
+
+
+@router.post("/tests/hold")
+async def post_hold_test(body: HoldTestRequest, request: Request, _: ControlClient):
+    """Hold the current tool position in the world under a simulated drifting drone, as a run
+    with world-frame stats (stats.world.{x,y,z}) and the time the goal spent outside."""
+    world, runs = request.app.state.world, request.app.state.runs
+    provider = world.provider(body.drone())
+    source = world.hold_source(None, provider, body.latency_compensation)
+    source.duration_s = body.duration_s + source.approach_s
+    params = {**body.model_dump(), "drone": asdict(body.drone())}
+    run = await asyncio.to_thread(runs.start_source, "hold", params, source)
+    return {"run_id": run.run_id}

@@ -1,0 +1,1 @@
+"""Test runs: trajectories as goal sources, feasibility checks, logs, statistics, reports."""

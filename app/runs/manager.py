@@ -1,0 +1,183 @@
+"""Runs: start a planned test, record it, abort it, find it again after a restart."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+import uuid
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from app.control.commands import MotionRefused
+from app.control.gate import GoalRejected
+from app.runs.feasibility import check_path
+from app.runs.logs import RunLog
+from app.runs.recorder import Recorder
+from app.runs.source import TrajectorySource
+from app.runs.trajectories import SinusoidParams, TimedPath, plan_sinusoid
+
+if TYPE_CHECKING:
+    from app.control.controller import Controller
+
+START_TIMEOUT_S = 2.0
+
+
+@dataclass
+class Run:
+    """One execution of a test trajectory; saved as run.json beside its logs."""
+
+    run_id: str
+    kind: str
+    params: dict[str, Any]
+    conditions: dict[str, Any]
+    folder: Path
+    state: str = "running"  # running | done | aborted
+    reason: str | None = None
+    started_at: float = field(default_factory=time.time)
+    ended_at: float | None = None
+    samples: int = 0
+    stats: dict[str, Any] = field(default_factory=dict)
+    has_report: bool = False
+    abort_reason: str | None = None
+    done: threading.Event = field(default_factory=threading.Event, repr=False)
+
+    @property
+    def title(self) -> str:
+        if self.kind == "hold":
+            on = self.params.get("latency_compensation")
+            return f"run {self.run_id}: hold in world (latency compensation {on}), world frame"
+        return f"run {self.run_id}: {self.kind}, feed-forward {self.params.get('feedforward')}"
+
+    def finish(self, stats: dict[str, Any], abort_reason: str | None, samples: int) -> None:
+        self.stats = stats
+        self.state, self.reason = ("aborted", abort_reason) if abort_reason else ("done", None)
+        self.samples, self.ended_at = samples, time.time()
+
+    def as_dict(self) -> dict[str, Any]:
+        hidden = {"folder", "done", "abort_reason"}
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in hidden}
+
+    def save(self) -> None:
+        (self.folder / "run.json").write_text(json.dumps(self.as_dict(), indent=1))
+        self.done.set()
+
+
+class RunManager:
+    """Owns the runs of one controller; one run at a time."""
+
+    def __init__(self, controller: Controller, folder: Path) -> None:
+        self.controller = controller
+        self.folder = folder
+        self._runs: dict[str, Run] = {}
+        self._active: tuple[Run, TrajectorySource] | None = None
+        self._lock = threading.Lock()
+        self._load_saved()
+
+    def _load_saved(self) -> None:
+        for path in sorted(self.folder.glob("*/run.json")):
+            try:
+                data = json.loads(path.read_text())
+            except (OSError, json.JSONDecodeError):
+                continue
+            data.pop("done", None)
+            run = Run(**{**data, "folder": path.parent})
+            run.done.set()
+            self._runs[run.run_id] = run
+
+    def list(self) -> list[Run]:
+        return sorted(self._runs.values(), key=lambda r: r.started_at, reverse=True)
+
+    def get(self, run_id: str) -> Run | None:
+        return self._runs.get(run_id)
+
+    def plan(self, params: TimedPath):
+        """(plan, start point, start joints) from where the robot is; GoalRejected if infeasible."""
+        snap = self.controller.snapshot()
+        start = snap.point_commanded_m
+        if not np.isfinite(start).all():
+            start = snap.point_measured_m
+        if not np.isfinite(start).all():
+            raise MotionRefused("the robot's position is unknown: check the bus")
+        try:
+            plan = plan_sinusoid(params, start)
+        except ValueError as exc:
+            raise GoalRejected(str(exc)) from exc
+        times, points = plan.sample(self.controller.period_s)
+        check_path(self.controller.gate, times, points, snap.joints_measured_rad)
+        return plan, start
+
+    def start_sinusoid(self, params: SinusoidParams) -> Run:
+        """Plan, check, start and record a sinusoid run; raises before anything moves."""
+        return self.start(params, "sinusoid")
+
+    def start(self, params: TimedPath, kind: str) -> Run:
+        """Plan, check, start and record a run of any timed path; raises before any motion."""
+        with self._lock:
+            self._refuse_if_busy()
+            plan, start = self.plan(params)
+            lead = self.controller.settings.runs.feedforward_lead_s if params.feedforward else 0.0
+            source = TrajectorySource(plan, lead)
+            return self._launch(kind, asdict(params), lead, source, start)
+
+    def start_source(self, kind: str, params: dict[str, Any], source: Any) -> Run:
+        """Record a run of a ready-made source (e.g. hold-in-world) from where the robot is."""
+        with self._lock:
+            self._refuse_if_busy()
+            start = self.controller.snapshot().point_commanded_m
+            if not np.isfinite(start).all():
+                start = self.controller.snapshot().point_measured_m
+            return self._launch(kind, params, 0.0, source, start)
+
+    def _refuse_if_busy(self) -> None:
+        if self._active is not None and self._active[0].state == "running":
+            raise MotionRefused(f"run {self._active[0].run_id} is in progress; abort it first")
+
+    def _launch(
+        self, kind: str, params: dict[str, Any], lead: float, source: Any, start: np.ndarray
+    ) -> Run:
+        run = self._new_run(kind, params, lead)
+        log = RunLog(run.folder, {"run_id": run.run_id, "params": json.dumps(run.params)})
+        skip = self.controller.settings.runs.stats_skip_s
+        recorder = Recorder(run, self.controller, source, log, skip)
+        self.controller.add_listener(recorder.on_tick)
+        try:
+            self.controller.run_source(source, start).result(timeout=START_TIMEOUT_S)
+        except BaseException:
+            self.controller.remove_listener(recorder.on_tick)
+            recorder.discard()
+            raise
+        self._runs[run.run_id] = run
+        self._active = (run, source)
+        return run
+
+    def abort(self, run_id: str, reason: str = "aborted by the operator") -> Run:
+        run = self._runs[run_id]
+        if self._active is not None and self._active[0] is run and run.state == "running":
+            run.abort_reason = reason
+            self.controller.stop_source(self._active[1]).result(timeout=START_TIMEOUT_S)
+        return run
+
+    def close(self) -> None:
+        """At shutdown: stop the active run (its log is finalised) and drop the plan."""
+        if self._active is not None:
+            run, _ = self._active
+            if run.state == "running":
+                self.abort(run.run_id, "server shutting down")
+                run.done.wait(timeout=5.0)
+            self._active = None
+
+    def _new_run(self, kind: str, params: dict[str, Any], lead_s: float) -> Run:
+        run_id = time.strftime("%Y%m%d-%H%M%S") + "-" + uuid.uuid4().hex[:4]
+        settings = self.controller.settings
+        conditions = {
+            "robot": settings.robot.model_dump(),
+            "backend": self.controller.backend,
+            "loop_rate_hz": settings.loop.rate_hz,
+            "feedforward_lead_s": lead_s,
+            "joints": [j.model_dump() for j in settings.hardware.joints],
+        }
+        return Run(run_id, kind, params, conditions, self.folder / run_id)

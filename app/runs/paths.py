@@ -1,0 +1,98 @@
+"""More timed paths for test runs: a chirp for identifying the servo response, and
+waypoints with timing (pick-and-place, rasters). Each offers what PlannedRun needs:
+``derivatives(t, order)``, ``duration_s``, ``peaks()`` and ``feedforward``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class ChirpParams:
+    """Linear chirp along ``axis``: a sin(2 pi (f0 t + (f1 - f0) t^2 / (2 T))) about ``offset_m``.
+
+    A frequency sweep shows the servo's lag and gain at every frequency in one run (thesis
+    ch. 6.3: tuning the servo gains).
+    """
+
+    axis: int = 2
+    amplitude_m: float = 0.02
+    f0_hz: float = 0.2
+    f1_hz: float = 3.0
+    offset_m: tuple[float, float, float] = (0.0, 0.0, -0.24)
+    duration_s: float = 10.0
+    feedforward: bool = False
+
+    def derivatives(self, t: np.ndarray, order: int) -> np.ndarray:
+        t = np.asarray(t, dtype=np.float64)
+        rate = (self.f1_hz - self.f0_hz) / self.duration_s
+        phase = TWO_PI * (self.f0_hz * t + 0.5 * rate * t * t)
+        omega = TWO_PI * (self.f0_hz + rate * t)  # d phase / dt
+        a = self.amplitude_m
+        value = {
+            0: a * np.sin(phase),
+            1: a * omega * np.cos(phase),
+            2: a * (TWO_PI * rate * np.cos(phase) - omega**2 * np.sin(phase)),
+        }[order]
+        out = np.zeros((*t.shape, 3))
+        out[..., self.axis] = value
+        return out + (np.asarray(self.offset_m) if order == 0 else 0.0)
+
+    def peaks(self) -> tuple[float, float, float]:
+        omega = TWO_PI * max(self.f0_hz, self.f1_hz)
+        a = abs(self.amplitude_m)
+        return a * omega, a * omega**2, a * omega**3
+
+
+def _quintic(s: np.ndarray, order: int) -> np.ndarray:
+    """Minimum-jerk blend 0 -> 1 on s in [0, 1] and its derivatives w.r.t. s."""
+    s = np.clip(s, 0.0, 1.0)
+    return {
+        0: 10 * s**3 - 15 * s**4 + 6 * s**5,
+        1: 30 * s**2 - 60 * s**3 + 30 * s**4,
+        2: 60 * s - 180 * s**2 + 120 * s**3,
+    }[order]
+
+
+@dataclass(frozen=True)
+class WaypointParams:
+    """Points [m] reached at times [s] (the first at t = 0), resting at each: minimum-jerk
+    segments between them, so velocity and acceleration are zero at every waypoint."""
+
+    points_m: tuple[tuple[float, float, float], ...]
+    times_s: tuple[float, ...]
+    feedforward: bool = False
+
+    def __post_init__(self) -> None:
+        if len(self.points_m) < 2 or len(self.points_m) != len(self.times_s):
+            raise ValueError("waypoints: give 2 or more points and one time per point")
+        if self.times_s[0] != 0.0 or not all(np.diff(self.times_s) > 0):
+            raise ValueError("waypoints: times_s must start at 0 and increase")
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.times_s[-1])
+
+    def derivatives(self, t: np.ndarray, order: int) -> np.ndarray:
+        t = np.asarray(t, dtype=np.float64)
+        times, points = np.asarray(self.times_s), np.asarray(self.points_m, dtype=np.float64)
+        k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2)
+        span = times[k + 1] - times[k]
+        s = (t - times[k]) / span
+        delta = points[k + 1] - points[k]
+        blend = _quintic(s, order)[..., None] / span[..., None] ** order
+        return (points[k] if order == 0 else 0.0) + blend * delta
+
+    def peaks(self) -> tuple[float, float, float]:
+        delta = np.abs(np.diff(np.asarray(self.points_m), axis=0)).max(axis=1)
+        span = np.diff(self.times_s)
+        # peaks of the quintic: 1.875 / T, 5.774 / T^2, 60 / T^3 per unit distance
+        return tuple(
+            float(np.max(c * delta / span**p)) for c, p in ((1.875, 1), (5.774, 2), (60.0, 3))
+        )

@@ -1,0 +1,160 @@
+"""Recording one run: a listener in the control thread feeds a writer thread.
+
+The control thread only appends to a queue; the writer thread writes the logs, keeps the
+samples for the statistics and, when the run ends (finished, aborted, e-stop or fault),
+closes the files, computes the stats and draws the report.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import shutil
+import threading
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from app.control.state import Snapshot
+from app.runs.logs import RunLog
+from app.runs.report import write_report
+from app.runs.stats import error_stats, window_mask
+
+if TYPE_CHECKING:
+    from app.control.controller import Controller
+    from app.runs.manager import Run
+    from app.runs.source import TrajectorySource
+
+_END = object()
+
+
+def _values(vector: np.ndarray) -> list[float | None]:
+    return [None if not math.isfinite(v) else float(v) for v in vector.tolist()]
+
+
+def row_of(snap: Snapshot, t_s: float) -> dict[str, Any]:
+    """One log row (see logs.COLUMNS) from a tick's snapshot."""
+    row: dict[str, Any] = {"t_s": t_s, "phase": snap.phase, "mode": snap.mode}
+    for prefix, vector, names in (
+        ("goal", snap.goal_m, "xyz"),
+        ("commanded", snap.joints_commanded_rad, "123"),
+        ("measured", snap.joints_measured_rad, "123"),
+        ("measured", snap.point_measured_m, "xyz"),
+    ):
+        unit = "m" if names == "xyz" else "rad"
+        letter = "" if names == "xyz" else "q"
+        for name, value in zip(names, _values(vector), strict=True):
+            row[f"{prefix}_{letter}{name}_{unit}"] = value
+    for name in "xyz":
+        row[f"external_{name}_m"] = None
+    row["lateness_ms"] = snap.lateness_ms
+    row["faults"] = "; ".join(f.reason for f in snap.faults)
+    extra = snap.extra or {}
+    for kind in ("goal", "measured"):
+        values = extra.get(f"{kind}_world_m") or [None] * 3
+        for name, value in zip("xyz", values, strict=True):
+            row[f"world_{kind}_{name}_m"] = value
+    row["outside"] = extra.get("outside")
+    age = extra.get("pose_age_s")
+    row["pose_age_ms"] = None if age is None else age * 1e3
+    return row
+
+
+def _columns(rows: list[dict[str, Any]], prefix: str) -> np.ndarray:
+    return np.array([[r[f"{prefix}_{a}_m"] for a in "xyz"] for r in rows], dtype=float)
+
+
+def run_stats(rows: list[dict[str, Any]], skip_s: float, dt_s: float) -> dict[str, Any]:
+    """Tracking stats (goal vs FK) over the test part, and world stats for hold runs."""
+    times = np.array([r["t_s"] for r in rows])
+    active = np.array([r["phase"] in ("timed", "hold") for r in rows], dtype=bool)
+    if active.any():  # the approach and the first moments are not the test
+        active &= window_mask(times, float(times[active][0]) + skip_s, None)
+    stats: dict[str, Any] = {
+        "tracking": error_stats(_columns(rows, "goal"), _columns(rows, "measured"), active)
+    }
+    world_measured = _columns(rows, "world_measured")
+    if np.isfinite(world_measured).any():
+        world = error_stats(_columns(rows, "world_goal"), world_measured, active)
+        outside = np.array([bool(r["outside"]) for r in rows])
+        world["outside_s"] = float(np.sum(outside & active) * dt_s)
+        world["inside_only"] = error_stats(
+            _columns(rows, "world_goal"), world_measured, active & ~outside
+        )
+        stats["world"] = world
+    return stats
+
+
+class Recorder:
+    """Feeds one run's ticks from the controller to its logs; finalises the run at the end."""
+
+    def __init__(
+        self, run: Run, controller: Controller, source: TrajectorySource, log: RunLog, skip_s: float
+    ) -> None:
+        self.run, self.controller, self.source, self.log = run, controller, source, log
+        self.skip_s = skip_s
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._t0: float | None = None
+        self._rows: list[dict[str, Any]] = []
+        self._thread = threading.Thread(target=self._write, name=f"run-{run.run_id}", daemon=True)
+        self._thread.start()
+
+    # control thread
+    def on_tick(self, snap: Snapshot) -> None:
+        active = self.controller.current_source is self.source
+        if self._t0 is None and not active:
+            return  # registered before the loop has taken the source up
+        if not active:
+            self.controller.remove_listener(self.on_tick)
+            reason = None if self.source.finished else self._why_stopped(snap)
+            self._queue.put((_END, reason))
+            return
+        if self._t0 is None:
+            self._t0 = snap.time_s
+        self._queue.put(row_of(snap, snap.time_s - self._t0))
+
+    def _why_stopped(self, snap: Snapshot) -> str:
+        if snap.estopped:
+            return "e-stop"
+        if snap.faults:
+            return f"fault: {snap.faults[0].reason}"
+        return self.run.abort_reason or "stopped by another command"
+
+    def discard(self) -> None:
+        """The run never started: close the files and remove its folder."""
+        self._queue.put((_END, "did not start"))
+        self._thread.join(timeout=5.0)
+        shutil.rmtree(self.run.folder, ignore_errors=True)
+
+    # writer thread
+    def _write(self) -> None:
+        while True:
+            item = self._queue.get()
+            if isinstance(item, tuple) and item[0] is _END:
+                self._finish(item[1])
+                return
+            self.log.write(item)
+            self._rows.append(item)
+
+    def _finish(self, abort_reason: str | None) -> None:
+        self.log.close()
+        if not self._rows:
+            self.run.finish({}, abort_reason, 0)
+            self.run.save()
+            return
+        stats = run_stats(self._rows, self.skip_s, self.controller.period_s)
+        times = np.array([r["t_s"] for r in self._rows])
+        reference, measured = (
+            ("world_goal", "world_measured") if "world" in stats else ("goal", "measured")
+        )
+        write_report(
+            self.run.folder / "report.png",
+            times,
+            _columns(self._rows, reference),
+            _columns(self._rows, measured),
+            stats.get("world", stats["tracking"]),
+            self.run.title,
+        )
+        self.run.has_report = True
+        self.run.finish(stats, abort_reason, len(self._rows))
+        self.run.save()

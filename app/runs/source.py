@@ -1,0 +1,31 @@
+"""A planned run as the control loop's goal source (mode "test")."""
+
+from __future__ import annotations
+
+from app.control.sources import Setpoint
+from app.runs.trajectories import PlannedRun
+
+
+class TrajectorySource:
+    """Plays a PlannedRun; with ``lead_s`` > 0 commands the point that far ahead (feed-forward
+    for the servos' position lag) while reporting the nominal point as the goal."""
+
+    name = "test"
+
+    def __init__(self, plan: PlannedRun, lead_s: float = 0.0) -> None:
+        self.plan = plan
+        self.lead_s = lead_s
+        self.t_s = 0.0
+        self.finished = False
+
+    def next(self, dt_s: float) -> Setpoint:
+        self.t_s += dt_s
+        goal = self.plan.point_at(self.t_s)
+        commanded = self.plan.point_at(self.t_s + self.lead_s) if self.lead_s else goal
+        self.finished = self.t_s >= self.plan.duration_s
+        return Setpoint(
+            point_m=commanded,
+            goal_m=goal,
+            phase=self.plan.phase_at(self.t_s),
+            finished=self.finished,
+        )

@@ -1,0 +1,64 @@
+"""Error statistics per axis, as in thesis Tables 6.1-6.3.
+
+error = reference - measurement per sample (goal - FK for tracking, FK - external for
+validation). Mean, RMSE, population standard deviation (ddof = 0, so RMSE^2 = mean^2 +
+std^2 exactly), largest |error|, and the share of samples under 1 cm and under 1 mm.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+AXES = ("x", "y", "z")
+
+
+def axis_stats(error: np.ndarray) -> dict[str, float]:
+    """Statistics of one axis' errors (N,) [m]; NaN samples are left out."""
+    values = np.asarray(error, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return {
+            key: float("nan")
+            for key in (
+                "mean_m",
+                "rmse_m",
+                "std_m",
+                "max_abs_m",
+                "share_under_1cm",
+                "share_under_1mm",
+            )
+        }
+    magnitude = np.abs(values)
+    return {
+        "mean_m": float(values.mean()),
+        "rmse_m": float(np.sqrt(np.mean(values**2))),
+        "std_m": float(values.std(ddof=0)),
+        "max_abs_m": float(magnitude.max()),
+        "share_under_1cm": float(np.mean(magnitude < 0.01)),
+        "share_under_1mm": float(np.mean(magnitude < 0.001)),
+    }
+
+
+def error_stats(
+    reference: np.ndarray, measured: np.ndarray, mask: np.ndarray | None = None
+) -> dict[str, Any]:
+    """Per-axis statistics of ``reference - measured`` (N, 3), over ``mask`` (N,) if given."""
+    error = np.asarray(reference, dtype=np.float64) - np.asarray(measured, dtype=np.float64)
+    if mask is not None:
+        error = error[np.asarray(mask, dtype=bool)]
+    result: dict[str, Any] = {axis: axis_stats(error[:, i]) for i, axis in enumerate(AXES)}
+    result["samples"] = int(len(error))
+    return result
+
+
+def window_mask(times_s: np.ndarray, start_s: float | None, end_s: float | None) -> np.ndarray:
+    """Samples with start_s <= t <= end_s (either bound may be None)."""
+    times = np.asarray(times_s)
+    mask = np.ones(times.shape, dtype=bool)
+    if start_s is not None:
+        mask &= times >= start_s
+    if end_s is not None:
+        mask &= times <= end_s
+    return mask

@@ -1,0 +1,186 @@
+"""Hold-in-world mode: keep the tool at a fixed world point while the drone drifts.
+
+Each tick (thesis eq. 5.1-5.2): take the latest drone pose, move the world goal into the
+base frame through the drone pose and the mount, clamp it onto the workspace (the time
+outside is counted), and command it. With latency compensation the pose is first
+predicted forward by its age plus the servos' lag, from its linear and angular velocity
+(supplied by the source or estimated from the last two samples).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from app.control.gate import Gate
+from app.control.sources import Setpoint
+from app.world.drone_sim import SimulatedDrone
+from app.world.poses import PoseTracker
+from kinematics import Pose
+from kinematics.pose import quaternion_multiply
+
+
+@dataclass(frozen=True)
+class Observation:
+    """A pose as the loop sees it: health, age [s], pose, velocity and angular velocity."""
+
+    state: str  # ok | stale | lost | none
+    age_s: float
+    pose: Pose | None = None
+    velocity_m_s: np.ndarray | None = None
+    angular_velocity_rad_s: np.ndarray | None = None  # body frame
+
+
+class PoseProvider(Protocol):
+    def observe(self, t_s: float) -> Observation: ...
+
+    def true_pose(self, t_s: float) -> Pose | None:
+        """The true pose when known (simulation), for measuring the world error."""
+
+
+def angular_velocity(q_old: np.ndarray, q_new: np.ndarray, dt_s: float) -> np.ndarray:
+    """Body-frame angular velocity [rad/s] turning q_old into q_new in dt_s."""
+    delta = quaternion_multiply(q_old * np.array([1, -1, -1, -1]), q_new)
+    delta = delta if delta[0] >= 0 else -delta
+    angle = 2.0 * math.atan2(float(np.linalg.norm(delta[1:])), float(delta[0]))
+    axis = delta[1:] / max(float(np.linalg.norm(delta[1:])), 1e-15)
+    return axis * angle / dt_s
+
+
+def predict(pose: Pose, velocity: np.ndarray, omega_body: np.ndarray, ahead_s: float) -> Pose:
+    """The pose ``ahead_s`` later at constant linear and angular velocity."""
+    angle = float(np.linalg.norm(omega_body)) * ahead_s
+    if angle > 0:
+        axis = omega_body / np.linalg.norm(omega_body)
+        turn = np.concatenate([[math.cos(angle / 2)], math.sin(angle / 2) * axis])
+        quaternion = quaternion_multiply(pose.quaternion, turn)
+    else:
+        quaternion = pose.quaternion
+    return Pose(pose.position + velocity * ahead_s, quaternion)
+
+
+class SimulatedDroneProvider:
+    """Observations of a SimulatedDrone: its measurement stream, latency and rate included."""
+
+    def __init__(self, drone: SimulatedDrone) -> None:
+        self.drone = drone
+
+    def observe(self, t_s: float) -> Observation:
+        stamp, pose, velocity = self.drone.measured(t_s)
+        period = 1.0 / self.drone.params.rate_hz
+        _, previous, _ = self.drone.measured(t_s - period)
+        omega = angular_velocity(previous.quaternion, pose.quaternion, period)
+        return Observation("ok", t_s - stamp, pose, velocity, omega)
+
+    def true_pose(self, t_s: float) -> Pose:
+        return self.drone.true_state(t_s)[0]
+
+
+class TrackerProvider:
+    """Observations of an external source (motion capture, MAVLink) through its tracker."""
+
+    def __init__(self, tracker: PoseTracker) -> None:
+        self.tracker = tracker
+        self._last: tuple[float, np.ndarray] | None = None
+        self._omega = np.zeros(3)
+
+    def observe(self, t_s: float) -> Observation:
+        state, age = self.tracker.health()
+        sample, velocity = self.tracker.latest()
+        if sample is None:
+            return Observation(state, age)
+        omega = sample.angular_velocity_rad_s
+        if omega is None:
+            if self._last is not None and sample.t_s > self._last[0]:
+                dt = sample.t_s - self._last[0]
+                self._omega = angular_velocity(self._last[1], sample.quaternion, dt)
+            omega = self._omega
+        self._last = (sample.t_s, sample.quaternion)
+        return Observation(state, age, sample.pose, velocity, omega)
+
+    def true_pose(self, t_s: float) -> Pose | None:
+        return None
+
+
+class HoldSource:
+    """Goal source of mode ``hold-world`` (see module docstring)."""
+
+    name = "hold-world"
+
+    def __init__(
+        self,
+        goal_world_m: np.ndarray,
+        provider: PoseProvider,
+        mount: Pose,
+        gate: Gate,
+        measured: Callable[[], np.ndarray],
+        lead_s: float | None,
+    ) -> None:
+        self.goal_world = np.asarray(goal_world_m, dtype=np.float64)
+        self.provider, self.mount, self.gate, self.measured = provider, mount, gate, measured
+        self.lead_s = lead_s  # None: plain method (thesis); else compensate age + lead_s
+        self.t_s = 0.0
+        self.outside_s = 0.0
+        self.finished = False
+        self.duration_s: float | None = None
+        self.approach_s = 1.0
+        self._start: np.ndarray | None = None
+
+    def next(self, dt_s: float) -> Setpoint:
+        self.t_s += dt_s
+        self.finished = self.duration_s is not None and self.t_s >= self.duration_s
+        seen = self.provider.observe(self.t_s)
+        if seen.state in ("lost", "none") or seen.pose is None:
+            return Setpoint(
+                fault=f"drone pose {seen.state} (age {seen.age_s:.3f} s)",
+                phase="hold",
+                finished=True,
+            )
+        if seen.state == "stale":
+            return Setpoint(
+                warning=f"drone pose stale ({seen.age_s * 1e3:.0f} ms): holding",
+                phase="hold",
+                finished=self.finished,
+            )
+        pose = seen.pose
+        if self.lead_s is not None:
+            ahead = seen.age_s + self.lead_s
+            pose = predict(pose, seen.velocity_m_s, seen.angular_velocity_rad_s, ahead)
+        goal_base = (pose @ self.mount).apply_inverse(self.goal_world)
+        commanded = self.gate.clamp_point(self._blend_in(goal_base))
+        outside = not self.gate.inside(goal_base)
+        self.outside_s += dt_s if outside and self.t_s >= self.approach_s else 0.0
+        return Setpoint(
+            point_m=commanded,
+            goal_m=goal_base,
+            phase="approach" if self.t_s < self.approach_s else "hold",
+            finished=self.finished,
+            extra=self._world(outside, seen.age_s),
+        )
+
+    def _blend_in(self, goal_base: np.ndarray) -> np.ndarray:
+        """Over the first approach_s, slide from where the robot was onto the moving goal
+        (minimum-jerk weight), so starting the mode never steps the servos."""
+        if self._start is None:
+            self._start = self.measured().copy()
+        if self.t_s >= self.approach_s:
+            return goal_base
+        s = self.t_s / self.approach_s
+        weight = 10 * s**3 - 15 * s**4 + 6 * s**5
+        return self._start + weight * (goal_base - self._start)
+
+    def _world(self, outside: bool, age_s: float) -> dict:
+        truth = self.provider.true_pose(self.t_s)
+        measured_world = None
+        if truth is not None:
+            measured_world = (truth @ self.mount).apply(self.measured()).tolist()
+        return {
+            "goal_world_m": self.goal_world.tolist(),
+            "measured_world_m": measured_world,
+            "outside": outside,
+            "pose_age_s": age_s,
+        }

@@ -1,0 +1,120 @@
+"""Pose inputs from outside: a UDP JSON stream and a MAVLink ODOMETRY listener.
+
+UDP: one JSON object per datagram, the same as POST /api/mav/pose:
+``{"t": 12.34, "position": [x, y, z], "quaternion": [w, x, y, z], "velocity": [vx, vy, vz]}``
+(world frame z up [m], body to world, velocity optional). MAVLink: ODOMETRY messages from a
+PX4/ArduPilot autopilot via pymavlink, converted from NED/FRD (app/world/frames.py).
+Each listener is a daemon thread that pushes vetted samples into a PoseTracker.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import socket
+import threading
+from typing import Any
+
+import numpy as np
+
+from app.world.frames import attitude_ned_frd_to_enu_flu, frd_to_flu, ned_to_enu
+from app.world.poses import PoseTracker, make_sample
+from kinematics import PoseError
+
+log = logging.getLogger(__name__)
+
+
+def sample_from_json(data: dict[str, Any]):
+    """A PoseSample from the documented JSON; PoseError or KeyError names what is wrong."""
+    missing = [key for key in ("t", "position", "quaternion") if key not in data]
+    if missing:
+        raise PoseError(f"missing field(s): {', '.join(missing)}")
+    return make_sample(
+        data["t"],
+        data["position"],
+        data["quaternion"],
+        data.get("velocity"),
+        data.get("angular_velocity"),
+    )
+
+
+class UdpPoseListener:
+    """Receives JSON pose datagrams on ``port`` (127.0.0.1 unless ``host`` says otherwise)."""
+
+    def __init__(self, tracker: PoseTracker, port: int, host: str = "127.0.0.1") -> None:
+        self.tracker = tracker
+        self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.socket.bind((host, port))
+        self.socket.settimeout(0.2)
+        self.port = self.socket.getsockname()[1]
+        self.errors = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="pose-udp", daemon=True)
+
+    def start(self) -> UdpPoseListener:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self.socket.close()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                payload, _ = self.socket.recvfrom(65536)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            try:
+                self.tracker.push(sample_from_json(json.loads(payload)))
+            except (ValueError, KeyError, TypeError) as exc:
+                self.errors += 1
+                log.debug("bad pose datagram: %s", exc)
+
+
+def sample_from_odometry(msg: Any):
+    """A PoseSample in the project's frames from a MAVLink ODOMETRY message (NED/FRD)."""
+    position = ned_to_enu(np.array([msg.x, msg.y, msg.z]))
+    quaternion = attitude_ned_frd_to_enu_flu(np.asarray(msg.q, dtype=np.float64))
+    # ODOMETRY velocity is in the child frame (body FRD) by default: rotate it to the world
+    body_velocity = np.array([msg.vx, msg.vy, msg.vz])
+    omega = frd_to_flu(np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed]))
+    sample = make_sample(msg.time_usec * 1e-6, position, quaternion, None, omega)
+    world_velocity = sample.pose.rotation @ frd_to_flu(body_velocity)
+    return make_sample(sample.t_s, position, quaternion, world_velocity, omega)
+
+
+class MavlinkPoseListener:
+    """Reads ODOMETRY from ``url`` (pymavlink connection string) into ``tracker``."""
+
+    def __init__(self, tracker: PoseTracker, url: str) -> None:
+        from pymavlink import mavutil
+
+        self.tracker = tracker
+        self.connection = mavutil.mavlink_connection(url, dialect="common")
+        self.errors = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="pose-mavlink", daemon=True)
+
+    def start(self) -> MavlinkPoseListener:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self.connection.close()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            msg = self.connection.recv_match(type="ODOMETRY", blocking=True, timeout=0.2)
+            if msg is None:
+                continue
+            try:
+                self.tracker.push(sample_from_odometry(msg))
+            except (ValueError, PoseError) as exc:
+                self.errors += 1
+                log.debug("bad ODOMETRY: %s", exc)

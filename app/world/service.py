@@ -1,0 +1,61 @@
+"""The world side of the server: the external pose tracker, its listeners, hold sources."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from app.world.drone_sim import DroneSimParams, SimulatedDrone
+from app.world.hold import HoldSource, PoseProvider, SimulatedDroneProvider, TrackerProvider
+from app.world.inputs import MavlinkPoseListener, UdpPoseListener
+from app.world.poses import PoseTracker
+from kinematics import Pose
+
+if TYPE_CHECKING:
+    from app.control.controller import Controller
+
+
+class WorldService:
+    """Owns the external pose tracker and listeners; builds hold sources for the loop."""
+
+    def __init__(self, controller: Controller) -> None:
+        self.controller = controller
+        world = controller.settings.world
+        self.mount = Pose.from_arrays(world.mount_position_m, world.mount_quaternion)
+        self.tracker = PoseTracker(world.stale_after_s, world.lost_after_s, world.max_jump_m)
+        self._listeners: list = []
+        if world.udp_port is not None:
+            self._listeners.append(UdpPoseListener(self.tracker, world.udp_port).start())
+        if world.mavlink_url is not None:
+            self._listeners.append(MavlinkPoseListener(self.tracker, world.mavlink_url).start())
+
+    def close(self) -> None:
+        for listener in self._listeners:
+            listener.stop()
+
+    def provider(self, simulated: DroneSimParams | None) -> PoseProvider:
+        if simulated is not None:
+            return SimulatedDroneProvider(SimulatedDrone(simulated))
+        return TrackerProvider(self.tracker)
+
+    def hold_source(
+        self, goal_world: np.ndarray | None, provider: PoseProvider, compensate: bool
+    ) -> HoldSource:
+        """A hold source; ``goal_world`` None holds the tool where it is now."""
+        controller = self.controller
+        if goal_world is None:
+            seen = provider.observe(0.0)
+            if seen.pose is None:
+                raise ValueError(f"no drone pose yet (source {seen.state}): cannot hold 'current'")
+            here = controller.snapshot().point_measured_m
+            goal_world = (seen.pose @ self.mount).apply(here)
+        lead = controller.settings.world.servo_lag_s if compensate else None
+        return HoldSource(
+            goal_world,
+            provider,
+            self.mount,
+            controller.gate,
+            lambda: controller.measured_point,
+            lead,
+        )

@@ -1,0 +1,71 @@
+"""Hold-in-world through the API: pose input, the hold mode, staleness, the hold test run."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.app.conftest import make_client, wait_for
+
+
+@pytest.fixture(scope="module")
+def client():
+    with make_client() as test_client:
+        yield test_client
+
+
+def _pose(t: float, z: float = 1.5) -> dict:
+    return {"t": t, "position": [0.0, 0.0, z], "quaternion": [1.0, 0.0, 0.0, 0.0]}
+
+
+def test_pose_post_vets_samples(client):
+    client.post("/api/reset")
+    assert client.post("/api/mav/pose", json=_pose(1.0)).json()["accepted"] is True
+    assert client.post("/api/mav/pose", json=_pose(0.5)).json()["accepted"] is False
+    for bad in (
+        {**_pose(2.0), "quaternion": [0, 0, 0, 0]},
+        {**_pose(2.0), "t": None},
+        {"position": [0, 0, 1]},
+    ):
+        assert client.post("/api/mav/pose", json=bad).status_code == 422
+    status = client.get("/api/mav/pose").json()
+    assert status["accepted"] >= 1 and status["dropped"] >= 1
+
+
+def test_pose_websocket_stream(client):
+    with client.websocket_connect("/api/mav/pose") as ws:
+        ws.send_text(json.dumps(_pose(10.0)))
+        ws.send_text(json.dumps({**_pose(10.01), "quaternion": [3, 0, 0, 0]}))
+        assert "unit" in ws.receive_json()["error"]
+    assert client.get("/api/mav/pose").json()["accepted"] >= 2
+
+
+def test_hold_faults_when_the_pose_stream_is_lost(client):
+    client.post("/api/reset")
+    client.post("/api/torque", json={"enabled": True})
+    client.post("/api/mav/pose", json=_pose(100.0))
+    response = client.post("/api/hold", json={"position_m": [0.0, 0.0, 1.5 - 0.08 - 0.24]})
+    assert response.status_code == 200, response.text
+    wait_for(lambda: client.get("/api/status").json()["mode"] == "fault", "the lost-pose fault")
+    reason = client.get("/api/status").json()["faults"][0]["reason"]
+    assert "pose" in reason and "lost" in reason
+    client.post("/api/reset")
+
+
+def test_hold_test_run_reports_world_stats(client):
+    client.post("/api/reset")
+    client.post("/api/torque", json={"enabled": True})
+    client.post("/api/goal", json={"position_m": [0.0, 0.0, -0.24]})
+    body = {"duration_s": 2.0, "latency_compensation": True, "seed": 3}
+    response = client.post("/api/tests/hold", json=body)
+    assert response.status_code == 200, response.text
+    run_id = response.json()["run_id"]
+    wait_for(lambda: client.get(f"/api/runs/{run_id}").json()["state"] != "running", "the run")
+    run = client.get(f"/api/runs/{run_id}").json()
+    assert run["state"] == "done" and run["kind"] == "hold"
+    world = run["stats"]["world"]
+    for axis in "xyz":
+        assert 0.0 <= world[axis]["rmse_m"] < 0.02
+    assert world["outside_s"] >= 0.0
+    assert client.post("/api/tests/hold", json={"duration_s": -1}).status_code == 422
