@@ -7,6 +7,7 @@
 - `motion_model.TwinMotionModel`: the twin as the emulator's `MotionModel`.
 """
 
+from hardware.sim.base_frame import BaseMotion
 from hardware.sim.masses import THESIS_MASSES, DeltaMasses, gravity_torques
 from hardware.sim.motion_model import TwinMotionModel
 from hardware.sim.servo_model import XM430_W210, Xm430, Xm430Params
@@ -14,6 +15,7 @@ from hardware.sim.sim_bus import SimBus, SimBusConfig
 from hardware.sim.twin import DeltaTwin, TwinConfig
 
 __all__ = [
+    "BaseMotion",
     "THESIS_MASSES",
     "XM430_W210",
     "DeltaMasses",

@@ -34,6 +34,7 @@ from hardware.registers import (
     rad_s_to_velocity,
     velocity_to_rad_s,
 )
+from hardware.sim.base_frame import BaseMotion
 from hardware.sim.twin import DeltaTwin, TwinConfig
 
 FIRMWARE_VERSION = 46
@@ -195,12 +196,10 @@ class SimBus:
         )
         return true + np.asarray(self.config.marker_offset_m) + noise
 
-    def set_base_motion(
-        self, attitude_wxyz: Sequence[float], acceleration_m_s2: Sequence[float]
-    ) -> None:
-        """The drone's attitude (body to world) and acceleration [m/s^2] acting on the arm."""
+    def set_base_motion(self, motion: BaseMotion) -> None:
+        """The drone's attitude, acceleration and turning, acting on the arm from now on."""
         with self.lock:
-            self.twin.set_base_motion(attitude_wxyz, acceleration_m_s2)
+            self.twin.set_base_motion(motion)
 
     # -- internals -----------------------------------------------------------------------
     def _require(self, instruction: str) -> None:

@@ -6,10 +6,9 @@ control period, and the torques they produce drive the motor hinges for the next
 The twin knows nothing of wall time; hardware.sim.sim_bus runs it in real time, tests and
 benchmarks run it as fast as it goes.
 
-A moving base (the drone) is simulated in the base frame: gravity is replaced by the
-effective acceleration R^T (g - a_base), R the base's attitude (body to world) and a_base
-its acceleration in the world. Tilt and linear acceleration act exactly; the terms of the
-base's angular velocity and acceleration (Euler, centrifugal, Coriolis) are left out.
+A moving base (the drone) is simulated in the base frame (hardware.sim.base_frame):
+gravity becomes R^T (g - a_base), and a turning base adds Euler, centrifugal and Coriolis
+forces on every moving body.
 """
 
 from __future__ import annotations
@@ -23,24 +22,14 @@ import numpy as np
 from hardware.calibration import JointCalibration
 from hardware.motion import MotionCommand
 from hardware.registers import RAD_PER_TICK, OperatingMode
-from hardware.sim.masses import GRAVITY_M_S2, THESIS_MASSES, DeltaMasses
+from hardware.sim.base_frame import BaseMotion, apply_frame_forces
+from hardware.sim.masses import THESIS_MASSES, DeltaMasses
 from hardware.sim.mjcf import MOTOR_JOINTS, PLATFORM_JOINTS, SimOptions, build_mjcf
 from hardware.sim.servo_model import XM430_W210, ServoOutput, Xm430, Xm430Params
 from kinematics import THESIS_DELTA, RotaryDelta
 
 DEFAULT_JOINTS = tuple(JointCalibration(servo_id=i) for i in (1, 2, 3))
 SETTLE_STEPS = 200
-
-
-def _rotation(quaternion_wxyz: Sequence[float]) -> np.ndarray:
-    w, x, y, z = np.asarray(quaternion_wxyz, dtype=float) / np.linalg.norm(quaternion_wxyz)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 @dataclass(frozen=True)
@@ -82,6 +71,8 @@ class DeltaTwin:
         self._motor_v = np.array([m.joint(j).dofadr[0] for j in MOTOR_JOINTS])
         m.dof_frictionloss[self._motor_v] = servo.coulomb_friction_nm  # gearbox, sticks at rest
         self._platform_q = np.array([m.joint(j).qposadr[0] for j in PLATFORM_JOINTS])
+        base = m.body("base").id
+        self._moving_bodies = [b for b in range(m.nbody) if b not in (0, base)]
         self._sign = np.array([c.direction for c in cfg.joints], dtype=float)
         self._zero = np.array([c.zero_offset_ticks * RAD_PER_TICK for c in cfg.joints])
         self.servos = [Xm430(servo) for _ in range(3)]
@@ -152,15 +143,11 @@ class DeltaTwin:
             raise ValueError(f"{len(commands)} commands for 3 servos")
         self.commands = list(commands)
 
-    def set_base_motion(
-        self,
-        attitude_wxyz: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
-        acceleration_m_s2: Sequence[float] = (0.0, 0.0, 0.0),
-    ) -> None:
-        """The base's attitude (quaternion, body to world) and its acceleration in the
-        world [m/s^2]; they hold until set again."""
-        g_world = np.array([0.0, 0.0, -GRAVITY_M_S2]) - np.asarray(acceleration_m_s2, float)
-        self.model.opt.gravity[:] = _rotation(attitude_wxyz).T @ g_world
+    def set_base_motion(self, motion: BaseMotion | None = None) -> None:
+        """How the base (the drone) moves; holds until set again (default: at rest, level)."""
+        self.base_motion = motion = motion or BaseMotion()
+        self.model.opt.gravity[:] = motion.effective_gravity()
+        self.data.xfrc_applied[:] = 0.0
 
     def step(self, n: int = 1) -> None:
         """Advance `n` physics steps, running the servos' firmware once per step."""
@@ -173,7 +160,10 @@ class DeltaTwin:
             for k in range(3)
         ]  # fmt: skip
         commands = self.commands
+        rotating = self.base_motion.rotating
         for _ in range(n):
+            if rotating:
+                apply_frame_forces(model, data, self._moving_bodies, self.base_motion)
             for k, (servo, iq, iv, sign, zero) in enumerate(legs):
                 out = servo.step(commands[k], zero + sign * qpos[iq], sign * qvel[iv])
                 ctrl[k] = sign * out.torque_nm

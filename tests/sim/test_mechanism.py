@@ -8,6 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from hardware.sim.base_frame import BaseMotion
 from hardware.sim.masses import DeltaMasses, gravity_torques
 from hardware.sim.mjcf import SimOptions, build_mjcf
 from hardware.sim.servo_model import XM430_W210
@@ -72,7 +73,7 @@ def frictionless(payload_kg: float = 0.0) -> DeltaTwin:
 )
 def test_holding_at_rest_the_servos_deliver_the_gravity_torques(joints, attitude, payload) -> None:
     twin = frictionless(payload)
-    twin.set_base_motion(attitude)
+    twin.set_base_motion(BaseMotion(attitude_wxyz=attitude))
     twin.reset(joints)
     twin.advance(0.3)
     torques = mean_torques(twin)
@@ -93,8 +94,40 @@ def mean_torques(twin: DeltaTwin, steps: int = 500) -> np.ndarray:
 
 def test_an_accelerating_base_weighs_like_stronger_gravity() -> None:
     level, lifting = frictionless(), frictionless()
-    lifting.set_base_motion(acceleration_m_s2=(0.0, 0.0, 9.81))  # 1 g upwards: twice the weight
+    lifting.set_base_motion(
+        BaseMotion(acceleration_m_s2=(0.0, 0.0, 9.81))
+    )  # 1 g upwards: twice the weight
     assert lifting.model.opt.gravity == pytest.approx([0.0, 0.0, -2 * 9.81])
     for twin in (level, lifting):
         twin.advance(0.3)
     assert mean_torques(lifting) == pytest.approx(2 * mean_torques(level), rel=0.05)
+
+
+def test_a_turning_base_adds_the_centrifugal_torques() -> None:
+    # steady spin about the base's z axis: at rest in the base frame the servos hold
+    # gravity plus the centrifugal pull, i.e. the gradient of U = sum m (-g.c - |w x c|^2 / 2)
+    # over the bodies' centres of mass c (platform, upper links at L/2, rods at mid-length)
+    robot, masses, spin = THESIS_DELTA, DeltaMasses(payload_kg=0.1), np.array([0.0, 0.0, 8.0])
+    g = np.array([0.0, 0.0, -9.81])
+
+    def potential(q: np.ndarray, w: np.ndarray) -> float:
+        hips, knees, ankles = robot.leg_points(q)
+        centres = [(masses.platform_total_kg, robot.fk(q).points)]
+        centres += [(masses.upper_kg, (h + k) / 2) for h, k in zip(hips, knees, strict=True)]
+        centres += [(masses.lower_kg, (k + a) / 2) for k, a in zip(knees, ankles, strict=True)]
+        return sum(m * (-g @ c - 0.5 * np.sum(np.cross(w, c) ** 2)) for m, c in centres)
+
+    def holding(q: np.ndarray, w: np.ndarray) -> np.ndarray:
+        h = 1e-6
+        return np.array(
+            [(potential(q + h * e, w) - potential(q - h * e, w)) / (2 * h) for e in np.eye(3)]
+        )
+
+    twin = frictionless(0.1)
+    twin.set_base_motion(BaseMotion(angular_velocity_rad_s=tuple(spin)))
+    twin.reset((0.3, 0.6, 0.8))
+    twin.advance(0.3)
+    q = twin.joints_rad
+    expected, still = holding(q, spin), holding(q, np.zeros(3))
+    assert np.abs(expected - still).max() > 0.1 * np.abs(still).max()  # the spin matters
+    assert mean_torques(twin) == pytest.approx(expected, rel=0.03, abs=2e-3)

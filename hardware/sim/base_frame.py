@@ -1,0 +1,73 @@
+"""The drone's motion felt by the arm: the twin simulates in the (moving) base frame.
+
+In a frame that accelerates by a (its origin, world frame) and turns at w with w' (base
+frame), a body of mass m at r moving at v (both in the base frame) feels, besides gravity,
+
+    F = -m (R^T a + w' x r + w x (w x r) + 2 w x v)
+
+The first term joins gravity as the effective gravity R^T (g - a), exact for every body.
+The rest (Euler, centrifugal, Coriolis) is applied as a force at each body's centre of
+mass, which is exact for the resultant force (all three are linear in r and v) but leaves
+out the moments they make about the body's own centre of mass: second order for the
+slender links of a Delta.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+GRAVITY_M_S2 = 9.81
+
+
+@dataclass(frozen=True)
+class BaseMotion:
+    """The base's attitude (quaternion w, x, y, z, body to world), the acceleration of its
+    origin in the world [m/s^2], and its angular velocity [rad/s] and acceleration
+    [rad/s^2] in the base frame."""
+
+    attitude_wxyz: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    acceleration_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    angular_velocity_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    angular_acceleration_rad_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def rotating(self) -> bool:
+        """Whether the base turns (then per-body frame forces are needed every step)."""
+        return any(self.angular_velocity_rad_s) or any(self.angular_acceleration_rad_s2)
+
+    def effective_gravity(self) -> np.ndarray:
+        """R^T (g - a) [m/s^2] in the base frame, shape (3,)."""
+        g_world = np.array([0.0, 0.0, -GRAVITY_M_S2]) - np.asarray(self.acceleration_m_s2)
+        return rotation(self.attitude_wxyz).T @ g_world
+
+
+def rotation(quaternion_wxyz: Sequence[float]) -> np.ndarray:
+    """Rotation matrix (3, 3) of a quaternion (w, x, y, z); normalized first."""
+    w, x, y, z = np.asarray(quaternion_wxyz, dtype=float) / np.linalg.norm(quaternion_wxyz)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def apply_frame_forces(
+    model: mujoco.MjModel, data: mujoco.MjData, bodies: Sequence[int], motion: BaseMotion
+) -> None:
+    """Write the Euler, centrifugal and Coriolis forces [N] of `motion` on `bodies` into
+    data.xfrc_applied (at each centre of mass), from the current positions and speeds."""
+    w = np.asarray(motion.angular_velocity_rad_s, dtype=float)
+    w_dot = np.asarray(motion.angular_acceleration_rad_s2, dtype=float)
+    velocity = np.zeros(6)
+    for body in bodies:
+        r = data.xipos[body]
+        # linear velocity of the centre of mass (world = base frame here), rows 3..5
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, body, velocity, 0)
+        accel = np.cross(w_dot, r) + np.cross(w, np.cross(w, r)) + 2.0 * np.cross(w, velocity[3:])
+        data.xfrc_applied[body, :3] = -model.body_mass[body] * accel
