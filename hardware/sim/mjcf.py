@@ -74,7 +74,10 @@ def _lower_frame(rod_dir_upper: np.ndarray) -> np.ndarray:
     return np.column_stack([e1, np.cross(e3, e1), e3])
 
 
-def _leg_xml(robot: RotaryDelta, masses: DeltaMasses, leg: int, theta: float, home) -> str:
+def _leg_xml(
+    robot: RotaryDelta, masses: DeltaMasses, leg: int, theta: float, home, rod_radius: float
+) -> str:
+    """One leg: upper link on the motor hinge, lower link on the knee's universal joint."""
     alpha = 2.0 * math.pi * leg / 3.0
     L, l, n = robot.L, robot.l, leg + 1
     hip = robot.R * np.array([math.cos(alpha), math.sin(alpha), 0.0])
@@ -100,10 +103,34 @@ def _leg_xml(robot: RotaryDelta, masses: DeltaMasses, leg: int, theta: float, ho
         <joint name="knee_{n}_b" type="hinge" axis="0 0 1"/>
         <inertial pos="{l / 2:.12g} 0 0" mass="{max(m_lo, 1e-6):.6g}"
                   diaginertia="{i_lo / 1000:.6g} {i_lo:.6g} {i_lo:.6g}"/>
-        <geom type="capsule" fromto="0 0 0 {l:.12g} 0 0" size="{{rod}}" mass="0" rgba=".2 .2 .2 1"/>
+        <geom type="capsule" fromto="0 0 0 {l:.12g} 0 0" size="{rod_radius:.6g}" mass="0"
+              rgba=".2 .2 .2 1"/>
         <site name="rod_end_{n}" pos="{l:.12g} 0 0"/>
       </body>
     </body>"""
+
+
+def _platform_xml(robot: RotaryDelta, masses: DeltaMasses, home) -> str:
+    """The platform on three slides (qpos = its centre [m]) with its ball-joint sites."""
+    x, y, z = home
+    alphas = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)
+    ankle_xy = [robot.r * np.array([math.cos(a), math.sin(a), 0.0]) for a in alphas]
+    ankles = "".join(
+        f'\n        <site name="ankle_{i + 1}" pos="{_fmt(xy)}"/>' for i, xy in enumerate(ankle_xy)
+    )
+    m_plat = masses.platform_total_kg
+    # a disc; its rotation is locked by the slides, so only A + B >= C must hold
+    i_plat = m_plat * robot.r**2 / 2.0
+    return f"""
+      <body name="platform" pos="{x:.12g} {y:.12g} {z:.12g}">
+        <joint name="platform_x" type="slide" axis="1 0 0" ref="{x:.12g}"/>
+        <joint name="platform_y" type="slide" axis="0 1 0" ref="{y:.12g}"/>
+        <joint name="platform_z" type="slide" axis="0 0 1" ref="{z:.12g}"/>
+        <inertial pos="0 0 0" mass="{m_plat:.6g}"
+                  diaginertia="{i_plat * 0.51:.6g} {i_plat * 0.51:.6g} {i_plat:.6g}"/>
+        <geom type="cylinder" size="{max(robot.r, 0.01):.6g} 0.003" mass="0" rgba=".8 .4 .2 1"/>
+        <site name="platform_centre" pos="0 0 0"/>{ankles}
+      </body>"""
 
 
 def build_mjcf(
@@ -117,20 +144,12 @@ def build_mjcf(
     if not bool(ok):
         raise ValueError(f"home {opt.home_m} m is outside the workspace of {robot}")
     legs = "".join(
-        _leg_xml(robot, masses, i, float(joints[i]), opt.home_m) for i in range(3)
-    ).replace("{rod}", f"{opt.rod_radius_m:.6g}")
-    x, y, z = opt.home_m
-    alphas = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)
-    ankle_xy = [robot.r * np.array([math.cos(a), math.sin(a), 0.0]) for a in alphas]
-    ankles = "".join(
-        f'\n      <site name="ankle_{i + 1}" pos="{_fmt(xy)}"/>' for i, xy in enumerate(ankle_xy)
+        _leg_xml(robot, masses, i, float(joints[i]), opt.home_m, opt.rod_radius_m) for i in range(3)
     )
     connects = "".join(f'\n    <connect site1="rod_end_{i}" site2="ankle_{i}"/>' for i in (1, 2, 3))
     motors = "".join(f'\n    <motor name="{j}" joint="{j}" gear="1"/>' for j in MOTOR_JOINTS)
     timeconst = max(opt.eq_timeconst_s, 2.0 * opt.timestep_s)
-    m_plat = masses.platform_total_kg
-    # a disc; its rotation is locked by the slides, so only A + B >= C must hold
-    i_plat = m_plat * robot.r**2 / 2.0
+    platform = _platform_xml(robot, masses, opt.home_m)
     return f"""<mujoco model="delta">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{opt.timestep_s:.9g}" integrator="implicitfast" gravity="0 0 -9.81"/>
@@ -141,16 +160,7 @@ def build_mjcf(
   <worldbody>
     <body name="base">
       <inertial pos="0 0 0" mass="{3 * masses.servo_kg + 1e-3:.6g}" diaginertia="1e-3 1e-3 1e-3"/>
-      <geom type="cylinder" size="{robot.R:.6g} 0.004" mass="0" rgba=".7 .7 .7 .5"/>{legs}
-      <body name="platform" pos="{x:.12g} {y:.12g} {z:.12g}">
-        <joint name="platform_x" type="slide" axis="1 0 0" ref="{x:.12g}"/>
-        <joint name="platform_y" type="slide" axis="0 1 0" ref="{y:.12g}"/>
-        <joint name="platform_z" type="slide" axis="0 0 1" ref="{z:.12g}"/>
-        <inertial pos="0 0 0" mass="{m_plat:.6g}"
-                  diaginertia="{i_plat * 0.51:.6g} {i_plat * 0.51:.6g} {i_plat:.6g}"/>
-        <geom type="cylinder" size="{max(robot.r, 0.01):.6g} 0.003" mass="0" rgba=".8 .4 .2 1"/>
-        <site name="platform_centre" pos="0 0 0"/>{ankles}
-      </body>
+      <geom type="cylinder" size="{robot.R:.6g} 0.004" mass="0" rgba=".7 .7 .7 .5"/>{legs}{platform}
     </body>
   </worldbody>
   <equality>{connects}
