@@ -40,6 +40,10 @@ class TwinMotionModel:
             MotionState(float(shafts[k]), float(speeds[k]), outs[k].current_a) for k in range(3)
         ]
 
+    def reboot(self, index: int) -> None:
+        """Clear servo `index`'s latched error (for the emulator's Reboot instruction)."""
+        self.twin.servos[index].reboot()
+
     @property
     def outputs(self) -> list[ServoOutput]:
         """Temperature and Hardware Error Status per servo, for the emulator's tables."""
