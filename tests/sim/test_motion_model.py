@@ -44,3 +44,10 @@ def test_goals_and_gains_written_over_the_sdk_drive_the_twin() -> None:
     assert all(cmd.position_p == 1200 for cmd in model.twin.commands)
     assert state.position_rad == pytest.approx([0.45] * 3, abs=0.01)
     assert model.twin.joints_rad == pytest.approx([0.45] * 3, abs=0.01)
+
+
+def test_reboot_clears_a_servo_models_latched_error() -> None:
+    model = TwinMotionModel()
+    model.twin.servos[2].hardware_error = 0x20
+    model.reboot(2)
+    assert model.twin.servos[2].hardware_error == 0
