@@ -24,10 +24,10 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.optimize import differential_evolution
 
-from ._xp import LEG_COS, LEG_SIN
 from .containment import Containment, certify_box, unit_box_samples
 from .errors import InvalidGeometryError
 from .rotary import RotaryDelta
+from .torus import torus_h, torus_inside
 
 _UNIT_CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
 
@@ -103,38 +103,21 @@ THESIS_DESIGN = Design(L=0.1558, l=0.2430, Rbar=0.0464, H=0.1903)
 """Table 4.3, with the printed Rbar = 0.4637 read as 0.0464 (R - r = 0.0844 - 0.038)."""
 
 
-def torus_h(L: Any, l: Any, Rbar: Any, points: Any) -> np.ndarray:
-    """Per-leg torus functions h_i (eq. 4.2), <= 0 where leg i reaches [m^4].
-
-    Args:
-        L, l, Rbar: geometry [m], shape (*S) (one value per design).
-        points: shape (*S, K, 3) or (K, 3) [m].
-
-    Returns:
-        shape (*S, K, 3 legs).
-    """
-    L, l, Rbar = (np.asarray(v, float)[..., None, None] for v in (L, l, Rbar))
-    p = np.asarray(points, float)
-    x, y, z = p[..., 0, None], p[..., 1, None], p[..., 2, None]
-    along = x * np.array(LEG_COS) + y * np.array(LEG_SIN)  # (*S, K, 3 legs)
-    E = 2.0 * L * (Rbar - along)
-    F = 2.0 * L * z
-    G = x * x + y * y + z * z + Rbar * Rbar + L * L - l * l - 2.0 * Rbar * along
-    return G * G - E * E - F * F
-
-
 @dataclass(frozen=True)
 class Problem:
     """A synthesis problem: the volume, the search bounds and the penalty samples.
 
     ``extra_unit`` are further sample points in the box's unit coordinates, [0, 1]^3
-    (witnesses of earlier failed certifications).
+    (witnesses of earlier failed certifications). ``clearance_m``: every sampled point
+    must be this far inside [m], so that the certification can prove containment with
+    no tolerance (a box touching the boundary can never be proved inside).
     """
 
     volume: DesiredVolume = DesiredVolume()
     bounds: Bounds = Bounds()
     per_edge: int = 7
     extra_unit: tuple[tuple[float, float, float], ...] = field(default=())
+    clearance_m: float = 1e-4
 
     def unit_samples(self) -> np.ndarray:
         samples = unit_box_samples(self.per_edge)
@@ -167,8 +150,10 @@ def score(problem: Problem, x: Any, samples: np.ndarray | None = None) -> Score:
     unit = problem.unit_samples() if samples is None else samples
     lower, upper = problem.volume.box(H)
     sampled = lower[..., None, :] + unit * (upper - lower)[..., None, :]
-    violations = (h > 0).sum(axis=(-2, -1)) + (torus_h(L, l, Rbar, sampled) > 0).sum(axis=(-2, -1))
-    violations = violations + (l <= L)
+    # h > 0 <=> distance > 0; the distance also gives the clearance in metres
+    every = np.concatenate([points, np.broadcast_to(sampled, np.shape(sampled))], axis=-2)
+    outside = ~torus_inside(L, l, Rbar, every, problem.clearance_m)
+    violations = outside.sum(axis=(-2, -1)) + (l <= L)
     return Score(pop + PENALTY * violations, pop, violations)
 
 
@@ -193,7 +178,7 @@ class SynthesisResult(NamedTuple):
         return bool(self.containment.contains) and self.extra_points_ok
 
 
-def check(problem: Problem, design: Design, tol: float = 1e-4) -> tuple[Containment, bool]:
+def check(problem: Problem, design: Design, tol: float = 0.0) -> tuple[Containment, bool]:
     """Certify the box and test the extra points for one design (see containment.py)."""
     robot = design.robot()
     lower, upper = problem.volume.box(design.H)
@@ -229,7 +214,7 @@ def synthesize(
     maxiter: int = 300,
     seed: int = 0,
     rounds: int = 3,
-    tol: float = 1e-4,
+    tol: float = 0.0,
     callback: Callable[[int, float], None] | None = None,
 ) -> SynthesisResult:
     """Differential evolution on eq. 4.7, then certification; repeat with any witness.
@@ -240,7 +225,8 @@ def synthesize(
             popsize * 4 designs, evaluated in one vectorized call per generation).
         seed: for repeatable runs.
         rounds: searches at most; each failed certification adds its witness point.
-        tol: certification tolerance [m] (see :func:`containment.certify_box`).
+        tol: certification tolerance [m] (see :func:`containment.certify_box`); 0: every
+            point of the box reachable, which ``problem.clearance_m`` makes provable.
         callback: called as callback(generation, best objective) after each generation.
     """
     evaluations, generation = 0, 0
@@ -270,7 +256,7 @@ def _with_witness(problem: Problem, design: Design, witness: np.ndarray) -> Prob
     lower, upper = problem.volume.box(design.H)
     unit = (witness - lower) / np.where(upper > lower, upper - lower, 1.0)
     extra = (*problem.extra_unit, tuple(float(u) for u in unit))
-    return Problem(problem.volume, problem.bounds, problem.per_edge, extra)
+    return Problem(problem.volume, problem.bounds, problem.per_edge, extra, problem.clearance_m)
 
 
 class Violation(NamedTuple):

@@ -84,6 +84,7 @@ def synth_payload(
         "seconds": round(seconds, 2),
         "evaluations": result.evaluations,
         "rounds": result.rounds,
+        "clearance_mm": problem.clearance_m * 1e3,
         "thesis": design_check(problem, THESIS_DESIGN),
         "thesis_readings": thesis_readings(),
     }

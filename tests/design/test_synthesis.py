@@ -21,6 +21,17 @@ from kinematics.synthesis import (
     torus_h,
     violations,
 )
+from kinematics.torus import torus_distance, torus_inside
+
+
+def test_torus_distance_and_inside_are_the_robots():
+    points = np.random.default_rng(1).uniform(-0.4, 0.4, (2000, 3))
+    d = THESIS_DESIGN
+    distance = torus_distance(d.L, d.l, d.Rbar, points)
+    np.testing.assert_allclose(distance.max(-1), THESIS_DELTA.signed_distance(points), atol=1e-15)
+    for clearance in (0.0, 1e-3, 0.02):
+        inside = torus_inside(d.L, d.l, d.Rbar, points, clearance)
+        np.testing.assert_array_equal(inside, distance <= -clearance)
 
 
 def test_torus_h_is_the_robots_h():
@@ -37,8 +48,8 @@ def test_point_problem_has_its_known_answer():
     On the axis every leg sees E = 2 L Rbar, F = -2 L H, G = H^2 + Rbar^2 + L^2 - l^2,
     and G^2 = E^2 + F^2 gives l^2 = rho^2 + L^2 -+ 2 L rho with rho = |(Rbar, H)|.
     """
-    problem = Problem(DesiredVolume(size_m=(0.0, 0.0, 0.0), extra_points=()))
-    result = synthesize(problem, popsize=10, maxiter=80, seed=1)
+    problem = Problem(DesiredVolume(size_m=(0.0, 0.0, 0.0), extra_points=()), clearance_m=0.0)
+    result = synthesize(problem, popsize=10, maxiter=80, seed=1, tol=1e-6)
     d = result.design
     rho = math.hypot(d.Rbar, d.H)
     assert result.power_of_point < 1e-5  # of ~1e-2 for a typical design
@@ -72,7 +83,14 @@ def test_quick_search_beats_the_thesis_and_is_certified():
     problem = Problem()
     result = synthesize(problem, popsize=12, maxiter=60, seed=3)
     thesis = score(problem, np.array(THESIS_DESIGN))
-    assert result.contains
+    assert result.contains and result.containment.contains is True  # with no tolerance
+    robot = result.design.robot()
+    lower, upper = problem.volume.box(result.design.H)
+    inside = np.random.default_rng(0).uniform(lower, upper, (20000, 3))
+    assert (
+        robot.reachable(inside).all()
+        and robot.reachable(problem.thesis_points(result.design.H)).all()
+    )
     assert result.power_of_point <= thesis.power_of_point
     assert result.objective == result.power_of_point  # no penalty left
     b = Bounds()
