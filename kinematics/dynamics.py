@@ -21,7 +21,9 @@ and eq. 3.113-3.125 give the torques (positive in the direction of positive thet
     tau_i = I qdd_i + m_L/6 C_i' . (2 aC_i + a) - (m_U + m_L)/2 g . C_i'
             + 2 lambda_i (P - C_i) . C_i'
 
-Pure NumPy, vectorized over (*, 3) samples; no I/O.
+The vector form needs no per-leg partial derivatives, so the printed slips (eq. 3.119's
+sin(theta_1) for sin(theta_2), the garbled eq. 3.113) cannot enter. Pure NumPy,
+vectorized over (*, 3) samples; no I/O.
 """
 
 from __future__ import annotations

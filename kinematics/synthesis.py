@@ -7,10 +7,11 @@ base) plus extra points, with the smallest power-of-point objective (eq. 4.5-4.1
 
 over the box's vertices and the extra points, h_i the per-leg torus function (eq. 4.2,
 read h = G^2 - E^2 - F^2; [m^4]). The workspace is not convex, so vertices are not
-enough: our penalty also counts points sampled on the box's faces and inside it, and
-the answer is then certified by :func:`containment.certify_box`; a witness found there
-joins the samples and the search runs again. F2 is always the thesis's (vertices and
-extra points), so objectives compare with Table 4.3.
+enough: our penalty also counts points sampled on the box's faces and inside it, each
+asked to be ``clearance_m`` inside so that a proof can close; the winner is certified by
+:func:`containment.certify_box`, and a witness found there joins the samples for another
+search. F2 is always the thesis's (vertices and extra points), so objectives compare
+with Table 4.3.
 
 Pure: the caller passes a ``callback`` for progress (the CLI's progress bar).
 """

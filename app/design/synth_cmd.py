@@ -29,7 +29,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         description="Geometric synthesis (thesis eq. 4.5-4.10, Laribi's "
         "power of point) by differential evolution; the box (top face at "
         "depth H) is certified, not just its vertices; the thesis's Table "
-        "4.3 design is checked on the same problem.",
+        "4.3 design is checked on the same problem. Exit status 1 if not contained.",
     )
     p.add_argument(
         "--size",
