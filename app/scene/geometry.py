@@ -94,12 +94,13 @@ def _patch(spec: TorusSpec, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, n
     return points.reshape(-1, 3), _grid_faces(len(u), len(v))
 
 
-def torus_lower_half(spec: TorusSpec, steps: int = 48) -> tuple[np.ndarray, np.ndarray]:
+def torus_lower_half(spec: TorusSpec, steps: int = 49) -> tuple[np.ndarray, np.ndarray]:
     """Lower half (z <= 0) of a spindle torus: outer 'apple' and inner 'lemon' surfaces.
 
     Returns vertices (V, 3) [m] and triangle faces (F, 3). Where L + l cos v >= 0 (the
     apple) z <= 0 needs sin u <= 0; on the lemon the sign flips, so each patch gets its own
-    u range and the cut at z = 0 is exact rather than a jagged row of dropped faces.
+    u range and the cut at z = 0 is exact rather than a jagged row of dropped faces. An
+    odd ``steps`` puts a vertex on the lowest point, (L + l) below the centre.
     """
     v0 = math.acos(max(-1.0, -spec.major_radius / spec.tube_radius))
     apple = _patch(spec, np.linspace(math.pi, 2 * math.pi, steps), np.linspace(-v0, v0, steps))
@@ -123,8 +124,9 @@ def cylinder_below(spec: TorusSpec, depth_m: float, steps: int = 48) -> tuple[np
     ring = np.cos(aa)[..., None] * e1 + np.sin(aa)[..., None] * e2
     points = spec.centre + tt[..., None] * n + spec.tube_radius * ring
     vertices, faces = points.reshape(-1, 3), _grid_faces(steps, steps)
-    keep = (vertices[faces][..., 2] <= 1e-9).all(axis=1)
-    return vertices, faces[keep]
+    faces = faces[(vertices[faces][..., 2] <= 1e-9).all(axis=1)]
+    used, faces = np.unique(faces, return_inverse=True)  # drop the vertices above the base
+    return vertices[used], faces.reshape(-1, 3)
 
 
 def torus_mesh(robot: RotaryDelta | LinearDelta, leg: int) -> tuple[np.ndarray, np.ndarray]:

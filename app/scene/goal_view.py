@@ -99,8 +99,8 @@ class GoalView:
             inside = bool(np.allclose(goal, point, atol=1e-9))
             self.marker.position = goal
             self.marker.color = INSIDE_COLOUR if inside else PROJECTED_COLOUR
-            if final and not inside:
-                self.gizmo.position = goal  # snap back onto the workspace
+            if final:  # snap back onto the workspace; other clients see where it went
+                self.gizmo.position = goal
             return goal
 
     def _send(self, point: np.ndarray) -> np.ndarray | None:
@@ -165,7 +165,7 @@ class GoalView:
             self._saved_handles.append(scene.add_icosphere(
                 f"/goal/saved/{i}", radius=0.005, color=SAVED_COLOUR, position=point))
             self._saved_handles.append(scene.add_label(
-                f"/goal/saved/{i}/label", name, position=(0.0, 0.0, 0.012)))  # fmt: skip
+                f"/goal/saved_labels/{i}", name, position=point + [0.0, 0.0, 0.012]))  # fmt: skip
 
     # ---- display rate (the scene thread) ----
     def show_path(self, points: np.ndarray | None) -> None:

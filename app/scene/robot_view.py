@@ -63,10 +63,10 @@ class RobotView:
         self.upper = scene.add_line_segments(
             f"{root}/upper", nan, segment_colours(colours, False), thickness=0.006 if ghost
             else 0.011)  # fmt: skip
-        light = tuple(tuple(int(0.55 * c + 0.45 * 255) for c in col) for col in colours)
+        light = tuple(tuple(int(0.7 * c + 0.3 * 255) for c in col) for col in colours)
         self.rods = scene.add_line_segments(
             f"{root}/rods", np.zeros((6, 2, 3)), segment_colours(light, True),
-            thickness=0.003 if ghost else 0.005)  # fmt: skip
+            thickness=0.003 if ghost else 0.006)  # fmt: skip
         disc = _disc(robot.r + 0.012, corners=3 if robot.r < 0.02 else 6)
         self.platform = scene.add_mesh_simple(
             f"{root}/platform", disc[0], disc[1], color=GHOST_COLOUR if ghost else (70, 74, 84),

@@ -86,8 +86,8 @@ class Scene:
     def _frame_camera(self, server: viser.ViserServer) -> None:
         robot = self.controller.robot
         reach = robot.R + getattr(robot, "L", 0.0) + robot.l
-        server.initial_camera.position = (1.6 * reach, -1.9 * reach, 0.5 * reach)
-        server.initial_camera.look_at = (0.0, 0.0, -0.45 * reach)
+        server.initial_camera.position = (1.05 * reach, -1.3 * reach, 0.25 * reach)
+        server.initial_camera.look_at = (0.0, 0.0, -0.42 * reach)
         server.initial_camera.up = (0.0, 0.0, 1.0)
         server.scene.set_up_direction("+z")
 
@@ -162,7 +162,8 @@ def start_scene(settings: Any, controller: Any, runs: Callable[[], Any]) -> Scen
     host = scene_host(settings.server.host)
     scene = Scene(controller, runs, host, settings.server.viser_port)
     scene.start()
-    if scene.server is not None and scene.server.get_port() != settings.server.viser_port:
-        print(f"deltadash: port {settings.server.viser_port} is taken: 3D scene on {scene.url}",
+    wanted = settings.server.viser_port
+    if scene.server is not None and wanted and scene.server.get_port() != wanted:
+        print(f"deltadash: port {wanted} is taken: 3D scene on {scene.url}",
               flush=True)  # fmt: skip
     return scene

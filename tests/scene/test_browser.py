@@ -1,0 +1,66 @@
+"""End to end in a real browser: Debian's chromium loads the scene the app serves, the
+scene renders, a goal moved through the drag's server-side path moves the robot."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+from PIL import Image
+
+from tests.browser_support import chromium_page, require_browser, save_artifact
+from tests.scene.conftest import measured, wait_for
+
+LEG_1_RED = np.array([222, 76, 64])
+VIEWPORT = (960, 600)
+PAGE_WAIT_MS = 45_000  # software WebGL on a loaded 2-core machine; not a timing assertion
+
+
+def _viewport_pixels(png: bytes) -> np.ndarray:
+    """RGB pixels of the 3D view: the left part of the page, without the control panel."""
+    image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
+    return image[:, : int(0.6 * image.shape[1])]
+
+
+def _near(pixels: np.ndarray, colour: np.ndarray, tolerance: int = 40) -> int:
+    return int((np.abs(pixels - colour).max(axis=-1) <= tolerance).sum())
+
+
+def _rendered(page, timeout_ms: int = PAGE_WAIT_MS) -> bytes:
+    """A screenshot once the robot shows (the scene fades in; software WebGL is slow)."""
+    for _ in range(timeout_ms // 1000):
+        png = page.screenshot()
+        if _near(_viewport_pixels(png), LEG_1_RED) > 30:
+            return png
+        page.wait_for_timeout(1000)
+    return png
+
+
+def test_scene_renders_and_a_dragged_goal_moves_the_robot(app_client):
+    require_browser()
+    app = app_client.app
+    scene = app.state.scene
+    with chromium_page(*VIEWPORT) as page:
+        page.goto(scene.url, wait_until="domcontentloaded")
+        page.wait_for_selector("canvas", timeout=PAGE_WAIT_MS)
+        page.wait_for_function("() => document.body.innerText.includes('E-STOP')",
+                               timeout=PAGE_WAIT_MS)  # fmt: skip
+        wait_for(lambda: len(scene.server.get_clients()) == 1, "the browser as a viser client")
+        before = _rendered(page)
+        save_artifact("scene-before.png", before)
+        pixels = _viewport_pixels(before)
+        assert pixels.std() > 10, "the 3D view is blank"
+        assert _near(pixels, LEG_1_RED) > 30, "leg 1's red upper link is not drawn"
+
+        assert app_client.post("/api/torque", json={"enabled": True}).status_code == 200
+        start = measured(app_client)
+        target = np.array([0.06, -0.04, -0.28])
+        scene.goals.drag_to(target, final=True)  # the gizmo's on_update path
+        wait_for(lambda: np.linalg.norm(measured(app_client) - target) < 2e-3,
+                 "/api/status: the robot at the dragged goal")  # fmt: skip
+        assert np.linalg.norm(start - target) > 0.04
+        page.wait_for_timeout(1500)  # a few display frames reach the page
+        after = page.screenshot()
+        save_artifact("scene-after.png", after)
+        changed = np.abs(_viewport_pixels(after) - pixels).max(axis=-1) > 30
+        assert changed.sum() > 200, "the robot did not move on the page"
