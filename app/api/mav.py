@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 from dataclasses import asdict
 from typing import Annotated, Any, Literal
 
@@ -111,10 +112,9 @@ async def post_hold(
     provider = world.provider(DroneSimParams() if body.source == "simulated" else None)
     goal = None if body.frame == "current" else np.asarray(body.position_m)
     source = world.hold_source(goal, provider, body.latency_compensation)
-    start = controller.snapshot().point_commanded_m
-    if not np.isfinite(start).all():
-        start = controller.snapshot().point_measured_m
-    await asyncio.wait_for(asyncio.wrap_future(controller.run_source(source, start)), 2.0)
+    # the hold mode blends in from wherever the robot is: no start point to check
+    started = controller.run_source(source, np.zeros(3), tolerance_m=math.inf)
+    await asyncio.wait_for(asyncio.wrap_future(started), 2.0)
     return Accepted(result={"goal_world_m": source.goal_world.tolist()})
 
 

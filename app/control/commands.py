@@ -8,6 +8,7 @@ state to move (HTTP 409): e-stop or fault active, or torque off.
 
 from __future__ import annotations
 
+import math
 from concurrent.futures import Future
 from typing import TYPE_CHECKING, Any
 
@@ -143,7 +144,7 @@ class CommandsMixin:
     def _run_source(self: Controller, source: GoalSource, start: np.ndarray, tol: float) -> str:
         self._require_motion()
         moved = float(np.linalg.norm(self._start_point() - start))
-        if not moved <= tol:
+        if math.isfinite(tol) and not moved <= tol:
             raise MotionRefused(f"the robot moved {moved * 1e3:.1f} mm since the plan; start again")
         self._source = source
         return source.name

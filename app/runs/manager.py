@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import threading
 import time
 import uuid
@@ -124,13 +125,11 @@ class RunManager:
             return self._launch(kind, asdict(params), lead, source, start)
 
     def start_source(self, kind: str, params: dict[str, Any], source: Any) -> Run:
-        """Record a run of a ready-made source (e.g. hold-in-world) from where the robot is."""
+        """Record a run of a ready-made source that starts smoothly from wherever the robot
+        is (e.g. hold-in-world, which blends in), so no start point is checked."""
         with self._lock:
             self._refuse_if_busy()
-            start = self.controller.snapshot().point_commanded_m
-            if not np.isfinite(start).all():
-                start = self.controller.snapshot().point_measured_m
-            return self._launch(kind, params, 0.0, source, start)
+            return self._launch(kind, params, 0.0, source, None)
 
     def _refuse_if_busy(self) -> None:
         if self._active is not None and self._active[0].state == "running":
@@ -145,7 +144,9 @@ class RunManager:
         recorder = Recorder(run, self.controller, source, log, skip)
         self.controller.add_listener(recorder.on_tick)
         try:
-            self.controller.run_source(source, start).result(timeout=START_TIMEOUT_S)
+            tolerance = math.inf if start is None else 0.002
+            expected = np.zeros(3) if start is None else start
+            self.controller.run_source(source, expected, tolerance).result(timeout=START_TIMEOUT_S)
         except BaseException:
             self.controller.remove_listener(recorder.on_tick)
             recorder.discard()

@@ -30,7 +30,7 @@ def test_sinusoid_run_end_to_end(fresh):
     for axis in "xyz":
         stats = run["stats"]["tracking"][axis]
         assert all(np.isfinite(stats[k]) for k in ("mean_m", "rmse_m", "std_m", "max_abs_m"))
-        assert 0.0 < stats["rmse_m"] < 0.05
+        assert 0.0 < stats["rmse_m"] < 0.2  # sanity; benchmarks/runs.py measures the figure
     mcap = fresh.get(f"/api/runs/{run_id}/log.mcap")
     assert mcap.status_code == 200
     messages = list(make_reader(io.BytesIO(mcap.content)).iter_messages())

@@ -53,19 +53,31 @@ def test_hold_faults_when_the_pose_stream_is_lost(client):
     client.post("/api/reset")
 
 
-def test_hold_test_run_reports_world_stats(client):
+def _hold_run(client, body: dict) -> dict:
     client.post("/api/reset")
     client.post("/api/torque", json={"enabled": True})
     client.post("/api/goal", json={"position_m": [0.0, 0.0, -0.24]})
-    body = {"duration_s": 2.0, "latency_compensation": True, "seed": 3}
     response = client.post("/api/tests/hold", json=body)
     assert response.status_code == 200, response.text
     run_id = response.json()["run_id"]
     wait_for(lambda: client.get(f"/api/runs/{run_id}").json()["state"] != "running", "the run")
     run = client.get(f"/api/runs/{run_id}").json()
     assert run["state"] == "done" and run["kind"] == "hold"
-    world = run["stats"]["world"]
+    return run["stats"]["world"]
+
+
+def test_a_still_drone_gives_no_world_error(client):
+    """No drift: the world goal maps to a fixed base point; what is left is quantization."""
+    still = {"drift_m": 0, "tilt_deg": 0, "yaw_deg": 0, "gust_m": 0, "duration_s": 1.5}
+    world = _hold_run(client, still)
     for axis in "xyz":
-        assert 0.0 <= world[axis]["rmse_m"] < 0.02
-    assert world["outside_s"] >= 0.0
+        assert world[axis]["rmse_m"] < 0.002
+    assert world["outside_s"] == 0.0
+
+
+def test_hold_test_run_under_drift_reports_world_stats(client):
+    world = _hold_run(client, {"duration_s": 2.0, "latency_compensation": True, "seed": 3})
+    for axis in "xyz":  # a sanity bound: the figure itself is measured by benchmarks/runs.py
+        assert 0.0 < world[axis]["rmse_m"] < 0.1
+        assert world[axis]["max_abs_m"] >= world[axis]["rmse_m"]
     assert client.post("/api/tests/hold", json={"duration_s": -1}).status_code == 422
