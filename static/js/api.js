@@ -1,0 +1,82 @@
+// The one place the page talks HTTP to the server: token, client name, errors as messages.
+// Only the public API is used (docs/server.md); everything is SI there, mm/deg on the page.
+
+const TOKEN_KEY = "deltadash.token";
+const CLIENT_KEY = "deltadash.client";
+
+// One control lease per browser tab: the server's lease is per X-Client name.
+export function clientName() {
+  let name = sessionStorage.getItem(CLIENT_KEY);
+  if (!name) {
+    name = "dashboard-" + Math.random().toString(36).slice(2, 8);
+    sessionStorage.setItem(CLIENT_KEY, name);
+  }
+  return name;
+}
+
+export function token() {
+  return sessionStorage.getItem(TOKEN_KEY);
+}
+
+export class ApiError extends Error {
+  constructor(status, detail) {
+    super(detail);
+    this.status = status;
+  }
+}
+
+let tokenPrompt = null; // a single prompt even when several requests fail at once
+
+// Ask once for the token; stored per tab (sessionStorage) so it is gone when the tab is.
+export function promptToken(reason) {
+  if (!tokenPrompt) {
+    tokenPrompt = Promise.resolve().then(() => {
+      const value = window.prompt(`${reason}\nServer token:`, "");
+      if (value) sessionStorage.setItem(TOKEN_KEY, value.trim());
+      tokenPrompt = null;
+      return Boolean(value);
+    });
+  }
+  return tokenPrompt;
+}
+
+async function detailOf(response) {
+  try {
+    const body = await response.json();
+    return typeof body.detail === "string" ? body.detail : JSON.stringify(body.detail);
+  } catch {
+    return response.statusText || `HTTP ${response.status}`;
+  }
+}
+
+// JSON request; a 401 asks for the token and retries once. Throws ApiError with the detail.
+export async function request(method, path, body, retried = false) {
+  const headers = { "X-Client": clientName() };
+  if (body !== undefined) headers["Content-Type"] = "application/json";
+  if (token()) headers.Authorization = `Bearer ${token()}`;
+  const response = await fetch(path, {
+    method, headers, body: body === undefined ? undefined : JSON.stringify(body),
+  });
+  if (response.status === 401 && !retried) {
+    if (await promptToken("This server requires a token for control.")) {
+      return request(method, path, body, true);
+    }
+  }
+  if (!response.ok) throw new ApiError(response.status, await detailOf(response));
+  return response.json();
+}
+
+export const get = (path) => request("GET", path);
+export const post = (path, body) => request("POST", path, body);
+
+export function telemetryUrl(hz) {
+  const proto = location.protocol === "https:" ? "wss:" : "ws:";
+  const query = new URLSearchParams({ hz: String(hz) });
+  if (token()) query.set("token", token());
+  return `${proto}//${location.host}/api/telemetry?${query}`;
+}
+
+// SI -> display units.
+export const mm = (m, digits = 1) => (m === null || m === undefined ? "–" : (m * 1000).toFixed(digits));
+export const deg = (rad, digits = 1) => (rad === null || rad === undefined ? "–" : (rad * 180 / Math.PI).toFixed(digits));
+export const fixed = (v, digits = 2) => (v === null || v === undefined ? "–" : Number(v).toFixed(digits));

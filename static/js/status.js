@@ -1,0 +1,115 @@
+// Header, faults and the servo table from GET /api/status, polled; connection banner.
+
+import { get, post, mm, deg, fixed } from "./api.js";
+import { showError, setText } from "./ui.js";
+
+const POLL_MS = 200;
+const BACKENDS = { sim: "simulator", emulated: "emulated bus", dynamixel: "real servos" };
+export const state = { status: null, online: false, streamOnline: false, why: "", listeners: [] };
+
+function setOnline(online, why) {
+  state.online = online;
+  if (!online) state.why = why;
+  updateConnection();
+}
+
+// HTTP (status poll) and the telemetry stream can fail separately; either shows the banner.
+export function setStreamOnline(online) {
+  state.streamOnline = online;
+  updateConnection();
+}
+
+function updateConnection() {
+  const ok = state.online && state.streamOnline;
+  const conn = document.getElementById("conn");
+  conn.textContent = ok ? "connected" : state.online ? "no telemetry" : "offline";
+  conn.className = ok ? "ok" : "bad";
+  const banner = document.getElementById("banner");
+  banner.hidden = ok;
+  if (!state.online) {
+    banner.textContent = `Connection to the server lost (${state.why}). Reconnecting…`;
+  } else if (!ok) {
+    banner.textContent = "Telemetry stream disconnected. Reconnecting…";
+  }
+}
+
+function renderHeader(s) {
+  const kind = BACKENDS[s.backend] || s.backend;
+  setText("backend", s.backend_description ? `${kind}: ${s.backend_description}` : kind);
+  const mode = document.getElementById("mode");
+  mode.textContent = s.phase ? `${s.mode} (${s.phase})` : s.mode;
+  mode.className = s.estopped || s.mode === "fault" ? "bad" : s.mode === "idle" ? "" : "ok";
+  setText("torque", s.torque ? "on" : "off");
+  setText("loop", `${fixed(s.loop.measured_hz, 0)} / ${fixed(s.loop.target_hz, 0)} Hz`);
+  setText("jitter", `${fixed(s.loop.jitter_p99_ms, 2)} ms`);
+  document.body.classList.toggle("estopped", Boolean(s.estopped));
+}
+
+function renderFaults(s) {
+  const list = document.getElementById("faults");
+  const items = s.faults.map((f) => {
+    const who = f.servo_id === null || f.servo_id === undefined ? f.source : `servo ${f.servo_id}`;
+    return `<li><strong>${escape(who)}</strong>: ${escape(f.reason)}</li>`;
+  });
+  if (s.warning) items.push(`<li class="warn">${escape(s.warning)}</li>`);
+  const html = items.join("");
+  if (list.innerHTML !== html) list.innerHTML = html;
+  list.hidden = items.length === 0;
+}
+
+function renderPosition(s) {
+  const triple = (v) => (v ? v.map((x) => mm(x)).join(", ") + " mm" : "–");
+  setText("pos-meas", triple(s.ee.position_m));
+  setText("pos-goal", triple(s.goal.position_m));
+  setText("pos-err", triple(s.ee.error_m));
+}
+
+function servoRow(j, i, torque) {
+  const errors = j.hardware_errors[i] || [];
+  const errorCell = errors.length
+    ? `<td class="bad">${errors.map(escape).join(", ")}</td>`
+    : `<td class="ok">none</td>`;
+  const reboot = errors.length
+    ? `<button type="button" data-reboot="${j.servo_ids[i]}">Reboot</button>`
+    : torque ? "torque on" : "relaxed";
+  return `<tr><th scope="row">${j.servo_ids[i]}</th><td>${deg(j.position_rad[i])}</td>` +
+    `<td>${deg(j.commanded_rad[i])}</td><td>${deg(j.velocity_rad_s[i], 0)}</td>` +
+    `<td>${fixed(j.current_a[i], 3)}</td><td>${fixed(j.voltage_v[i], 1)}</td>` +
+    `<td>${fixed(j.temperature_c[i], 0)}</td>${errorCell}<td>${reboot}</td></tr>`;
+}
+
+function renderServos(s) {
+  const j = s.joints;
+  const html = j.servo_ids.map((_, i) => servoRow(j, i, s.torque)).join("");
+  const body = document.getElementById("servo-rows");
+  if (body.innerHTML !== html) body.innerHTML = html;
+}
+
+export function escape(text) {
+  return String(text).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" })[c]);
+}
+
+async function poll() {
+  try {
+    const s = await get("/api/status");
+    state.status = s;
+    if (!state.online) setOnline(true);
+    renderHeader(s);
+    renderFaults(s);
+    renderPosition(s);
+    renderServos(s);
+    state.listeners.forEach((fn) => fn(s));
+  } catch (err) {
+    setOnline(false, err.message || "no answer");
+  }
+  setTimeout(poll, state.online ? POLL_MS : 1000);
+}
+
+export function startStatus() {
+  // A servo in error is rebooted by the reset, which reboots every servo reporting errors.
+  document.getElementById("servo-rows").addEventListener("click", (event) => {
+    const id = event.target.dataset.reboot;
+    if (id) post("/api/reset").catch(showError);
+  });
+  poll();
+}
