@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import simpson
 
@@ -56,6 +56,7 @@ def _trajectory(seed: int, centre: np.ndarray, amplitude: float, t: np.ndarray):
     return p, pd, pdd
 
 
+@settings(max_examples=50)  # each example integrates a 2001-sample trajectory
 @given(mass_models(), gravities(), st.integers(0, 2**32 - 1), st.sampled_from([0, 1]))
 def test_work_of_the_torques_is_the_change_of_energy(mass, gravity, seed, which):
     """Along a smooth motion, the integral of tau . qd dt equals Delta(K + U)."""
