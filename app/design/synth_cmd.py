@@ -66,7 +66,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out",
         type=Path,
-        help="folder for design.toml ([robot] for serve --config), report.md, PNG",
+        help="folder for design.toml ([robot] for serve --config), report.md/.json, PNG",
     )
     common(p, robot=False)
     p.set_defaults(handler=_synth)
@@ -105,7 +105,10 @@ def _synth_files(args: argparse.Namespace, result: Any, problem: Problem, payloa
     toml_path.write_text(report.design_toml(result.design, args.r))
     json_path = args.out / "report.json"
     json_path.write_text(json.dumps(payload, indent=2))
-    paths = [toml_path, json_path]
+    text_path = args.out / "report.md"
+    text_path.write_text(f"# Synthesis report\n\n```\n{report.synth_table(payload)}\n```\n\n"
+                         "See docs/design.md for the problem and the certification.\n")  # fmt: skip
+    paths = [toml_path, json_path, text_path]
     for name, design in (("ours", result.design), ("thesis", report.THESIS_DESIGN)):
         lower, upper = problem.volume.box(design.H)
         robot = design.robot(args.r)

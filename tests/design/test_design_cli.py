@@ -38,6 +38,7 @@ def test_synth_json_answers_the_thesis_problem(capsys, tmp_path):
     assert robot["R"] == pytest.approx(payload["Rbar"] + 0.038, abs=1e-6)
     RobotSettings(**robot).build()  # the server's own loader accepts it
     assert (tmp_path / "synth_ours.png").read_bytes()[:4] == b"\x89PNG"
+    assert "thesis 4.3" in (tmp_path / "report.md").read_text()
 
 
 def test_size_json_puts_the_thesis_figures_beside_ours(capsys):
