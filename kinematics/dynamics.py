@@ -29,6 +29,7 @@ vectorized over (*, 3) samples; no I/O.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -67,8 +68,9 @@ class MassModel:
     def __post_init__(self) -> None:
         for name in ("platform_kg", "upper_kg", "upper_inertia_kgm2", "lower_kg"):
             value = getattr(self, name)
-            minimum_ok = value > 0.0 if name == "platform_kg" else value >= 0.0
-            if not (isinstance(value, int | float) and math.isfinite(value) and minimum_ok):
+            number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+            finite = number and math.isfinite(value)
+            if not (finite and (value > 0.0 if name == "platform_kg" else value >= 0.0)):
                 bound = "> 0" if name == "platform_kg" else ">= 0"
                 raise InvalidGeometryError(f"{name} = {value!r}: must be finite and {bound}")
 

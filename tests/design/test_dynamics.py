@@ -173,7 +173,13 @@ def test_unreachable_points_give_nan_not_errors():
 
 
 @pytest.mark.parametrize(
-    "fields", [(0.0, 0.1, 0.1, 0.1), (0.1, -0.1, 0.1, 0.1), (0.1, 0.1, float("nan"), 0.1)]
+    "fields",
+    [
+        (0.0, 0.1, 0.1, 0.1),
+        (0.1, -0.1, 0.1, 0.1),
+        (0.1, 0.1, float("nan"), 0.1),
+        (0.1, 0.1, 0.1, "1"),
+    ],
 )
 def test_mass_model_is_validated(fields):
     with pytest.raises(InvalidGeometryError):
