@@ -154,22 +154,11 @@ def size_motors(
     usable = robot.fk(q).ok & (np.nan_to_num(robot.dexterity(q)) > min_dexterity)
     usable &= robot.signed_distance(pts) <= -margin_m
     pts, q = pts[usable], q[usable]
-    zero, eye = np.zeros_like(pts), np.eye(3)
-    per_gravity = np.stack(
-        [inverse_dynamics(robot, loaded, pts, zero, zero, gravity=e) for e in eye], -1
-    )  # (N, joint, gravity axis) [N m per m/s^2]
-    per_accel = np.stack(
-        [inverse_dynamics(robot, loaded, pts, zero, e, gravity=(0, 0, 0)) for e in eye], -1
-    )
-    most, least = cone_extremes(per_gravity, np.array([0.0, 0.0, -1.0]), np.radians(tilt_deg))
-    most, least = gravity_m_s2 * most, gravity_m_s2 * least
-    static = np.maximum(most, -least)
-    velocities = speed_m_s * _fibonacci_sphere(velocity_directions)
-    moving = inverse_dynamics(
-        robot, loaded, pts[:, None, :], velocities[None], zero[:, None, :], gravity=(0, 0, 0)
-    )  # (N, directions, joint): velocity terms only
-    worst_sum = np.maximum((moving + most[:, None]).max(1), -(moving + least[:, None]).min(1))
-    peak = worst_sum + acceleration_m_s2 * np.linalg.norm(per_accel, axis=-1)
+    static, peak = _torques(
+        robot, loaded, pts, gravity_m_s2 * np.array([0.0, 0.0, -1.0]), np.radians(tilt_deg),
+        acceleration_m_s2, speed_m_s * _fibonacci_sphere(velocity_directions),
+    )  # fmt: skip
+    eye = np.eye(3)
     inverse_jacobian = np.stack([robot.joint_velocity(q, e) for e in eye], -1)
     speed = speed_m_s * np.linalg.norm(inverse_jacobian, axis=-1) * RPM_PER_RAD_S
     worst_static, worst_peak = _worst(static, pts), _worst(peak, pts)
@@ -182,3 +171,30 @@ def size_motors(
         bool(torque_margin >= 1.0 and speed_margin >= 1.0), int(usable.sum()),
         int((~usable).sum()),
     )  # fmt: skip
+
+
+def _torques(
+    robot: RotaryDelta, loaded: MassModel, pts: np.ndarray, gravity: np.ndarray,
+    tilt_rad: float, acceleration: float, velocities: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Worst static and peak |torque| per point and joint [N m], each (N, 3).
+
+    Gravity anywhere within tilt_rad of ``gravity``'s direction (same magnitude),
+    acceleration of the given size in any direction, velocities as sampled (M, 3).
+    """
+    zero, eye = np.zeros_like(pts), np.eye(3)
+    per_gravity = np.stack(
+        [inverse_dynamics(robot, loaded, pts, zero, zero, gravity=e) for e in eye], -1
+    )  # (N, joint, gravity axis) [N m per m/s^2]
+    per_accel = np.stack(
+        [inverse_dynamics(robot, loaded, pts, zero, e, gravity=(0, 0, 0)) for e in eye], -1
+    )
+    g = float(np.linalg.norm(gravity))
+    most, least = cone_extremes(per_gravity, gravity / max(g, 1e-300), tilt_rad)
+    most, least = g * most, g * least
+    moving = inverse_dynamics(
+        robot, loaded, pts[:, None, :], velocities[None], zero[:, None, :], gravity=(0, 0, 0)
+    )  # (N, directions, joint): velocity terms only
+    worst_sum = np.maximum((moving + most[:, None]).max(1), -(moving + least[:, None]).min(1))
+    peak = worst_sum + acceleration * np.linalg.norm(per_accel, axis=-1)
+    return np.maximum(most, -least), peak
