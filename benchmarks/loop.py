@@ -2,11 +2,15 @@
 
 Usage: python benchmarks/loop.py [--backend emulated] [--seconds 60] [--clients 5]
                                  [--rates 200,500,1000] [--torque]
+                                 [--viser-clients 3] [--browsers 3]
 
 Starts the server as a subprocess per loop rate, connects telemetry clients at 50 Hz
 (and with --torque enables torque and jogs the robot in a circle), and after the run
 prints the loop's own figures from /api/status (rate, lateness p50/p99, worst tick,
 overruns) and the server's CPU use. Lateness is how far a tick started after its deadline.
+--viser-clients opens raw WebSocket clients on the 3D scene (the server's whole cost of a
+viewer, no rendering); --browsers opens the scene in headless chromium pages (Debian's
+chromium via Playwright, software WebGL: on a 2-core machine they compete for the CPU).
 """
 
 from __future__ import annotations
@@ -25,6 +29,11 @@ import urllib.request
 import websockets
 
 PORT = 8765
+VISER_PORT = 8766
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                 "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--use-angle=swiftshader",
+                 "--enable-unsafe-swiftshader"]  # fmt: skip
 
 
 def _http(method: str, path: str, body: dict | None = None) -> dict:
@@ -60,6 +69,47 @@ async def _client(seconds: float) -> int:
     return count
 
 
+def _camera_message() -> bytes:
+    """What a browser sends first: viser counts a client as connected from its camera."""
+    import msgspec
+    from viser import _messages
+
+    camera = _messages.ViewerCameraMessage((1.0, 0.0, 0.0, 0.0), (0.5, -0.6, 0.1), 1.3, 0.01,
+                                           100.0, 800, 1280, (0.0, 0.0, -0.2), (0.0, 0.0, 1.0))
+    return msgspec.msgpack.encode(camera.as_serializable_dict())  # fmt: skip
+
+
+async def _viser_client(seconds: float) -> int:
+    import viser
+
+    count, protocol = 0, websockets.Subprotocol(f"viser-v{viser.__version__}")
+    async with websockets.connect(f"ws://127.0.0.1:{VISER_PORT}", subprotocols=[protocol],
+                                  max_size=None) as ws:  # fmt: skip
+        await ws.send(_camera_message())
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            try:
+                await asyncio.wait_for(ws.recv(), timeout=left)
+            except TimeoutError:
+                break
+            count += 1
+    return count
+
+
+async def _browsers(count: int, seconds: float) -> None:
+    from playwright.async_api import async_playwright
+
+    async with async_playwright() as playwright:
+        browsers = [await playwright.chromium.launch(executable_path="/usr/bin/chromium",
+                                                     args=CHROMIUM_ARGS) for _ in range(count)]
+        for browser in browsers:
+            page = await browser.new_page(viewport={"width": 1280, "height": 800})
+            await page.goto(f"http://127.0.0.1:{VISER_PORT}/")
+        await asyncio.sleep(seconds)
+        for browser in browsers:
+            await browser.close()
+
+
 async def _jog_circle(seconds: float) -> None:
     end, t = time.monotonic() + seconds, 0.0
     while time.monotonic() < end:
@@ -77,6 +127,9 @@ def _cpu_s(pid: int) -> float:
 
 async def _load(args: argparse.Namespace) -> list[int]:
     tasks = [_client(args.seconds) for _ in range(args.clients)]
+    tasks += [_viser_client(args.seconds) for _ in range(args.viser_clients)]
+    if args.browsers:
+        tasks.append(_browsers(args.browsers, args.seconds))
     if args.torque:
         tasks.append(_jog_circle(args.seconds))
     return await asyncio.gather(*tasks)
@@ -88,6 +141,7 @@ def run_once(args: argparse.Namespace, rate_hz: float) -> None:
         "DELTADASH_HARDWARE__BACKEND": args.backend,
         "DELTADASH_LOOP__RATE_HZ": str(rate_hz),
         "DELTADASH_SERVER__HTTP_PORT": str(PORT),
+        "DELTADASH_SERVER__VISER_PORT": str(VISER_PORT),
     }
     server = subprocess.Popen(
         [sys.executable, "-m", "app.cli", "serve"],
@@ -106,12 +160,16 @@ def run_once(args: argparse.Namespace, rate_hz: float) -> None:
     finally:
         server.terminate()
         server.wait(timeout=10)
-    messages = min(r for r in received if r is not None)
+    telemetry = [r for r in received[: args.clients] if r is not None]
+    scene = [r for r in received[args.clients : args.clients + args.viser_clients]]
+    messages = min(telemetry) if telemetry else 0
     print(
         f"{args.backend:9} {rate_hz:6.0f} Hz target: measured {loop['measured_hz']:7.1f} Hz, "
         f"lateness p50 {loop['jitter_p50_ms']:.2f} ms p99 {loop['jitter_p99_ms']:.2f} ms, "
         f"worst {loop['worst_ms']:.2f} ms, overruns {loop['overruns']}/{loop['ticks']}, "
         f"server CPU {100 * cpu:.0f} % of a core, telemetry msgs/client {messages}"
+        + (f", scene clients {args.viser_clients} (msgs/client {min(scene)})" if scene else "")
+        + (f", browsers on the scene {args.browsers}" if args.browsers else "")
     )
 
 
@@ -122,6 +180,8 @@ def main() -> None:
     parser.add_argument("--clients", type=int, default=5)
     parser.add_argument("--rates", default="200")
     parser.add_argument("--torque", action="store_true", help="enable torque and jog meanwhile")
+    parser.add_argument("--viser-clients", type=int, default=0, help="WebSocket scene viewers")
+    parser.add_argument("--browsers", type=int, default=0, help="headless chromium scene pages")
     args = parser.parse_args()
     print(
         f"python {platform.python_version()}, {os.cpu_count()} cores, {platform.machine()}, "

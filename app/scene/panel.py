@@ -74,7 +74,7 @@ class ControlPanel:
         self._add_goal_points(gui)
 
     def _add_goal_points(self, gui) -> None:
-        with gui.add_folder("Goal points"):
+        with gui.add_folder("Goal points", expand_by_default=False):
             self.gui_point_name = gui.add_text("Name", "point 1")
             self.gui_save_point = gui.add_button("Save current goal", icon=viser.Icon.PIN)
             self.gui_points = gui.add_dropdown("Saved", ("—",))

@@ -86,8 +86,8 @@ class Scene:
     def _frame_camera(self, server: viser.ViserServer) -> None:
         robot = self.controller.robot
         reach = robot.R + getattr(robot, "L", 0.0) + robot.l
-        server.initial_camera.position = (1.05 * reach, -1.3 * reach, 0.25 * reach)
-        server.initial_camera.look_at = (0.0, 0.0, -0.42 * reach)
+        server.initial_camera.position = (0.75 * reach, -0.95 * reach, 0.05 * reach)
+        server.initial_camera.look_at = (-0.1 * reach, 0.1 * reach, -0.45 * reach)
         server.initial_camera.up = (0.0, 0.0, 1.0)
         server.scene.set_up_direction("+z")
 

@@ -65,7 +65,7 @@ class TestPanel:
         self._last_stats = ""
         gui = server.gui
         api = _load_runs_api()
-        with gui.add_folder("Test: sinusoid", expand_by_default=False):
+        with gui.add_folder("Test: sinusoid"):
             if isinstance(api, str):
                 self.gui_unavailable = gui.add_markdown(f"⚠ {api}")
                 self.params_type = None
