@@ -45,12 +45,21 @@ class SinusoidCheck(BaseModel):
     peak_acceleration_m_s2: float
 
 
+def _viser_port(request: Request) -> int | None:
+    """The port viser is bound to (port 0 in the config means a free one), None if no scene."""
+    scene = getattr(request.app.state, "scene", None)
+    if scene is None:
+        return None
+    server = getattr(scene, "server", None)
+    return server.get_port() if server is not None else scene.port
+
+
 @router.get("/api/info")
 def get_info(request: Request) -> dict[str, Any]:
     """Viser port, token requirement and the limits the page shows beside its controls."""
     settings = request.app.state.settings
     return {
-        "viser_port": settings.server.viser_port if settings.server.scene else None,
+        "viser_port": _viser_port(request),
         "token_required": settings.server.token is not None,
         "telemetry_hz": settings.server.telemetry_hz,
         "jog_max_velocity_m_s": settings.jog.max_velocity_m_s,

@@ -1,0 +1,139 @@
+"""The dashboard in Debian's chromium against `deltadash serve` on the simulator.
+
+One page is walked through in order, as an operator would: the header fills in, go-to,
+jog by key and by pad, a short sinusoid (plot data grows, the run lands in the table with
+stats), e-stop by key, then the server dies and the page says so. Screenshots go to
+artifacts/ (git-ignored); the plot's frame rate is written there too, not asserted.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from tests.browser_support import browser_skip_reason, chromium_page, save_artifact
+from tests.dashboard.conftest import Server, wait_for
+
+SKIP = browser_skip_reason()
+pytestmark = pytest.mark.skipif(SKIP is not None, reason=str(SKIP))
+STEP_M = 0.005  # the page's default jog step (5 mm)
+SCENE_STUB = "<p style='font: 14px sans-serif'>3D scene (viser): stubbed in this test</p>"
+
+
+@pytest.fixture(scope="module")
+def page(server: Server) -> Iterator[Any]:
+    with chromium_page(1366, 900) as page:
+        errors: list[str] = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        # The scene has its own browser test; its software WebGL would take a core from this one.
+        scene = f"http://127.0.0.1:{server.get('/api/info')['viser_port']}/**"
+        page.route(scene, lambda route: route.fulfill(content_type="text/html", body=SCENE_STUB))
+        page.goto(server.url + "/")
+        yield page
+        assert not errors, f"JavaScript errors on the page: {errors}"
+
+
+def measured(server: Server) -> list[float]:
+    return server.get("/api/status")["ee"]["position_m"]
+
+
+def shot(page: Any, name: str) -> None:
+    save_artifact(f"dashboard-{name}.png", page.screenshot(full_page=True))
+
+
+def text(page: Any, selector: str) -> str:
+    return page.locator(selector).inner_text()
+
+
+def test_header_fills_in_from_the_server(page: Any, server: Server) -> None:
+    wait_for(lambda: text(page, "#conn") == "connected", "the link to show connected")
+    status = server.get("/api/status")
+    wait_for(lambda: "Hz" in text(page, "#loop"), "the loop rate")
+    assert text(page, "#mode").startswith(status["mode"])
+    assert status["backend_description"] in text(page, "#backend")
+    assert page.locator("#estop").is_visible()
+    info = server.get("/api/info")
+    assert page.locator("#scene").get_attribute("src").endswith(f":{info['viser_port']}/")
+    wait_for(lambda: page.locator("#servo-rows tr").count() == 3, "three servo rows")
+    shot(page, "loaded")
+
+
+def test_go_to_then_jog_by_key_and_by_pad(page: Any, server: Server) -> None:
+    page.click("#torque-on")
+    wait_for(lambda: server.get("/api/status")["torque"], "torque on")
+    page.click("#goal-form button[type=submit]")  # the form's default goal: (0, 0, -240) mm
+    wait_for(lambda: abs(measured(server)[2] + 0.24) < 0.002, "arrival at z = -240 mm")
+    shown = text(page, "#pos-meas")
+
+    page.check("#jog-keys")
+    x_before = measured(server)[0]
+    page.keyboard.press("ArrowRight")
+    wait_for(lambda: measured(server)[0] > x_before + 0.8 * STEP_M, "+x after the arrow key")
+    wait_for(lambda: text(page, "#pos-meas") != shown, "the page's measured position to change")
+
+    z_before = measured(server)[2]
+    page.click("[data-jog='z+']")
+    wait_for(lambda: measured(server)[2] > z_before + 0.8 * STEP_M, "+z after the pad button")
+    shot(page, "jogged")
+
+
+def test_keys_do_not_jog_while_keyboard_jog_is_off(page: Any, server: Server) -> None:
+    page.uncheck("#jog-keys")
+    goal = server.get("/api/status")["goal"]["position_m"]
+    page.keyboard.press("ArrowUp")
+    page.wait_for_timeout(500)  # a refused jog has no effect to wait for; give it a chance
+    assert server.get("/api/status")["goal"]["position_m"] == goal
+
+
+def plotted_span_mm(page: Any) -> float:
+    """Peak-to-peak of the measured x in the plot itself (plotly's own trace data) [mm]."""
+    return page.evaluate(
+        "(() => { const y = document.getElementById('plot').data[1].y.filter(v => v !== null);"
+        " return Math.max(...y) - Math.min(...y); })()"
+    )
+
+
+def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -> None:
+    page.fill("input[name=duration]", "2")
+    wait_for(lambda: text(page, "#sine-preview").rsplit(": ", 1)[-1] == "feasible",
+             "the preview to say feasible")  # fmt: skip
+    assert "peak joint speed" in text(page, "#sine-preview")
+    before = page.evaluate("window.deltadashPlot.samples")
+    page.click("#sine-start")
+    toast = page.locator("#toast")
+    wait_for(lambda: toast.is_visible(), "the page to confirm the start or say why not")
+    assert "started" in toast.inner_text(), toast.inner_text()
+    wait_for(lambda: page.evaluate("window.deltadashPlot.samples") > before, "new plot samples")
+    # the sinusoid's x amplitude is 50 mm: the plotted measured x must swing by tens of mm
+    wait_for(lambda: plotted_span_mm(page) > 30, "the plotted x to show the sinusoid")
+    shot(page, "running")
+    run = wait_for(lambda: [r for r in server.get("/api/runs") if r["state"] != "running"],
+                   "the run to end", timeout_s=60)[0]  # fmt: skip
+    assert run["state"] == "done", run
+    row = page.locator(f"tr[data-run='{run['run_id']}']")
+    wait_for(lambda: row.count() == 1 and "done" in row.inner_text(), "the run's row")
+    rmse_mm = run["stats"]["tracking"]["x"]["rmse_m"] * 1000
+    wait_for(lambda: f"{rmse_mm:.2f}" in row.inner_text(), "the x RMSE in mm in the row")
+    assert row.locator("a", has_text="CSV").get_attribute("href").endswith("/log.csv")
+    save_artifact("dashboard-plot.json", json.dumps(page.evaluate("window.deltadashPlot")).encode())
+    shot(page, "run-done")
+
+
+def test_space_presses_e_stop(page: Any, server: Server) -> None:
+    page.locator("h1").click()  # focus on the page, not in a field
+    page.keyboard.press(" ")
+    wait_for(lambda: server.get("/api/status")["estopped"], "the server to be e-stopped")
+    wait_for(lambda: "estop" in text(page, "#mode"), "the header to show the e-stop")
+    shot(page, "estop")
+
+
+def test_lost_server_shows_a_banner(page: Any, server: Server) -> None:
+    server.process.terminate()
+    server.process.wait(timeout=15)
+    wait_for(lambda: page.locator("#banner").is_visible(), "the connection banner")
+    assert "Reconnecting" in text(page, "#banner")
+    assert text(page, "#conn") != "connected"
+    shot(page, "offline")
