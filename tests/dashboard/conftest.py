@@ -11,6 +11,7 @@ import time
 import urllib.error
 import urllib.request
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -63,13 +64,13 @@ class Server:
             return False
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory) -> Iterator[Server]:
-    folder = tmp_path_factory.mktemp("dashboard")
+@contextmanager
+def serve(folder: Path, **env: str) -> Iterator[Server]:
+    """`deltadash serve` on free ports with runs under ``folder``; extra DELTADASH_* ``env``."""
     port = free_port()
     env = {**os.environ, "DELTADASH_SERVER__HTTP_PORT": str(port),
            "DELTADASH_SERVER__VISER_PORT": str(free_port()),
-           "DELTADASH_RUNS__FOLDER": str(folder / "runs")}  # fmt: skip
+           "DELTADASH_RUNS__FOLDER": str(folder / "runs"), **env}  # fmt: skip
     log = folder / "serve.log"
     command = [sys.executable, "-c", "import sys; from app.cli import main; sys.exit(main())"]
     with log.open("wb") as out:
@@ -88,3 +89,9 @@ def server(tmp_path_factory) -> Iterator[Server]:
             process.wait(timeout=15)
         except subprocess.TimeoutExpired:
             process.kill()
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory) -> Iterator[Server]:
+    with serve(tmp_path_factory.mktemp("dashboard")) as served:
+        yield served

@@ -41,6 +41,7 @@ def measured(server: Server) -> list[float]:
 
 
 def shot(page: Any, name: str) -> None:
+    page.evaluate("window.scrollTo(0, 0)")  # the sticky header belongs at the top
     save_artifact(f"dashboard-{name}.png", page.screenshot(full_page=True))
 
 

@@ -1,0 +1,41 @@
+"""With a token configured, the page asks for it once and then controls and streams."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from tests.browser_support import browser_skip_reason, chromium_page
+from tests.dashboard.conftest import Server, serve, wait_for
+
+SKIP = browser_skip_reason()
+pytestmark = pytest.mark.skipif(SKIP is not None, reason=str(SKIP))
+TOKEN = "dashboard-test-token"
+
+
+@pytest.fixture(scope="module")
+def token_server(tmp_path_factory) -> Iterator[Server]:
+    folder = tmp_path_factory.mktemp("dashboard-token")
+    with serve(folder, DELTADASH_SERVER__TOKEN=TOKEN, DELTADASH_SERVER__SCENE="false") as server:
+        yield server
+
+
+def test_token_prompt_then_control_and_telemetry(token_server: Server) -> None:
+    prompts: list[str] = []
+
+    def answer(dialog: Any) -> None:
+        prompts.append(dialog.message)
+        dialog.accept(TOKEN)
+
+    with chromium_page(1280, 800) as page:
+        page.on("dialog", answer)
+        page.goto(token_server.url + "/")
+        # the telemetry stream is refused without the token: the page asks, then connects
+        wait_for(lambda: page.evaluate("window.deltadashPlot.connected"), "telemetry with token")
+        assert page.evaluate("sessionStorage.getItem('deltadash.token')") == TOKEN
+        page.click("#torque-on")
+        wait_for(lambda: token_server.get("/api/status")["torque"], "torque on with the token")
+        assert len(prompts) == 1, prompts
+        assert page.locator("#scene-off").is_visible()  # server.scene = false says so
