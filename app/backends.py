@@ -14,6 +14,7 @@ from hardware.calibration import JointCalibration
 from hardware.dynamixel import DynamixelBus, DynamixelConfig
 from hardware.emulator import ServoEmulator
 from hardware.registers import Reg
+from kinematics import RotaryDelta
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,17 @@ def _dynamixel(settings: Settings, port: str) -> DynamixelBus:
         joints=_calibrations(settings), port=port, baudrate=hw.baud, max_tries=hw.max_tries
     )
     return DynamixelBus(config)
+
+
+def _twin(settings: Settings) -> ServoBus:
+    """The in-process simulated robot (hardware/sim) for this config's rotary Delta."""
+    from hardware.sim import SimBus, SimBusConfig, TwinConfig
+
+    robot = settings.robot.build()
+    if not isinstance(robot, RotaryDelta):
+        raise ValueError("robot.type: the simulator models rotary Deltas; use backend 'emulated'")
+    twin = TwinConfig(robot=robot, joints=_calibrations(settings))
+    return SimBus(SimBusConfig(twin=twin))
 
 
 @contextlib.contextmanager
@@ -88,10 +100,16 @@ def open_backend(settings: Settings, emulator_in_process: bool = False) -> Itera
     ids = [joint.servo_id for joint in settings.hardware.joints]
     with contextlib.ExitStack() as stack:
         emulator: ServoEmulator | None = None
+        if kind == "sim":
+            bus = _twin(settings)
+            bus.connect()
+            stack.callback(bus.disconnect)
+            yield Backend(bus, kind, "simulated robot: MuJoCo twin with XM430-W210 servo models")
+            return
         if kind == "dynamixel":
             port = settings.hardware.port
             description = f"Dynamixel servos on {port} at {settings.hardware.baud} bit/s"
-        elif emulator_in_process:  # "sim" runs on the emulator until the twin is wired in
+        elif emulator_in_process:
             emulator = stack.enter_context(_emulator_thread(ids))
             port, description = emulator.port, f"emulated XM430-W210 bus on {emulator.port}"
         else:

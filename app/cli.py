@@ -7,7 +7,7 @@ import json
 import math
 import sys
 
-from app import run_cli, serve
+from app import design_cli, run_cli, serve
 from hardware import emulator_cli
 from kinematics import THESIS_DELTA, DeltaError
 
@@ -56,6 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True)
     serve.add_parser(commands)
     run_cli.add_parser(commands)
+    design_cli.add_parser(commands)
     emulator_cli.add_parser(commands)
     ik = commands.add_parser("ik", help="inverse kinematics of the thesis robot (metres)")
     ik.add_argument("x", type=float)

@@ -87,8 +87,9 @@ class HardwareSettings(_Section):
     """Which servo bus drives the robot."""
 
     backend: Literal["sim", "emulated", "dynamixel"] = Field(
-        "emulated",
-        description="emulated: pty emulator through the real driver; dynamixel: real servos",
+        "sim",
+        description="sim: the MuJoCo twin in-process; emulated: the pty servo emulator through "
+        "the real driver; dynamixel: real servos",
     )
     port: str = Field("/dev/ttyUSB0", description="serial port of the bus (dynamixel)")
     baud: int = Field(1_000_000, ge=9600, le=10_500_000, description="bus baud rate [bit/s]")

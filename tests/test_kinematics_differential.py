@@ -32,8 +32,11 @@ def test_jacobian_matches_finite_differences(case):
     jac = robot.jacobian(joints)
     assert jac.shape == joints.shape + (3,)
     scale = np.abs(jac[usable]).max(initial=1.0)
-    expected = _fd_jacobian(robot, joints)[usable]
-    np.testing.assert_allclose(jac[usable], expected, rtol=1e-5, atol=2e-6 * scale)
+    expected = _fd_jacobian(robot, joints)
+    usable &= np.isfinite(expected).all(axis=(-2, -1))  # the stencil may cross the FK boundary
+    # near a singularity the differences' truncation error grows like 1/dexterity^k; a wrong
+    # formula is off by O(1), far above this tolerance
+    np.testing.assert_allclose(jac[usable], expected[usable], rtol=1e-4, atol=1e-5 * scale)
 
 
 @given(robot_and_joints(), st.integers(0, 2**32 - 1))

@@ -103,11 +103,21 @@ class Gate:
         return self.inside(point)
 
     def solve(self, point: np.ndarray, near: np.ndarray) -> np.ndarray:
-        """Joints for a point that passed :meth:`check_point`; GoalRejected if unusable."""
+        """Joints for a point that passed :meth:`check_point`; GoalRejected if unusable.
+
+        The branch nearest the current joints first; if that breaks a limit (the arm may
+        start from outside them, e.g. hanging with torque off), the working knee-out branch.
+        """
         joints, ok = self.robot.ik(point, near=near)
         if not ok:
             raise GoalRejected("position_m: no joint solution", self.nearest(point))
-        return self.check_joints(joints)
+        try:
+            return self.check_joints(joints)
+        except GoalRejected:
+            knee_out = self.robot.ik(point).joints
+            if np.array_equal(knee_out, joints):
+                raise
+            return self.check_joints(knee_out)
 
     def check_joints(self, joints: np.ndarray) -> np.ndarray:
         """Joint limits and the singularity margin; returns ``joints`` or raises."""
