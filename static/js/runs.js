@@ -64,11 +64,15 @@ export function onStatus(s) {
   const running = Boolean(active) && s.mode === "test";
   document.getElementById("sine-abort").disabled = !running;
   bar.hidden = !running;
-  if (!running) return;
+  if (!running) {
+    setText("run-phase", "");
+    return;
+  }
   if (s.phase === "timed" && active.timedSince === null) active.timedSince = performance.now();
   const done = active.timedSince === null ? 0 : (performance.now() - active.timedSince) / 1000;
   bar.value = s.phase === "stop" ? 1 : Math.min(done / active.duration, 1);
   bar.textContent = `${Math.round(bar.value * 100)} %`;
+  setText("run-phase", `run ${active.id}: ${s.phase || "starting"} ${Math.round(bar.value * 100)} %`);
 }
 
 const triple = (t, key) => (t ? ["x", "y", "z"].map((a) => mm(t[a]?.[key], 2)).join(" / ") : "–");

@@ -35,7 +35,9 @@ function updateConnection() {
 
 function renderHeader(s) {
   const kind = BACKENDS[s.backend] || s.backend;
-  setText("backend", s.backend_description ? `${kind}: ${s.backend_description}` : kind);
+  const backend = s.backend_description ? `${kind}: ${s.backend_description}` : kind;
+  setText("backend", backend);
+  document.getElementById("backend").title = backend; // the header cuts long descriptions
   const mode = document.getElementById("mode");
   mode.textContent = s.phase ? `${s.mode} (${s.phase})` : s.mode;
   mode.className = s.estopped || s.mode === "fault" ? "bad" : s.mode === "idle" ? "" : "ok";
