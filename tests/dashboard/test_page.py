@@ -57,7 +57,12 @@ def test_header_fills_in_from_the_server(page: Any, server: Server) -> None:
     assert status["backend_description"] in text(page, "#backend")
     assert page.locator("#estop").is_visible()
     info = server.get("/api/info")
-    assert page.locator("#scene").get_attribute("src").endswith(f":{info['viser_port']}/")
+    scene_url = f":{info['viser_port']}/"
+    assert page.locator("#scene-link").get_attribute("href").endswith(scene_url)
+    # headless chromium renders WebGL in software: the scene is offered, not embedded
+    assert not page.locator("#scene-embed").is_checked()
+    page.check("#scene-embed")
+    assert page.locator("#scene").get_attribute("src").endswith(scene_url)
     wait_for(lambda: page.locator("#servo-rows tr").count() == 3, "three servo rows")
     shot(page, "loaded")
 
