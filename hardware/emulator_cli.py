@@ -39,8 +39,25 @@ def configure(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         default=None,
         help="Return Delay Time of every servo [us] (factory default 500; 0 for speed)",
     )
+    parser.add_argument(
+        "--model",
+        choices=["simple", "twin"],
+        default="simple",
+        help="motion: a simple position loop per servo, or the MuJoCo twin of the thesis robot",
+    )
     parser.set_defaults(handler=run)
     return parser
+
+
+def _model(name: str, ids: list[int]):
+    if name != "twin":
+        return None
+    from hardware.calibration import JointCalibration
+    from hardware.sim import TwinConfig, TwinMotionModel
+
+    if len(ids) != 3:
+        raise SystemExit("--model twin drives a 3-leg Delta: give three --ids")
+    return TwinMotionModel(TwinConfig(joints=tuple(JointCalibration(i) for i in ids)))
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -61,7 +78,9 @@ def run(
         # Before the path is printed: a client may signal as soon as it has read it.
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: stop.set())
-    with ServoEmulator(args.ids) as emulator:
+    with ServoEmulator(
+        args.ids, model=_model(getattr(args, "model", "simple"), args.ids)
+    ) as emulator:
         if args.return_delay_us is not None:
             units = min(254, max(0, args.return_delay_us) // 2)  # 2 us per unit
             with emulator.lock:

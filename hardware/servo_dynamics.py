@@ -106,3 +106,19 @@ def advance_servos(
     states = model.step(dt_s, [command_of(servo) for servo in servos])
     for servo, state in zip(servos, states, strict=True):
         store_state(servo, state, now_s)
+    outputs = getattr(model, "outputs", None)  # models of the servo's heat and protection
+    if outputs is not None:
+        _store_outputs(model, servos, outputs)
+
+
+def _store_outputs(model: MotionModel, servos: Sequence[EmulatedServo], outputs) -> None:
+    """Temperature and latched errors from a physical model (the twin) into the tables;
+    a Reboot the servo has executed since clears the model's latched error too."""
+    for index, (servo, output) in enumerate(zip(servos, outputs, strict=True)):
+        if getattr(servo, "model_reboots", 0) != servo.reboots:
+            model.reboot(index)  # type: ignore[attr-defined]
+            servo.model_reboots = servo.reboots  # type: ignore[attr-defined]
+            continue
+        servo.table.set(Reg.PRESENT_TEMPERATURE, max(0, min(100, round(output.temperature_c))))
+        if output.hardware_error:
+            servo.raise_hardware_error(output.hardware_error)

@@ -51,3 +51,29 @@ def test_reboot_clears_a_servo_models_latched_error() -> None:
     model.twin.servos[2].hardware_error = 0x20
     model.reboot(2)
     assert model.twin.servos[2].hardware_error == 0
+
+
+def test_the_twins_heat_and_errors_reach_the_control_table_and_reboot_clears_both() -> None:
+    """A latched overload in the twin's servo shows in Hardware Error Status over the SDK,
+    with the twin's winding temperature, and a Reboot over the bus clears it in both."""
+    model = TwinMotionModel()
+    joints = tuple(JointCalibration(i) for i in (1, 2, 3))
+    with fast(ServoEmulator((1, 2, 3), model=model)) as emulator:
+        bus = DynamixelBus(DynamixelConfig(joints=joints, port=emulator.port))
+        bus.connect()
+        try:
+            model.twin.servos[1].hardware_error = 0x20  # overload, latched in servo 2's model
+            deadline = time.monotonic() + 10.0
+            state = bus.read_state()
+            while not state.hardware_errors[1] and time.monotonic() < deadline:
+                time.sleep(0.01)
+                state = bus.read_state()
+            assert state.hardware_errors[1] and not state.hardware_errors[0]
+            expected = [round(out.temperature_c) for out in model.outputs]
+            assert list(state.temperature_c) == pytest.approx(expected, abs=1)
+            bus.reboot([2])
+            state = bus.read_state()
+            state = bus.read_state()
+        finally:
+            bus.disconnect()
+    assert model.twin.servos[1].hardware_error == 0 and not state.hardware_errors[1]
