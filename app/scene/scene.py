@@ -24,6 +24,8 @@ from app.scene.panel import ControlPanel
 from app.scene.robot_view import RobotView
 from app.scene.test_panel import TestPanel
 from app.scene.workspace_view import WorkspaceView
+from app.scene.world_view import WorldView
+from kinematics import Pose
 
 log = logging.getLogger(__name__)
 PANEL_EVERY = 3  # frames per panel refresh: 10 Hz is plenty for text and the plot
@@ -78,6 +80,7 @@ class Scene:
         self.goals = GoalView(server, self.controller)
         self.panel = ControlPanel(server, self.controller, self.goals)
         self.tests = TestPanel(server, self.runs, self.goals.show_path)
+        self.world = WorldView(server, _mount(settings))
         self._add_view_toggles(server)
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="deltadash-scene", daemon=True)
@@ -136,11 +139,20 @@ class Scene:
             self.ghost.update(snap.joints_commanded_rad)
             self.ghost.visible = bool(commanded and self.gui_ghost.value)
             self.goals.update(snap, now_s)
+            self.world.update(self.controller.current_source)
             self.tests.record(snap, now_s)
             if self.frames % PANEL_EVERY == 0:
                 self.panel.update(snap)
                 self.tests.update(now_s)
         self.frames += 1
+
+
+def _mount(settings: Any) -> Pose:
+    """The base's pose in the drone body (settings.world), identity where there is none."""
+    world = getattr(settings, "world", None)
+    if world is None:
+        return Pose.identity()
+    return Pose.from_arrays(world.mount_position_m, world.mount_quaternion)
 
 
 def scene_host(host: str) -> str:
