@@ -85,9 +85,9 @@ function runRow(run) {
     .filter(([name]) => name !== "report.png" || run.has_report)
     .map(([name, label]) => `<a href="${base}/${name}" target="_blank" rel="noopener">${label}</a>`)
     .join(" ");
-  const state = run.reason ? `${run.state}: ${run.reason}` : run.state;
+  const reason = run.reason ? ` title="${escape(run.reason)}"` : ""; // long reasons as a tooltip
   return `<tr data-run="${escape(run.run_id)}"><td>${escape(run.run_id)}</td><td>${escape(run.kind)}</td>` +
-    `<td class="${run.state === "done" ? "ok" : run.state === "aborted" ? "bad" : ""}">${escape(state)}</td>` +
+    `<td class="${run.state === "done" ? "ok" : run.state === "aborted" ? "bad" : ""}"${reason}>${escape(run.state)}</td>` +
     `<td class="num">${triple(t, "rmse_m")}</td><td class="num">${triple(t, "max_abs_m")}</td>` +
     `<td class="num">${under}</td><td>${links}</td></tr>`;
 }
