@@ -94,6 +94,43 @@ def test_keys_do_not_jog_while_keyboard_jog_is_off(page: Any, server: Server) ->
     assert server.get("/api/status")["goal"]["position_m"] == goal
 
 
+FAKE_PAD = """(state) => {
+  const buttons = Array.from({ length: 8 }, (_, i) => ({ pressed: i === 4 && state.held }));
+  const pad = { id: "test pad", axes: [state.x, 0, 0, 0], buttons };
+  Object.defineProperty(navigator, "getGamepads", { configurable: true, value: () => [pad] });
+}"""
+
+
+def test_gamepad_jogs_only_with_the_deadman_held(page: Any, server: Server) -> None:
+    page.check("#jog-pad")
+    page.evaluate(FAKE_PAD, {"x": 1.0, "held": False})
+    wait_for(lambda: "hold LB" in text(page, "#gamepad-state"), "the page to see the pad")
+    goal = server.get("/api/status")["goal"]["position_m"]
+    page.wait_for_timeout(500)  # stick full right, deadman released: nothing may move
+    assert server.get("/api/status")["goal"]["position_m"] == goal
+
+    page.evaluate(FAKE_PAD, {"x": 1.0, "held": True})
+    wait_for(lambda: server.get("/api/status")["goal"]["position_m"][0] > goal[0] + 0.002,
+             "+x goal from the stick with the deadman held")  # fmt: skip
+    page.evaluate(FAKE_PAD, {"x": 1.0, "held": False})
+    page.uncheck("#jog-pad")
+
+
+def test_plot_buffer_keeps_a_fixed_window_in_order(page: Any) -> None:
+    """The ring buffer behind the plots: after an hour's worth of pushes, the last N in order."""
+    result = page.evaluate("""async () => {
+        const { Ring } = await import("/js/ring.js");
+        const ring = new Ring(500);
+        for (let i = 0; i < 50 * 3600; i++) ring.push(i);
+        ring.push(null);
+        const view = ring.view(), values = ring.values();
+        return { length: view.length, first: view[0], last: values[values.length - 1],
+                 before: values[values.length - 2], stored: ring.data.length };
+    }""")
+    assert result == {"length": 500, "first": 50 * 3600 - 499, "last": None,
+                      "before": 50 * 3600 - 1, "stored": 1000}  # fmt: skip
+
+
 def plotted_span_mm(page: Any) -> float:
     """Peak-to-peak of the measured x in the plot itself (plotly's own trace data) [mm]."""
     return page.evaluate(
