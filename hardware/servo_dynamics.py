@@ -118,7 +118,9 @@ def _store_outputs(model: MotionModel, servos: Sequence[EmulatedServo], outputs)
         if getattr(servo, "model_reboots", 0) != servo.reboots:
             model.reboot(index)  # type: ignore[attr-defined]
             servo.model_reboots = servo.reboots  # type: ignore[attr-defined]
-            continue
         servo.table.set(Reg.PRESENT_TEMPERATURE, max(0, min(100, round(output.temperature_c))))
-        if output.hardware_error:
+        # latch what the model newly reports; its outputs lag a reboot by one physics step
+        seen = getattr(servo, "model_error_seen", 0)
+        if output.hardware_error and output.hardware_error != seen:
             servo.raise_hardware_error(output.hardware_error)
+        servo.model_error_seen = output.hardware_error  # type: ignore[attr-defined]
