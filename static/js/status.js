@@ -53,6 +53,7 @@ function renderFaults(s) {
     const who = f.servo_id === null || f.servo_id === undefined ? f.source : `servo ${f.servo_id}`;
     return `<li><strong>${escape(who)}</strong>: ${escape(f.reason)}</li>`;
   });
+  if (s.estopped) items.unshift("<li><strong>E-stop engaged</strong>: nothing moves until Reset</li>");
   if (s.warning) items.push(`<li class="warn">${escape(s.warning)}</li>`);
   const html = items.join("");
   if (list.innerHTML !== html) list.innerHTML = html;

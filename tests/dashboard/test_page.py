@@ -63,6 +63,7 @@ def test_header_fills_in_from_the_server(page: Any, server: Server) -> None:
     assert not page.locator("#scene-embed").is_checked()
     page.check("#scene-embed")
     assert page.locator("#scene").get_attribute("src").endswith(scene_url)
+    assert page.locator("#scene").is_visible() and not page.locator("#scene-note").is_visible()
     wait_for(lambda: page.locator("#servo-rows tr").count() == 3, "three servo rows")
     shot(page, "loaded")
 
@@ -170,6 +171,7 @@ def test_space_presses_e_stop(page: Any, server: Server) -> None:
     page.keyboard.press(" ")
     wait_for(lambda: server.get("/api/status")["estopped"], "the server to be e-stopped")
     wait_for(lambda: "estop" in text(page, "#mode"), "the header to show the e-stop")
+    assert "E-stop engaged" in text(page, "#faults")
     shot(page, "estop")
 
 
