@@ -11,7 +11,7 @@ import { Ring } from "./ring.js";
 const HZ = 50;
 const WINDOW_S = 10;
 const CAPACITY = HZ * WINDOW_S + 50; // a little slack for rate jitter
-const FRAME_MS = 40; // aim at 25 frames/s, above the 20 the operator needs
+const FRAME_MS = 33; // aim at 30 frames/s: headroom above the 20 the operator needs
 const MIN_SPAN_MM = [2, 0.2]; // position, error: a resting signal does not zoom into noise
 const AXES = ["x", "y", "z"];
 const KINDS = ["goal", "measured", "error"];
