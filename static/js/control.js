@@ -11,6 +11,7 @@ const GAMEPAD_PERIOD_MS = 50; // velocity jog as steps at 20 Hz
 const DEADZONE = 0.15;
 const DEADMAN_BUTTON = 4; // LB on standard-mapping pads
 let gamepadBusy = false;
+let keyJogBusy = false;
 let jogSpeed = 0.05; // [m/s] at full stick, capped by /api/info's jog limit
 
 // A command that needs the control lease; another holder is taken over only if the operator agrees.
@@ -59,7 +60,10 @@ function onKey(event) {
   // Keys jog only while this page has focus and the operator has switched keyboard jog on.
   if (!document.getElementById("jog-keys").checked || !document.hasFocus()) return;
   event.preventDefault();
-  jog(axis[0], axis[1]);
+  // a held key repeats ~30 times a second: one jog in flight at most, so none pile up
+  if (keyJogBusy) return;
+  keyJogBusy = true;
+  jog(axis[0], axis[1]).finally(() => { keyJogBusy = false; });
 }
 
 function bindButtons() {
