@@ -75,6 +75,11 @@ class SimulatedDrone:
         yaw = np.radians(p.yaw_deg) * s[5]
         return Pose(position, _rpy_quaternion(roll, pitch, yaw)), velocity
 
+    def acceleration(self, t: float) -> np.ndarray:
+        """True acceleration of the drone's centre [m/s^2] at time t [s]."""
+        h = 1e-3  # the signals are smooth sums of sinusoids and Gaussians: differences suffice
+        return (self.true_state(t + h)[1] - self.true_state(t - h)[1]) / (2 * h)
+
     def measured(self, t: float) -> tuple[float, Pose, np.ndarray]:
         """The newest measurement available at time t: (its stamp, pose, velocity)."""
         period = 1.0 / self.params.rate_hz

@@ -64,12 +64,19 @@ def predict(pose: Pose, velocity: np.ndarray, omega_body: np.ndarray, ahead_s: f
 
 
 class SimulatedDroneProvider:
-    """Observations of a SimulatedDrone: its measurement stream, latency and rate included."""
+    """Observations of a SimulatedDrone: its measurement stream, latency and rate included.
 
-    def __init__(self, drone: SimulatedDrone) -> None:
+    ``feel`` (optional) receives the true attitude, acceleration and body rate each tick,
+    so a simulated arm's base moves with the drone (gravity and base motion act on it).
+    """
+
+    def __init__(self, drone: SimulatedDrone, feel: Callable[..., None] | None = None) -> None:
         self.drone = drone
+        self.feel = feel
 
     def observe(self, t_s: float) -> Observation:
+        if self.feel is not None:
+            self._feel(t_s)
         stamp, pose, velocity = self.drone.measured(t_s)
         period = 1.0 / self.drone.params.rate_hz
         _, previous, _ = self.drone.measured(t_s - period)
@@ -78,6 +85,12 @@ class SimulatedDroneProvider:
 
     def true_pose(self, t_s: float) -> Pose:
         return self.drone.true_state(t_s)[0]
+
+    def _feel(self, t_s: float) -> None:
+        h = 1e-3
+        now, before = self.drone.true_state(t_s)[0], self.drone.true_state(t_s - h)[0]
+        omega = angular_velocity(before.quaternion, now.quaternion, h)
+        self.feel(now.quaternion, self.drone.acceleration(t_s), omega)
 
 
 class TrackerProvider:

@@ -33,11 +33,37 @@ class WorldService:
     def close(self) -> None:
         for listener in self._listeners:
             listener.stop()
+        self.level_base()
 
     def provider(self, simulated: DroneSimParams | None) -> PoseProvider:
+        self.level_base()
         if simulated is not None:
-            return SimulatedDroneProvider(SimulatedDrone(simulated))
+            return SimulatedDroneProvider(SimulatedDrone(simulated), self._feel_hook())
         return TrackerProvider(self.tracker)
+
+    def _feel_hook(self):
+        """On the simulated robot, the drone's motion moves the twin's base (else None)."""
+        bus = self.controller.bus
+        if not hasattr(bus, "set_base_motion"):
+            return None
+        from hardware.sim import BaseMotion
+
+        def feel(quaternion, acceleration, omega) -> None:
+            # attitude and acceleration: the effective gravity, exact and cheap; the turning
+            # terms (Euler, Coriolis) cost a Python callback per physics step and are second
+            # order for a hovering drone, so they are left out here
+            del omega
+            bus.set_base_motion(BaseMotion(tuple(quaternion), tuple(acceleration)))
+
+        return feel
+
+    def level_base(self) -> None:
+        """Back to a level, still base (after a simulated-drone hold)."""
+        bus = self.controller.bus
+        if hasattr(bus, "set_base_motion"):
+            from hardware.sim import BaseMotion
+
+            bus.set_base_motion(BaseMotion())
 
     def hold_source(
         self, goal_world: np.ndarray | None, provider: PoseProvider, compensate: bool

@@ -97,3 +97,19 @@ def test_prediction_is_exact_for_constant_rates(axis, rate, ahead):
     later = predict(now, velocity, estimated, ahead)
     np.testing.assert_allclose(later.position, true_pose(0.1 + ahead).position, atol=1e-12)
     np.testing.assert_allclose(later.rotation, true_pose(0.1 + ahead).rotation, atol=1e-9)
+
+
+def test_simulated_drone_moves_the_simulated_base():
+    """The simulated drone's true attitude and acceleration reach the twin's base each tick."""
+    from app.world.drone_sim import DroneSimParams, SimulatedDrone
+    from app.world.hold import SimulatedDroneProvider
+
+    felt = []
+    drone = SimulatedDrone(DroneSimParams(seed=2))
+    provider = SimulatedDroneProvider(drone, lambda q, a, w: felt.append((q, a, w)))
+    provider.observe(1.0)
+    quaternion, acceleration, _ = felt[-1]
+    np.testing.assert_allclose(quaternion, drone.true_state(1.0)[0].quaternion)
+    h = 1e-4
+    expected = (drone.true_state(1.0 + h)[1] - drone.true_state(1.0 - h)[1]) / (2 * h)
+    np.testing.assert_allclose(acceleration, expected, rtol=1e-3, atol=1e-5)
