@@ -7,7 +7,7 @@ import json
 import math
 import sys
 
-from app import design_cli, run_cli, serve
+from app import design_cli, home_cli, run_cli, serve
 from hardware import emulator_cli
 from kinematics import THESIS_DELTA, DeltaError
 
@@ -57,6 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_parser(commands)
     run_cli.add_parser(commands)
     design_cli.add_parser(commands)
+    home_cli.add_parser(commands)
     emulator_cli.add_parser(commands)
     ik = commands.add_parser("ik", help="inverse kinematics of the thesis robot (metres)")
     ik.add_argument("x", type=float)

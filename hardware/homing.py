@@ -1,6 +1,6 @@
 """The guided homing procedure on a live bus: relax, hold the pose, read, save.
 
-This is the step-by-step helper behind a ``deltadash home`` command (not wired yet); the
+This is the step-by-step helper behind ``deltadash home`` (app/home_cli.py); the
 arithmetic is hardware.calibration.home, a pure function.
 """
 
