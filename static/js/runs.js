@@ -99,6 +99,12 @@ export async function refreshRuns() {
     const body = document.getElementById("run-rows");
     if (body.innerHTML !== html) body.innerHTML = html;
     if (active && runs.some((r) => r.run_id === active.id && r.state !== "running")) active = null;
+    // a run started elsewhere (CLI, the 3D scene, another tab) can be followed and aborted too
+    const running = runs.find((r) => r.state === "running");
+    if (!active && running) {
+      const p = running.params;
+      active = { id: running.run_id, duration: p.duration_s || p.times_s?.at(-1) || 1, timedSince: null };
+    }
   } catch {
     // the status poll shows the connection banner; keep the last table
   }
