@@ -44,6 +44,7 @@ def status(controller: Controller) -> dict[str, Any]:
             "position_m": floats(snap.point_measured_m),
             "commanded_m": floats(snap.point_commanded_m),
             "error_m": floats(snap.tracking_error_m),
+            "external_m": floats(snap.external_m),
         },
         "goal": {"position_m": floats(snap.goal_m)},
         "loop": loop_timing(controller),

@@ -78,6 +78,8 @@ class Controller(CommandsMixin):
         self._tick = 0
         self._phase = ""
         self._extra: dict | None = None
+        self._external = getattr(bus, "measure_platform", None)
+        self._external_m = np.full(3, np.nan)
         self._lateness_s = 0.0
         self._dt_s = self.period_s
         self._t0 = time.monotonic()
@@ -190,6 +192,8 @@ class Controller(CommandsMixin):
         self._misses.ok()
         self._state = state
         self._point = self.robot.fk(state.position_rad).points
+        if self._external is not None:  # the simulator's "motion capture" of the platform,
+            self._external_m = self._external(at_last_read=True)  # at the read's instant
         return True
 
     def _advance(self) -> None:
@@ -283,6 +287,7 @@ class Controller(CommandsMixin):
             phase=self._phase if self._source else "",
             lateness_ms=self._lateness_s * 1e3,
             extra=self._extra if self._source else None,
+            external_m=self._external_m,
         )
         for listener in tuple(self._listeners):  # a listener may remove itself
             listener(self._snapshot)

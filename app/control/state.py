@@ -56,6 +56,7 @@ class Snapshot:
     phase: str = ""
     lateness_ms: float = 0.0
     extra: dict | None = None
+    external_m: np.ndarray = field(default_factory=lambda: _NAN3)  # e.g. motion capture
 
     @property
     def tracking_error_m(self) -> np.ndarray:

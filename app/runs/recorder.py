@@ -45,8 +45,8 @@ def row_of(snap: Snapshot, t_s: float) -> dict[str, Any]:
         letter = "" if names == "xyz" else "q"
         for name, value in zip(names, _values(vector), strict=True):
             row[f"{prefix}_{letter}{name}_{unit}"] = value
-    for name in "xyz":
-        row[f"external_{name}_m"] = None
+    for name, value in zip("xyz", _values(snap.external_m), strict=True):
+        row[f"external_{name}_m"] = value
     row["lateness_ms"] = snap.lateness_ms
     row["faults"] = "; ".join(f.reason for f in snap.faults)
     extra = snap.extra or {}
@@ -73,6 +73,9 @@ def run_stats(rows: list[dict[str, Any]], skip_s: float, dt_s: float) -> dict[st
     stats: dict[str, Any] = {
         "tracking": error_stats(_columns(rows, "goal"), _columns(rows, "measured"), active)
     }
+    external = _columns(rows, "external")
+    if np.isfinite(external).any():  # thesis Table 6.2: FK against the external measurement
+        stats["validation"] = error_stats(_columns(rows, "measured"), external, active)
     world_measured = _columns(rows, "world_measured")
     if np.isfinite(world_measured).any():
         world = error_stats(_columns(rows, "world_goal"), world_measured, active)

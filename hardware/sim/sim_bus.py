@@ -138,6 +138,8 @@ class SimBus:
 
     def read_state(self) -> JointState:
         with self._transaction("sync read MOVING..PRESENT_TEMPERATURE"):
+            # the platform at the same instant, for measure_platform(at_last_read=True)
+            self._platform_at_read = self.twin.platform_m.copy()
             return self._state()
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
@@ -186,11 +188,14 @@ class SimBus:
         with self.lock:
             self.twin.advance(duration_s)
 
-    def measure_platform(self) -> np.ndarray:
+    def measure_platform(self, at_last_read: bool = False) -> np.ndarray:
         """The external measurement of the platform in the base frame [m], shape (3,):
-        the true centre plus the marker offset plus noise (motion capture's view)."""
+        the true centre plus the marker offset plus noise (motion capture's view); with
+        ``at_last_read`` at the instant of the last read_state (a synchronized capture)."""
         with self.lock:
             true = self.twin.platform_m
+            if at_last_read and getattr(self, "_platform_at_read", None) is not None:
+                true = self._platform_at_read
         noise = (
             self._rng.normal(0.0, self.config.noise_std_m, 3) if self.config.noise_std_m else 0.0
         )

@@ -34,3 +34,19 @@ def test_default_backend_is_the_twin_and_reaches_a_goal():
         wait_for(near_goal, "the twin to reach the goal")
         currents = client.get("/api/status").json()["joints"]["current_a"]
         assert all(abs(c) > 0.0 for c in currents)  # holding against gravity draws current
+
+
+def test_sinusoid_on_the_twin_has_tracking_and_validation_stats():
+    """On the simulator the twin's true platform is the external measurement (thesis
+    Table 6.2): FK of the encoders agrees with it to encoder resolution."""
+    settings = load_settings(runs={"folder": tempfile.mkdtemp(prefix="deltadash-runs-")})
+    with TestClient(create_app(settings)) as client:
+        client.post("/api/torque", json={"enabled": True})
+        external = client.get("/api/status").json()["ee"]["external_m"]
+        assert None not in external
+        run_id = client.post("/api/tests/sinusoid", json={"duration_s": 1.5}).json()["run_id"]
+        wait_for(lambda: client.get(f"/api/runs/{run_id}").json()["state"] != "running", "run")
+        stats = client.get(f"/api/runs/{run_id}").json()["stats"]
+    for axis in "xyz":
+        assert stats["validation"][axis]["max_abs_m"] < 0.001
+        assert stats["tracking"][axis]["rmse_m"] > stats["validation"][axis]["rmse_m"]
