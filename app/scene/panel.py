@@ -107,6 +107,9 @@ class ControlPanel:
         if not np.isfinite(start).all():
             start = snap.point_measured_m
         near = snap.joints_measured_rad
+        if not (np.isfinite(start).all() and np.isfinite(near).all()):
+            self.message = "the robot's position is unknown: check the bus"
+            return
         try:
             target = self.controller.gate.clamp_towards(
                 start, start + step_m * np.asarray(direction, float), near)
