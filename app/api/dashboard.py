@@ -70,14 +70,15 @@ def get_info(request: Request) -> dict[str, Any]:
 
 
 def peak_joint_speed(controller: Controller, params: SinusoidParams) -> float | None:
-    """Largest joint speed [rad/s] over the timed sinusoid, on the robot's current IK branch.
+    """Largest joint speed [rad/s] over the timed sinusoid, on the working IK branch.
 
-    Sampled at the loop period like the feasibility check; None when no sample has a
-    joint solution (the check then names why).
+    Sampled at the loop period like the feasibility check; None when no sample has a joint
+    solution (the check then names why). Not ``near`` the current joints: from a far pose
+    (a relaxed arm) that picked other branches for some samples, and jumps between them
+    read as hundreds of rad/s.
     """
     times = np.arange(0.0, params.duration_s, controller.period_s)
-    near = controller.snapshot().joints_measured_rad
-    joints, ok = controller.robot.ik(sinusoid_points(params, times), near=near)
+    joints, ok = controller.robot.ik(sinusoid_points(params, times))
     if times.size < 2 or not ok.any():
         return None
     speed = np.abs(np.diff(joints, axis=0)) / controller.period_s

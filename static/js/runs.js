@@ -59,7 +59,15 @@ function abort() {
 }
 
 // Progress through the timed part, from the loop's phase in status (approach, timed, stop).
+// Feasibility depends on where the robot starts: re-check when its state changes.
+let previewKey = "";
+
 export function onStatus(s) {
+  const key = `${s.mode}|${s.torque}|${s.estopped}|${s.faults.length}`;
+  if (key !== previewKey && s.mode !== "test") {
+    previewKey = key;
+    schedulePreview();
+  }
   const bar = document.getElementById("run-progress");
   const running = Boolean(active) && s.mode === "test";
   document.getElementById("sine-abort").disabled = !running;

@@ -48,6 +48,22 @@ def test_check_names_the_infeasible_time_and_starts_nothing(client: TestClient) 
     assert client.get("/api/status").json()["mode"] != "test"
 
 
+def test_peak_joint_speed_does_not_depend_on_where_the_arm_hangs(client: TestClient) -> None:
+    """Relaxed, the arm hangs far from the path; the preview must still be the path's own."""
+    body = {"duration_s": 2}
+    client.post("/api/reset")
+    client.post("/api/torque", json={"enabled": False})
+    relaxed = client.post("/api/tests/sinusoid/check", json=body).json()
+    client.post("/api/torque", json={"enabled": True})
+    client.post("/api/goal", json={"position_m": [0.0, 0.0, -0.24]})
+    wait_for(lambda: abs(client.get("/api/status").json()["ee"]["position_m"][2] + 0.24) < 0.003,
+             "arrival at the sinusoid's centre")  # fmt: skip
+    held = client.post("/api/tests/sinusoid/check", json=body).json()
+    client.post("/api/torque", json={"enabled": False})
+    assert relaxed["peak_joint_speed_rad_s"] == pytest.approx(held["peak_joint_speed_rad_s"])
+    assert held["peak_joint_speed_rad_s"] <= held["joint_speed_limit_rad_s"]
+
+
 def test_faster_sinusoid_previews_a_higher_joint_speed(client: TestClient) -> None:
     def peak(frequency_hz: float) -> float:
         body = {"frequency_hz": [frequency_hz, 0, 0], "amplitude_m": [0.02, 0, 0], "duration_s": 2}
