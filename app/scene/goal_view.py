@@ -47,6 +47,7 @@ class GoalView:
         self.message = ""  # the last refusal, shown in the panel
         self.saved: dict[str, np.ndarray] = {}
         self._lock = threading.Lock()
+        self._sequence_lock = threading.Lock()
         self._sequence = itertools.count(1)
         self._latest = 0
         self._dragging = False
@@ -85,8 +86,9 @@ class GoalView:
         parallel threads); ``final`` (drag end) snaps the gizmo to the point sent. Returns
         the goal handed to the loop, or None if this update was superseded or refused.
         """
-        sequence = next(self._sequence)
-        self._latest = sequence
+        with self._sequence_lock:  # number and record together, or a late thread could
+            sequence = next(self._sequence)  # overwrite a newer number with its older one
+            self._latest = sequence
         with self._lock:
             if sequence != self._latest and not final:
                 return None
