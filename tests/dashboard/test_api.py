@@ -2,19 +2,43 @@
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Iterator
+from types import SimpleNamespace
+from typing import Any
 
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from tests.app.conftest import make_client, wait_for
+from app.api.dashboard import peak_joint_speed
+from app.config import load_settings
+from app.main import create_app
+from app.runs.trajectories import SinusoidParams
+from tests.app.conftest import wait_for
+
+
+def make_client(**overrides) -> TestClient:
+    """An app on the default backend (the simulator: no pty, no emulator process)."""
+    folder = tempfile.mkdtemp(prefix="deltadash-runs-")
+    server = {"viser_port": 0, **overrides.pop("server", {})}
+    settings = load_settings(runs={"folder": folder}, server=server, **overrides)
+    return TestClient(create_app(settings))
+
+
+def hold_at_centre(client: TestClient) -> None:
+    """Torque on and the platform at the thesis sinusoid's centre, (0, 0, -0.24) m."""
+    client.post("/api/reset")
+    client.post("/api/torque", json={"enabled": True})
+    client.post("/api/goal", json={"position_m": [0.0, 0.0, -0.24]})
+    wait_for(lambda: abs(client.get("/api/status").json()["ee"]["position_m"][2] + 0.24) < 0.003,
+             "arrival at the sinusoid's centre")  # fmt: skip
 
 
 @pytest.fixture(scope="module")
 def client() -> Iterator[TestClient]:
-    with make_client(server={"viser_port": 0}) as test_client:
-        wait_for(lambda: test_client.get("/api/status").json()["ee"]["position_m"][2] is not None,
-                 "a measured platform position")  # fmt: skip
+    with make_client() as test_client:
+        hold_at_centre(test_client)
         yield test_client
 
 
@@ -48,20 +72,19 @@ def test_check_names_the_infeasible_time_and_starts_nothing(client: TestClient) 
     assert client.get("/api/status").json()["mode"] != "test"
 
 
-def test_peak_joint_speed_does_not_depend_on_where_the_arm_hangs(client: TestClient) -> None:
-    """Relaxed, the arm hangs far from the path; the preview must still be the path's own."""
-    body = {"duration_s": 2}
-    client.post("/api/reset")
-    client.post("/api/torque", json={"enabled": False})
-    relaxed = client.post("/api/tests/sinusoid/check", json=body).json()
-    client.post("/api/torque", json={"enabled": True})
-    client.post("/api/goal", json={"position_m": [0.0, 0.0, -0.24]})
-    wait_for(lambda: abs(client.get("/api/status").json()["ee"]["position_m"][2] + 0.24) < 0.003,
-             "arrival at the sinusoid's centre")  # fmt: skip
-    held = client.post("/api/tests/sinusoid/check", json=body).json()
-    client.post("/api/torque", json={"enabled": False})
-    assert relaxed["peak_joint_speed_rad_s"] == pytest.approx(held["peak_joint_speed_rad_s"])
-    assert held["peak_joint_speed_rad_s"] <= held["joint_speed_limit_rad_s"]
+def test_peak_joint_speed_does_not_depend_on_where_the_arm_hangs() -> None:
+    """A relaxed arm hanging nearly straight down (1.55 rad) must not change the preview:
+    IK near those joints picked other branches for some samples (jumps of ~650 rad/s)."""
+    robot = load_settings().robot.build()
+    params = SinusoidParams(duration_s=2.0)
+
+    def controller(joints_rad: float) -> Any:
+        snapshot = SimpleNamespace(joints_measured_rad=np.full(3, joints_rad))
+        return SimpleNamespace(period_s=0.005, robot=robot, snapshot=lambda: snapshot)
+
+    hanging, held = (peak_joint_speed(controller(j), params) for j in (1.55, 0.3))
+    assert hanging == pytest.approx(held)
+    assert 1.0 < held < 10.0  # the thesis test drives the XM430s near their 7.5 rad/s limit
 
 
 def test_faster_sinusoid_previews_a_higher_joint_speed(client: TestClient) -> None:
@@ -87,7 +110,7 @@ def test_plotly_is_served_from_the_installed_package(client: TestClient) -> None
 
 def test_with_a_token_info_says_so_and_the_check_needs_it() -> None:
     token = "a-long-secret-1"
-    with make_client(server={"token": token, "viser_port": 0}) as client:
+    with make_client(server={"token": token}) as client:
         assert client.get("/api/info").json()["token_required"] is True
         url = "/api/tests/sinusoid/check"
         assert client.post(url, json={"duration_s": 1}).status_code == 401
