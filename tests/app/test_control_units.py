@@ -28,10 +28,13 @@ def test_timing_statistics_by_hand():
 
 
 def test_tick_clock_deadlines_do_not_drift():
+    """Deadlines are t0 + k * period: every gap a whole number of periods (a slot missed on a
+    loaded machine is skipped, never shifted), however late the ticks ran."""
     clock = TickClock(rate_hz=1000.0, spin_s=0.0)
-    deadlines = [clock.wait_next()[0] for _ in range(50)]
-    steps = np.diff(deadlines)
-    np.testing.assert_allclose(steps, 1e-3, rtol=0, atol=1e-12)  # k * period, not now + period
+    deadlines = np.array([clock.wait_next()[0] for _ in range(50)])
+    periods = np.diff(deadlines) / 1e-3
+    np.testing.assert_allclose(periods, np.round(periods), rtol=0, atol=1e-9)
+    assert np.all(np.round(periods) >= 1)
 
 
 def test_following_error_trips_only_after_its_time():
