@@ -9,7 +9,6 @@ before the deadline and busy-waits the rest gave p99 0.02 ms for ~3 % of one cor
 from __future__ import annotations
 
 import time
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,31 +57,50 @@ class TickClock:
 
 
 class TimingRecorder:
-    """Lateness and period of every tick, since start and over the last 10 s."""
+    """Lateness and period of every tick, since start and over the last 10 s.
+
+    Written by the control thread only. The 10 s figures are recomputed there every
+    0.25 s into an immutable TimingStats, so readers (status, telemetry at 50 Hz per
+    client) pay nothing and never iterate a buffer the loop is writing.
+    """
+
+    REFRESH_S = 0.25
 
     def __init__(self, rate_hz: float) -> None:
         self.target_hz = rate_hz
         self._period_s = 1.0 / rate_hz
-        self._recent: deque[tuple[float, float, float]] = deque(maxlen=int(WINDOW_S * rate_hz))
+        size = max(int(WINDOW_S * rate_hz), 2)
+        self._ring = np.zeros((3, size))  # lateness, period, work [s]
+        self._filled = 0
         self._histogram = np.zeros(2001, dtype=np.int64)  # 10 us bins up to 20 ms
         self.ticks = 0
         self.overruns = 0
         self.worst_s = 0.0
         self._first: float | None = None
         self._last: float | None = None
+        self._window = TimingStats(rate_hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0)
+        self._refreshed_at = 0.0
 
     def record(self, deadline: float, lateness_s: float, work_s: float) -> None:
         """One tick: its deadline, how late it started and how long its work took [s]."""
         self.ticks += 1
         if self._first is None:
-            self._first = deadline
+            self._first = self._refreshed_at = deadline
         period = 0.0 if self._last is None else deadline - self._last
         self._last = deadline
-        self._recent.append((lateness_s, period, work_s))
+        self._ring[:, (self.ticks - 1) % self._ring.shape[1]] = (lateness_s, period, work_s)
+        self._filled = min(self._filled + 1, self._ring.shape[1])
         self._histogram[min(int(lateness_s * 1e5), 2000)] += 1
         self.worst_s = max(self.worst_s, lateness_s)
         if lateness_s + work_s > self._period_s:
             self.overruns += 1
+        if deadline - self._refreshed_at >= self.REFRESH_S:
+            self.refresh()
+
+    def refresh(self) -> None:
+        """Recompute the 10 s figures now (the control thread does it every 0.25 s)."""
+        self._refreshed_at = self._last or 0.0
+        self._window = self._compute_window()
 
     def since_start(self) -> TimingStats:
         counts = np.cumsum(self._histogram)
@@ -105,18 +123,23 @@ class TimingRecorder:
         )
 
     def last_window(self) -> TimingStats:
-        """The same figures over the last 10 s (or what there is of it)."""
-        if len(self._recent) < 2:
+        """The same figures over the last 10 s (refreshed every 0.25 s)."""
+        return self._window
+
+    def _compute_window(self) -> TimingStats:
+        if self._filled < 2:
             return TimingStats(self.target_hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0, self.ticks)
-        lateness, periods, work = (np.array(c) for c in zip(*self._recent, strict=True))
-        mean_period = float(periods[1:].mean())
+        lateness, periods, work = self._ring[:, : self._filled]
+        periods = periods[periods > 0]
+        mean_period = float(periods.mean()) if periods.size else 0.0
+        p50, p99 = np.percentile(lateness, [50, 99])
         return TimingStats(
             self.target_hz,
             1.0 / mean_period if mean_period else 0.0,
             mean_period * 1e3,
-            float(np.percentile(lateness, 50)) * 1e3,
-            float(np.percentile(lateness, 99)) * 1e3,
+            float(p50) * 1e3,
+            float(p99) * 1e3,
             float(lateness.max()) * 1e3,
             int((lateness + work > self._period_s).sum()),
-            len(lateness),
+            self._filled,
         )
