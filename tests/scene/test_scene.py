@@ -150,3 +150,26 @@ def test_tracking_error_plot_keeps_the_window(scene):
     scene.tests.update(now + 12.0)
     times = scene.tests.gui_plot.data[0]
     assert len(times) >= 2 and times.min() >= -10.0 - 1e-9 and math.isclose(times.max(), 0.0)
+
+
+def test_a_linear_delta_draws_as_one():
+    from app.scene.robot_view import RobotView
+    from app.scene.workspace_view import WorkspaceView
+    from kinematics import LinearDelta
+
+    robot = LinearDelta(l=0.25, R=0.15, r=0.04)
+    joints, ok = robot.ik([0.02, -0.01, -0.2])
+    assert ok
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        view = RobotView(server, robot, "/linear")
+        assert view.update(joints)
+        expected = robot_lines(robot, joints)
+        np.testing.assert_allclose(view.upper.points, expected.upper, atol=1e-6)
+        np.testing.assert_allclose(view.platform.position, [0.02, -0.01, -0.2], atol=1e-9)
+        workspace = WorkspaceView(server, robot, margin_m=0.002, z_max_m=-0.06)
+        assert len(workspace.mesh.faces) > 100 and len(workspace.tori) == 3
+        view.remove()
+        workspace.remove()
+    finally:
+        server.stop()
