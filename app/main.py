@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import sys
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
@@ -89,6 +90,11 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
         # The control thread must get the GIL back within a fraction of a tick when it wakes;
         # CPython's default switch interval (5 ms) let other threads delay ticks that long.
         sys.setswitchinterval(GIL_SWITCH_S)
+        # A full garbage collection stops every thread; over the startup heap (viser,
+        # mujoco, FastAPI) it took tens of ms. Freeze what exists now so later collections
+        # only walk new objects.
+        gc.collect()
+        gc.freeze()
         with backend_opener(settings) as backend:
             controller = Controller(settings, backend.bus, backend.kind, backend.description)
             controller.start()
