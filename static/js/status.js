@@ -44,7 +44,20 @@ function renderHeader(s) {
   setText("torque", s.torque ? "on" : "off");
   setText("loop", `${fixed(s.loop.measured_hz, 0)} / ${fixed(s.loop.target_hz, 0)} Hz`);
   setText("jitter", `${fixed(s.loop.jitter_p99_ms, 2)} ms`);
+  renderPose(s.pose);
   document.body.classList.toggle("estopped", Boolean(s.estopped));
+}
+
+// Hold-in-world's pose input: none until a source sends; its age matters (staleness).
+function renderPose(pose) {
+  const el = document.getElementById("pose");
+  if (!pose || pose.state === "none") {
+    el.textContent = "none";
+    el.className = "";
+    return;
+  }
+  el.textContent = `${pose.state}, ${fixed(pose.age_s * 1000, 0)} ms, ${fixed(pose.rate_hz, 0)} Hz`;
+  el.className = pose.state === "ok" ? "ok" : "bad";
 }
 
 function renderFaults(s) {
