@@ -19,8 +19,9 @@ def test_default_backend_is_the_twin_and_reaches_a_goal():
     with TestClient(create_app(settings)) as client:
         status = client.get("/api/status").json()
         assert status["backend"] == "sim" and status["mode"] == "idle"
-        hanging = status["ee"]["position_m"]
-        assert hanging[2] < -0.3  # torque off: the arm hangs under gravity
+        # torque off: the arm falls and hangs under gravity
+        wait_for(lambda: client.get("/api/status").json()["ee"]["position_m"][2] < -0.3,
+                 "the relaxed arm to hang")
         assert client.post("/api/torque", json={"enabled": True}).status_code == 200
         goal = [0.02, -0.01, -0.23]
         response = client.post("/api/goal", json={"position_m": goal})

@@ -6,26 +6,23 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from app.scene.geometry import robot_lines, torus_mesh, torus_spec
 from app.scene.volume import reachable_volume, volume_field
 from kinematics import THESIS_DELTA, LinearDelta, RotaryDelta
-from tests.strategies import linear_deltas, rotary_deltas
+from tests.strategies import joint_range, linear_deltas, rotary_deltas
 
 ALPHAS = (0.0, 2 * math.pi / 3, 4 * math.pi / 3)
 
 
 def _reachable_joints(robot, fractions) -> np.ndarray:
-    """Joints of a point inside the workspace, picked by ``fractions`` in [0, 1]^3."""
-    mesh = reachable_volume(robot, 0.0, -0.02, step_m=0.02)
-    lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
-    centre = np.array([0.0, 0.0, 0.5 * (lo[2] + hi[2])])
-    target = centre + (np.asarray(fractions) - 0.5) * 0.3 * (hi - lo)
-    point = robot.project(target, margin=1e-3).point
-    joints, ok = robot.ik(point)
-    assert ok
+    """Joints with an FK solution, picked by ``fractions`` in [0, 1]^3 of the joint range
+    (any design, even one whose workspace is too small to mesh at a coarse step)."""
+    low, high = joint_range(robot)
+    joints = low + np.asarray(fractions) * (high - low)
+    assume(bool(robot.fk(joints).ok))
     return joints
 
 
