@@ -76,7 +76,9 @@ class JointSettings(_Section):
     zero_offset_ticks: int = Field(2048, description="raw position at theta = 0 [ticks]")
     direction: Literal[1, -1] = Field(1, description="+1 if ticks grow with theta, else -1")
     min_angle_rad: float = Field(-0.6, description="lowest joint angle [rad] (link up)")
-    max_angle_rad: float = Field(1.5, description="highest joint angle [rad] (link down)")
+    max_angle_rad: float = Field(
+        1.65, description="highest joint angle [rad] (link down; hanging relaxed is ~1.55)"
+    )
 
 
 def _default_joints() -> list[JointSettings]:
