@@ -33,7 +33,7 @@ def check_path(gate: Gate, times_s: np.ndarray, points_m: np.ndarray, near: np.n
     ]
     for reason, mask in checks:
         _raise_at(_first(mask), reason, times_s, points_m)
-    joints, ok = robot.ik(points_m, near=near)
+    joints, ok = _follow_branch(robot, points_m, near)
     _raise_at(_first(ok), "no joint solution", times_s, points_m)
     low, high = np.asarray(gate.joint_min_rad), np.asarray(gate.joint_max_rad)
     _raise_at(
@@ -53,6 +53,24 @@ def check_path(gate: Gate, times_s: np.ndarray, points_m: np.ndarray, near: np.n
         dt = float(times_s[1] - times_s[0])
         speed = step[index - 1] / dt
         _raise_at(index, f"joint speed {speed:.2f} rad/s above the limit", times_s, points_m)
+
+
+def _follow_branch(robot, points_m: np.ndarray, near: np.ndarray):
+    """IK along the path as the loop does it: each sample on the branch nearest the last
+    (a single ``near`` for the whole path would jump branches far from the start). From a
+    start outside the joint limits (a relaxed, hanging arm) the gate's knee-out fallback
+    applies, so the path is followed from the knee-out branch."""
+    joints = np.empty_like(points_m)
+    ok = np.empty(len(points_m), dtype=bool)
+    previous = np.asarray(near, dtype=np.float64)
+    if not np.isfinite(previous).all():
+        previous = robot.ik(points_m[0]).joints
+    for index, point in enumerate(points_m):
+        solved, good = robot.ik(point, near=previous)
+        joints[index], ok[index] = solved, good
+        if good:
+            previous = solved
+    return joints, ok
 
 
 def _raise_at(index: int | None, reason: str, times_s: np.ndarray, points_m: np.ndarray) -> None:

@@ -56,7 +56,7 @@ function renderPose(pose) {
     el.className = "";
     return;
   }
-  el.textContent = `${pose.state}, ${fixed(pose.age_s * 1000, 0)} ms, ${fixed(pose.rate_hz, 0)} Hz`;
+  el.textContent = `${pose.state} ${fixed(pose.age_s * 1000, 0)} ms`;
   el.className = pose.state === "ok" ? "ok" : "bad";
 }
 
