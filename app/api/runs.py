@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from app.api.deps import ControlClient
 from app.runs.logs import read_messages
 from app.runs.manager import Run, RunManager
-from app.runs.paths import ChirpParams, WaypointParams
+from app.runs.paths import ChirpParams, StepParams, WaypointParams
 from app.runs.stats import error_stats, window_mask
 from app.runs.trajectories import SinusoidParams
 
@@ -64,6 +64,20 @@ class ChirpRequest(BaseModel):
         return ChirpParams(**{**self.model_dump(), "offset_m": tuple(self.offset_m)})
 
 
+class StepRequest(BaseModel):
+    """A position step on one axis (servo step response)."""
+
+    model_config = ConfigDict(extra="forbid")
+    axis: Annotated[int, Field(ge=0, le=2, description="0 = x, 1 = y, 2 = z")] = 2
+    size_m: Annotated[float, Field(ge=-0.05, le=0.05, allow_inf_nan=False)] = 0.005
+    step_at_s: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False)] = 0.5
+    offset_m: Triple = list(_DEFAULT.offset_m)
+    duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = 2.0
+
+    def params(self) -> StepParams:
+        return StepParams(**{**self.model_dump(), "offset_m": tuple(self.offset_m)})
+
+
 class WaypointsRequest(BaseModel):
     """Points [m] reached at times [s] (first at 0), resting at each; minimum-jerk between."""
 
@@ -102,6 +116,13 @@ async def start_sinusoid(body: SinusoidRequest, request: Request, _: ControlClie
 async def start_chirp(body: ChirpRequest, request: Request, _: ControlClient):
     """A frequency sweep f0 -> f1 on one axis; checked like the sinusoid."""
     run = await asyncio.to_thread(_runs(request).start, body.params(), "chirp")
+    return {"run_id": run.run_id}
+
+
+@router.post("/tests/step")
+async def start_step(body: StepRequest, request: Request, _: ControlClient):
+    """A step on one axis; small steps pass the joint-speed limit unchanged."""
+    run = await asyncio.to_thread(_runs(request).start, body.params(), "step")
     return {"run_id": run.run_id}
 
 

@@ -96,3 +96,28 @@ class WaypointParams:
         return tuple(
             float(np.max(c * delta / span**p)) for c, p in ((1.875, 1), (5.774, 2), (60.0, 3))
         )
+
+
+@dataclass(frozen=True)
+class StepParams:
+    """A position step of ``size_m`` along ``axis`` at ``step_at_s``, then hold: the servo's
+    step response (rise time, overshoot, lag) in one run. Small steps (a few mm) pass the
+    gate's joint-speed limit unchanged; larger ones are refused by the feasibility check."""
+
+    axis: int = 2
+    size_m: float = 0.005
+    step_at_s: float = 0.5
+    offset_m: tuple[float, float, float] = (0.0, 0.0, -0.24)
+    duration_s: float = 2.0
+    feedforward: bool = False
+
+    def derivatives(self, t: np.ndarray, order: int) -> np.ndarray:
+        t = np.asarray(t, dtype=np.float64)
+        out = np.zeros((*t.shape, 3))
+        if order == 0:
+            out[..., self.axis] = np.where(t >= self.step_at_s, self.size_m, 0.0)
+            out += np.asarray(self.offset_m)
+        return out
+
+    def peaks(self) -> tuple[float, float, float]:
+        return 0.0, 0.0, 0.0  # the approach and stop join it at rest

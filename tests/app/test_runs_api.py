@@ -6,6 +6,7 @@ import csv
 import io
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 
 from app.runs.logs import read_messages
@@ -115,3 +116,18 @@ def test_chirp_too_fast_for_the_joints_is_refused(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     response = fresh.post("/api/tests/chirp", json={"amplitude_m": 0.08, "f1_hz": 8.0})
     assert response.status_code == 422 and "infeasible" in response.json()["detail"]
+
+
+def test_step_response_run(fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    response = fresh.post("/api/tests/step", json={"size_m": 0.004, "duration_s": 1.0})
+    assert response.status_code == 200, response.text
+    run_id = response.json()["run_id"]
+    wait_for(lambda: _state(fresh, run_id) != "running", "the step run to end")
+    rows = list(csv.DictReader(io.StringIO(fresh.get(f"/api/runs/{run_id}/log.csv").text)))
+    goal_z = [float(r["goal_z_m"]) for r in rows if r["phase"] == "timed"]
+    assert max(goal_z) - min(goal_z) == pytest.approx(0.004, abs=1e-9)  # a true step
+    measured_z = [float(r["measured_z_m"]) for r in rows if r["phase"] == "timed"]
+    assert max(measured_z) - min(measured_z) > 0.003  # and the robot followed it
+    big = fresh.post("/api/tests/step", json={"size_m": 0.05})
+    assert big.status_code == 422 and "joint speed" in big.json()["detail"]
