@@ -99,6 +99,7 @@ class Controller(CommandsMixin):
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+        self._source = None  # ruckig objects must not outlive the interpreter's shutdown
         if self.settings.safety.torque_off_on_exit and self._torque:
             try:
                 self.bus.torque(False)
