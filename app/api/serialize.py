@@ -89,4 +89,16 @@ def telemetry(snap: Snapshot, controller: Controller) -> dict[str, Any]:
             "overruns": controller.timing.overruns,
         },
         "faults": [f.as_dict() for f in snap.faults],
+        "world": world_frame(snap),
     }
+
+
+def world_frame(snap: Snapshot) -> dict[str, Any] | None:
+    """In hold-in-world with a known drone pose: goal, measured tool and error [m] in the
+    world frame (error = goal - measured, as in the run stats); None otherwise."""
+    extra = snap.extra or {}
+    goal, measured = extra.get("goal_world_m"), extra.get("measured_world_m")
+    if goal is None or measured is None:
+        return None
+    error = [g - m for g, m in zip(goal, measured, strict=True)]
+    return {"goal_m": floats(goal), "measured_m": floats(measured), "error_m": floats(error)}

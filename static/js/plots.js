@@ -137,12 +137,25 @@ function draw(now) {
   render().then(() => countFrame(performance.now())).finally(() => { drawing = false; });
 }
 
+let frame = "base"; // hold-in-world plots the world frame: goal, tool and their error
+
+function showFrame(next) {
+  frame = next;
+  for (const r of Object.values(series)) r.clear(); // never mix the two frames in one trace
+  const heading = document.getElementById("plots-h");
+  if (heading && heading.firstChild) {
+    heading.firstChild.textContent = next === "world" ? "World frame (hold), last 10 s " : "Tracking, last 10 s ";
+  }
+}
+
 function onMessage(message) {
-  const m = JSON.parse(message.data);
-  if (m.t < lastT - 1) for (const r of Object.values(series)) r.clear(); // server restarted
-  else if (m.t <= lastT) return;
-  lastT = m.t;
-  series.t.push(m.t);
+  const raw = JSON.parse(message.data);
+  if (raw.t < lastT - 1) for (const r of Object.values(series)) r.clear(); // server restarted
+  else if (raw.t <= lastT) return;
+  lastT = raw.t;
+  if ((raw.world ? "world" : "base") !== frame) showFrame(raw.world ? "world" : "base");
+  const m = raw.world || raw;
+  series.t.push(raw.t);
   AXES.forEach((a, i) => {
     // rounded to 1 um so a resting axis does not show float noise
     const mm = (v) => (!v || v[i] === null ? NaN : Math.round(v[i] * 1e6) / 1e3);

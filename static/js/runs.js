@@ -86,7 +86,8 @@ export function onStatus(s) {
 const triple = (t, key) => (t ? ["x", "y", "z"].map((a) => mm(t[a]?.[key], 2)).join(" / ") : "–");
 
 function runRow(run) {
-  const t = run.stats && run.stats.tracking;
+  // a hold run is judged in the world frame (thesis Table 6.3), the others by tracking
+  const t = run.stats && (run.stats.world || run.stats.tracking);
   const under = t ? ["x", "y", "z"].map((a) => `${fixed(100 * t[a].share_under_1mm, 0)}%`).join(" / ") : "–";
   const base = `/api/runs/${encodeURIComponent(run.run_id)}`;
   const links = [["report.png", "report"], ["log.mcap", "MCAP"], ["log.csv", "CSV"]]
@@ -94,7 +95,7 @@ function runRow(run) {
     .map(([name, label]) => `<a href="${base}/${name}" target="_blank" rel="noopener">${label}</a>`)
     .join(" ");
   const reason = run.reason ? ` title="${escape(run.reason)}"` : ""; // long reasons as a tooltip
-  return `<tr data-run="${escape(run.run_id)}"><td>${escape(run.run_id)}</td><td>${escape(run.kind)}</td>` +
+  return `<tr data-run="${escape(run.run_id)}"><td>${escape(run.run_id)}</td><td>${escape(run.kind)}${run.stats && run.stats.world ? " (world)" : ""}</td>` +
     `<td class="${run.state === "done" ? "ok" : run.state === "aborted" ? "bad" : ""}"${reason}>${escape(run.state)}</td>` +
     `<td class="num">${triple(t, "rmse_m")}</td><td class="num">${triple(t, "max_abs_m")}</td>` +
     `<td class="num">${under}</td><td>${links}</td></tr>`;

@@ -51,11 +51,9 @@ function renderHeader(s) {
 // Hold-in-world's pose input: none until a source sends; its age matters (staleness).
 function renderPose(pose) {
   const el = document.getElementById("pose");
-  if (!pose || pose.state === "none") {
-    el.textContent = "none";
-    el.className = "";
-    return;
-  }
+  // shown once a pose source has sent something: the header stays one line otherwise
+  el.parentElement.hidden = !pose || pose.state === "none";
+  if (el.parentElement.hidden) return;
   el.textContent = `${pose.state} ${fixed(pose.age_s * 1000, 0)} ms`;
   el.className = pose.state === "ok" ? "ok" : "bad";
 }

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from tests.app.conftest import make_client, wait_for
@@ -81,3 +82,21 @@ def test_hold_test_run_under_drift_reports_world_stats(client):
         assert 0.0 < world[axis]["rmse_m"] < 0.1
         assert world[axis]["max_abs_m"] >= world[axis]["rmse_m"]
     assert client.post("/api/tests/hold", json={"duration_s": -1}).status_code == 422
+
+
+def test_telemetry_carries_the_world_frame_during_a_hold(client):
+    """The dashboard plots the world frame from telemetry while a hold run is on."""
+    client.post("/api/reset")
+    client.post("/api/torque", json={"enabled": True})
+    body = {"duration_s": 3.0, "seed": 1}
+    run_id = client.post("/api/tests/hold", json=body).json()["run_id"]
+    with client.websocket_connect("/api/telemetry?hz=50") as ws:
+        for _ in range(200):
+            message = ws.receive_json()
+            if message["world"] is not None:
+                break
+    world = message["world"]
+    assert world is not None
+    np.testing.assert_allclose(world["error_m"],
+                               np.subtract(world["goal_m"], world["measured_m"]), atol=1e-12)
+    wait_for(lambda: client.get(f"/api/runs/{run_id}").json()["state"] != "running", "run")
