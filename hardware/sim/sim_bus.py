@@ -262,4 +262,7 @@ class SimBus:
             last -= due - steps * dt  # carry the fraction of a step to the next round
             with self.lock:
                 self.twin.step(steps)
-            self._stop.wait(0.001)
+            # physics in ~2.5 ms chunks: at 1 ms the thread took the GIL 1000 times a second
+            # and the control loop's p99 lateness was 0.77 ms; at 2.5 ms it is 0.5-0.6 ms
+            # (benchmarks/loop.py --backend sim); 5 ms beats against the 200 Hz loop (0.78 ms)
+            self._stop.wait(0.0025)
