@@ -148,7 +148,9 @@ def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -
     before = page.evaluate("window.deltadashPlot.samples")
     page.click("#sine-start")
     toast = page.locator("#toast")
-    wait_for(lambda: toast.is_visible(), "the page to confirm the start or say why not")
+    # an earlier message (e.g. "Goal accepted") may still be showing: wait for this one
+    wait_for(lambda: toast.is_visible() and "Goal accepted" not in toast.inner_text(),
+             "the page to confirm the start or say why not")
     assert "started" in toast.inner_text(), toast.inner_text()
     wait_for(lambda: page.evaluate("window.deltadashPlot.samples") > before, "new plot samples")
     # the sinusoid's x amplitude is 50 mm: the plotted measured x must swing by tens of mm
