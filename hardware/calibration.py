@@ -66,6 +66,19 @@ class JointCalibration:
         return ends[0], ends[1]
 
 
+def goal_ticks(joints: Sequence[JointCalibration], positions_rad: Sequence[float]) -> list[int]:
+    """Goal joint angles [rad] to raw ticks, each clamped to its joint's limits.
+
+    Raises:
+        ValueError: a count that does not match the joints, or a non-finite angle.
+    """
+    if len(positions_rad) != len(joints):
+        raise ValueError(f"{len(positions_rad)} goals for {len(joints)} joints")
+    if not all(math.isfinite(p) for p in positions_rad):
+        raise ValueError(f"non-finite goal {list(positions_rad)} rad")
+    return [cal.to_ticks(cal.clamp(float(p))) for cal, p in zip(joints, positions_rad, strict=True)]
+
+
 def home(
     calibrations: Sequence[JointCalibration],
     present_ticks: Mapping[int, int],

@@ -13,7 +13,6 @@ from a partial reply. Configuration writes go one servo at a time and wait for e
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -22,7 +21,7 @@ import dynamixel_sdk as sdk
 import numpy as np
 
 from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
-from hardware.calibration import JointCalibration
+from hardware.calibration import JointCalibration, goal_ticks
 from hardware.errors import BusError, CommError, HardwareError
 from hardware.protocol import ALERT_BIT
 from hardware.registers import (
@@ -130,14 +129,7 @@ class DynamixelBus:
         self._write_all(Reg.OPERATING_MODE, [int(mode)] * len(self.ids))
 
     def write_goal(self, positions_rad: Sequence[float]) -> None:
-        if len(positions_rad) != len(self.ids):
-            raise ValueError(f"{len(positions_rad)} goals for {len(self.ids)} joints")
-        if not all(math.isfinite(p) for p in positions_rad):
-            raise ValueError(f"non-finite goal {list(positions_rad)} rad")
-        ticks = [
-            cal.to_ticks(cal.clamp(float(p)))
-            for cal, p in zip(self.config.joints, positions_rad, strict=True)
-        ]
+        ticks = goal_ticks(self.config.joints, positions_rad)
         self._sync_write_goal_ticks(ticks)
 
     def read_state(self) -> JointState:

@@ -11,7 +11,6 @@ simulated time with `advance` (tests, headless runs, faster than real time).
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections.abc import Sequence
@@ -20,6 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
+from hardware.calibration import goal_ticks
 from hardware.errors import BusError, HardwareError, NotConnectedError
 from hardware.registers import (
     MODEL_NUMBER_XM430_W210,
@@ -125,14 +125,7 @@ class SimBus:
             self._update(mode=[OperatingMode(mode)] * 3)
 
     def write_goal(self, positions_rad: Sequence[float]) -> None:
-        if len(positions_rad) != len(self.ids):
-            raise ValueError(f"{len(positions_rad)} goals for {len(self.ids)} joints")
-        if not all(math.isfinite(p) for p in positions_rad):
-            raise ValueError(f"non-finite goal {list(positions_rad)} rad")
-        ticks = [
-            cal.to_ticks(cal.clamp(float(p)))
-            for cal, p in zip(self.joints, positions_rad, strict=True)
-        ]
+        ticks = goal_ticks(self.joints, positions_rad)
         with self._transaction("sync write GOAL_POSITION"):
             self._update(goal_position_rad=[t * RAD_PER_TICK for t in ticks])
 
