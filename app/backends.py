@@ -40,14 +40,15 @@ def _dynamixel(settings: Settings, port: str) -> DynamixelBus:
 
 
 def _twin(settings: Settings) -> ServoBus:
-    """The in-process simulated robot (hardware/sim) for this config's rotary Delta."""
-    from hardware.sim import SimBus, SimBusConfig, TwinConfig
+    """The simulated robot (hardware/sim) for this config's rotary Delta."""
+    from hardware.sim import ProcessSimBus, SimBus, SimBusConfig, TwinConfig
 
     robot = settings.robot.build()
     if not isinstance(robot, RotaryDelta):
         raise ValueError("robot.type: the simulator models rotary Deltas; use backend 'emulated'")
     twin = TwinConfig(robot=robot, joints=_calibrations(settings))
-    return SimBus(SimBusConfig(twin=twin))
+    bus = ProcessSimBus if settings.hardware.sim_process else SimBus
+    return bus(SimBusConfig(twin=twin))
 
 
 @contextlib.contextmanager

@@ -90,12 +90,17 @@ class HardwareSettings(_Section):
 
     backend: Literal["sim", "emulated", "dynamixel"] = Field(
         "sim",
-        description="sim: the MuJoCo twin in-process; emulated: the pty servo emulator through "
-        "the real driver; dynamixel: real servos",
+        description="sim: the MuJoCo twin (its own process); emulated: the pty servo "
+        "emulator through the real driver; dynamixel: real servos",
     )
     port: str = Field("/dev/ttyUSB0", description="serial port of the bus (dynamixel)")
     baud: int = Field(1_000_000, ge=9600, le=10_500_000, description="bus baud rate [bit/s]")
     max_tries: int = Field(3, ge=1, le=10, description="tries per bus transaction")
+    sim_process: bool = Field(
+        True,
+        description="sim: step the twin in its own process (off the control loop's GIL); "
+        "false steps it in a thread of the server",
+    )
     joints: list[JointSettings] = Field(default_factory=_default_joints, min_length=3, max_length=3)
 
 

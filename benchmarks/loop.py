@@ -8,6 +8,8 @@ Starts the server as a subprocess per loop rate, connects telemetry clients at 5
 (and with --torque enables torque and jogs the robot in a circle), and after the run
 prints the loop's own figures from /api/status (rate, lateness p50/p99, worst tick,
 overruns) and the server's CPU use. Lateness is how far a tick started after its deadline.
+Beside the server, benchmarks/clock_floor.py ticks a bare clock over the same seconds: the
+machine's floor (kernel wake-up, a VM's vCPU descheduled), printed under each result.
 --viser-clients opens raw WebSocket clients on the 3D scene (the server's whole cost of a
 viewer, no rendering); --browsers opens the scene in headless chromium pages (Debian's
 chromium via Playwright, software WebGL: on a 2-core machine they compete for the CPU).
@@ -153,10 +155,12 @@ def run_once(args: argparse.Namespace, rate_hz: float) -> None:
         _wait_up()
         if args.torque:
             _http("POST", "/api/torque", {"enabled": True})
+        floor = None if args.no_floor else _start_floor(args.seconds, rate_hz)
         cpu0, wall0 = _cpu_s(server.pid), time.monotonic()
         received = asyncio.run(_load(args))
         cpu = (_cpu_s(server.pid) - cpu0) / (time.monotonic() - wall0)
         loop = _http("GET", "/api/status")["loop"]["since_start"]
+        floor_line = floor.communicate(timeout=60)[0].strip() if floor else ""
     finally:
         server.terminate()
         server.wait(timeout=10)
@@ -171,6 +175,18 @@ def run_once(args: argparse.Namespace, rate_hz: float) -> None:
         + (f", scene clients {args.viser_clients} (msgs/client {min(scene)})" if scene else "")
         + (f", browsers on the scene {args.browsers}" if args.browsers else "")
     )
+    if floor_line:
+        print(floor_line + " (same seconds, beside the server)")
+
+
+def _start_floor(seconds: float, rate_hz: float) -> subprocess.Popen:
+    """The machine's floor over the same seconds: a bare clock in its own process."""
+    script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "clock_floor.py")
+    return subprocess.Popen(
+        [sys.executable, script, "--seconds", str(seconds), "--rate", str(rate_hz)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
 
 
 def main() -> None:
@@ -182,6 +198,7 @@ def main() -> None:
     parser.add_argument("--torque", action="store_true", help="enable torque and jog meanwhile")
     parser.add_argument("--viser-clients", type=int, default=0, help="WebSocket scene viewers")
     parser.add_argument("--browsers", type=int, default=0, help="headless chromium scene pages")
+    parser.add_argument("--no-floor", action="store_true", help="skip the bare-clock floor")
     args = parser.parse_args()
     print(
         f"python {platform.python_version()}, {os.cpu_count()} cores, {platform.machine()}, "

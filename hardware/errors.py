@@ -23,6 +23,9 @@ class BusError(Exception):
         after = f" after {tries} tries" if tries > 1 else ""
         super().__init__(f"{instruction} on servo {names} failed{after}: {reason}")
 
+    def __reduce__(self):  # pickled by its fields: errors cross the simulator's process
+        return type(self), (self.ids, self.instruction, self.reason, self.tries)
+
 
 class NotConnectedError(BusError):
     """The port is not open (connect() not called, or disconnect() already called)."""
@@ -41,6 +44,9 @@ class ServoStatusError(BusError):
         self.error_number = error_number
         super().__init__(ids, instruction, reason, tries)
 
+    def __reduce__(self):
+        return type(self), (self.ids, self.instruction, self.reason, self.error_number, self.tries)
+
 
 class HardwareError(BusError):
     """A servo reports a latched hardware error (overload, overheating, ...); reboot clears it."""
@@ -51,6 +57,9 @@ class HardwareError(BusError):
         self.flags = dict(flags)
         reason = "; ".join(f"servo {i}: {', '.join(names)}" for i, names in self.flags.items())
         super().__init__(ids, instruction, f"hardware error ({reason})")
+
+    def __reduce__(self):
+        return type(self), (self.ids, self.instruction, self.flags)
 
 
 class CalibrationError(ValueError):

@@ -14,7 +14,7 @@ from app.backends import open_backend
 from app.config import load_settings
 from app.main import create_app
 
-WAIT_S = 15.0  # generous bound for convergence on a loaded 2-core machine; not a timing test
+WAIT_S = 30.0  # generous bound for convergence on a loaded 2-core machine; not a timing test
 
 
 def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = WAIT_S) -> None:

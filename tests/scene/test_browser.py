@@ -4,6 +4,7 @@ scene renders, a goal moved through the drag's server-side path moves the robot.
 from __future__ import annotations
 
 import io
+import time
 
 import numpy as np
 from PIL import Image
@@ -14,6 +15,7 @@ from tests.scene.conftest import measured, wait_for
 LEG_3_BLUE = np.array([60, 112, 214])  # leg 3 sits left of the panel in this view
 VIEWPORT = (880, 540)  # small: software WebGL renders every pixel on the CPU
 PAGE_WAIT_MS = 45_000  # software WebGL on a loaded 2-core machine; not a timing assertion
+RENDER_WAIT_S = 150.0  # a noisy 2-core VM took 30 s to show the robot; a bound, not a claim
 
 
 def _viewport_pixels(png: bytes, right_px: int) -> np.ndarray:
@@ -33,14 +35,13 @@ def _near(pixels: np.ndarray, colour: np.ndarray, tolerance: int = 40) -> int:
     return int((np.abs(pixels - colour).max(axis=-1) <= tolerance).sum())
 
 
-def _rendered(page, timeout_ms: int = PAGE_WAIT_MS) -> bytes:
+def _rendered(page) -> bytes:
     """A screenshot once the robot shows (the scene fades in; software WebGL is slow)."""
-    right = _panel_left(page)
-    for _ in range(timeout_ms // 1000):
-        png = page.screenshot()
-        if _near(_viewport_pixels(png, right), LEG_3_BLUE) > 30:
-            return png
+    right, end = _panel_left(page), time.monotonic() + RENDER_WAIT_S
+    png = page.screenshot()
+    while _near(_viewport_pixels(png, right), LEG_3_BLUE) <= 30 and time.monotonic() < end:
         page.wait_for_timeout(1000)
+        png = page.screenshot()
     return png
 
 
@@ -69,13 +70,11 @@ def test_scene_renders_and_a_dragged_goal_moves_the_robot(app_client):
                  "/api/status: the robot at the dragged goal")  # fmt: skip
         assert np.linalg.norm(start - target) > 0.04
         # display frames reach a software-rendered page at their own pace: poll, bounded
-        changed_pixels = 0
-        for _ in range(20):
+        changed_pixels, end = 0, time.monotonic() + RENDER_WAIT_S
+        while changed_pixels <= 200 and time.monotonic() < end:
             page.wait_for_timeout(500)
             after = page.screenshot()
             changed = np.abs(_viewport_pixels(after, right) - pixels).max(axis=-1) > 30
             changed_pixels = int(changed.sum())
-            if changed_pixels > 200:
-                break
         save_artifact("scene-after.png", after)
         assert changed_pixels > 200, "the robot did not move on the page"

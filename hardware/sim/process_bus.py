@@ -1,0 +1,295 @@
+"""The MuJoCo twin in its own process: the server's simulated bus.
+
+In the server's process the twin's physics thread competed with the control loop for the
+GIL a few hundred times a second (docs/performance.md, "Control loop"). Here a child
+process owns a `SimBus` and steps it against the wall clock, 1 ms at a time; the loop's
+hot path never waits for it:
+
+- after every step the child publishes the joint state and the platform position into
+  shared memory; `read_state` copies the latest frame (at most one step old, as a real
+  bus read is a fraction of a millisecond old by the time it arrives);
+- `write_goal` validates the goal here (the same `goal_ticks` as every bus) and leaves it
+  in shared memory; the child applies it before its next step;
+- everything else (torque, gains, profile, reboot, base motion) is a request over a pipe
+  that the child answers between steps, raising the same errors as `SimBus`.
+
+The child exits when the parent closes the pipe or dies.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import signal
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+from multiprocessing.connection import Connection
+from multiprocessing.shared_memory import SharedMemory
+from typing import Any
+
+import numpy as np
+
+from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
+from hardware.calibration import goal_ticks
+from hardware.errors import BusError, NotConnectedError
+from hardware.registers import OperatingMode, hardware_error_names
+from hardware.sim.base_frame import BaseMotion
+from hardware.sim.sim_bus import MAX_CATCH_UP_S, SimBus, SimBusConfig
+
+STEP_S = 1e-3  # the child's physics chunk: the published state is at most this old
+LOCK_TIMEOUT_S = 0.05
+START_TIMEOUT_S = 60.0
+REPLY_TIMEOUT_S = 10.0
+STALE_S = 0.2
+
+# shared frame: state written by the child, goal written by the parent (float64 slots)
+_POS, _VEL, _CUR, _VOLT, _TEMP, _MOVING, _ERR = (slice(3 * k, 3 * k + 3) for k in range(7))
+_STAMP, _PLATFORM, _GOAL_SEQ, _GOAL = 21, slice(22, 25), 25, slice(26, 29)
+_FRAME_SIZE = 29
+
+
+class ProcessSimBus:
+    """ServoBus on a `SimBus` in a child process (joint order = the calibrations' order)."""
+
+    def __init__(self, config: SimBusConfig | None = None) -> None:
+        self.config = replace(config or SimBusConfig(), realtime=False)  # the child paces it
+        self.joints = self.config.twin.joints
+        self.ids = tuple(j.servo_id for j in self.joints)
+        self._rng = np.random.default_rng(self.config.seed)
+        self._stats = BusStats()
+        self._process: mp.process.BaseProcess | None = None
+        self._conn: Connection | None = None
+        self._memory: SharedMemory | None = None
+        self._frame: np.ndarray | None = None
+        self._frame_lock: Any = None
+        self._request_lock = threading.Lock()
+        self._platform_at_read = np.full(3, np.nan)
+
+    # -- ServoBus ------------------------------------------------------------------------
+    def connect(self) -> None:
+        self.disconnect()
+        context = mp.get_context("spawn")  # never fork a process that runs threads
+        self._memory = SharedMemory(create=True, size=_FRAME_SIZE * 8)
+        self._frame = np.ndarray((_FRAME_SIZE,), dtype=np.float64, buffer=self._memory.buf)
+        self._frame[:] = np.nan
+        self._frame[_GOAL_SEQ] = 0.0
+        self._frame_lock = context.Lock()
+        self._conn, child_end = context.Pipe()
+        self._process = context.Process(
+            target=_child_main,
+            args=(self.config, child_end, self._memory.name, self._frame_lock),
+            name="deltadash-sim",
+            daemon=True,
+        )
+        self._process.start()
+        child_end.close()
+        try:
+            ready = self._conn.poll(START_TIMEOUT_S) and self._conn.recv() == "ready"
+        except (EOFError, OSError):
+            ready = False
+        if not ready:
+            self.disconnect()
+            raise NotConnectedError(
+                self.ids,
+                "connect",
+                "the simulator process did not start (a script that starts it needs an "
+                "`if __name__ == '__main__':` guard: the process imports the main module)",
+            )
+
+    def disconnect(self) -> None:
+        if self._conn is not None:
+            with contextlib.suppress(OSError):  # the child may already be gone
+                self._conn.send(None)
+            self._conn.close()
+            self._conn = None
+        if self._process is not None:
+            self._process.join(timeout=5.0)
+            if self._process.is_alive():
+                self._process.kill()
+            self._process = None
+        if self._memory is not None:
+            self._frame = None
+            self._memory.close()
+            self._memory.unlink()
+            self._memory = None
+
+    def scan(self, ids: Sequence[int] | None = None) -> list[ServoInfo]:
+        return self._call("scan", ids)
+
+    def torque(self, enabled: bool) -> None:
+        self._call("torque", enabled)
+
+    def set_operating_mode(self, mode: OperatingMode) -> None:
+        self._call("set_operating_mode", OperatingMode(mode))
+
+    def write_goal(self, positions_rad: Sequence[float]) -> None:
+        goal_ticks(self.joints, positions_rad)  # refuse bad goals here, with the same errors
+        frame = self._require_frame("sync write GOAL_POSITION")
+        with self._frame_access("sync write GOAL_POSITION"):
+            frame[_GOAL] = np.asarray(positions_rad, dtype=float)
+            frame[_GOAL_SEQ] += 1.0
+        self._count()
+
+    def read_state(self) -> JointState:
+        instruction = "sync read MOVING..PRESENT_TEMPERATURE"
+        frame = self._require_frame(instruction)
+        with self._frame_access(instruction):
+            values = frame.copy()
+        self._count()
+        if time.monotonic() - values[_STAMP] > STALE_S:  # a dead or hung child
+            raise BusError(self.ids, instruction, "the simulator process stopped stepping")
+        self._platform_at_read = values[_PLATFORM]
+        return JointState(
+            position_rad=values[_POS],
+            velocity_rad_s=values[_VEL],
+            current_a=values[_CUR],
+            voltage_v=values[_VOLT],
+            temperature_c=values[_TEMP],
+            moving=values[_MOVING] > 0.5,
+            hardware_errors=tuple(hardware_error_names(int(code)) for code in values[_ERR]),
+            stamp_s=float(values[_STAMP]),
+        )
+
+    def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
+        self._call("set_profile", velocity_rad_s, acceleration_rad_s2)
+
+    def set_gains(self, gains: PositionGains) -> None:
+        self._call("set_gains", gains)
+
+    def reboot(self, ids: Sequence[int] | None = None) -> None:
+        self._call("reboot", ids)
+
+    @property
+    def stats(self) -> BusStats:
+        return self._stats
+
+    # -- beyond the ServoBus protocol --------------------------------------------------
+    def measure_platform(self, at_last_read: bool = False) -> np.ndarray:
+        """The external measurement of the platform in the base frame [m], shape (3,), as
+        `SimBus.measure_platform`; with ``at_last_read`` at the instant of the last read."""
+        if at_last_read and np.isfinite(self._platform_at_read).all():
+            true = self._platform_at_read
+        else:
+            with self._frame_access("measure platform"):
+                true = self._require_frame("measure platform")[_PLATFORM].copy()
+        noise = (
+            self._rng.normal(0.0, self.config.noise_std_m, 3) if self.config.noise_std_m else 0.0
+        )
+        return true + np.asarray(self.config.marker_offset_m) + noise
+
+    def set_base_motion(self, motion: BaseMotion) -> None:
+        """The drone's attitude, acceleration and turning, acting on the arm from now on."""
+        self._call("set_base_motion", motion, reply=False)
+
+    # -- internals -----------------------------------------------------------------------
+    def _require_frame(self, instruction: str) -> np.ndarray:
+        if self._frame is None:
+            raise NotConnectedError(self.ids, instruction, "the simulated bus is not connected")
+        return self._frame
+
+    def _frame_access(self, instruction: str) -> _Held:
+        return _Held(self._frame_lock, self.ids, instruction)
+
+    def _count(self) -> None:
+        self._stats = replace(self._stats, transactions=self._stats.transactions + 1)
+
+    def _call(self, method: str, *args: Any, reply: bool = True) -> Any:
+        if self._conn is None:
+            raise NotConnectedError(self.ids, method, "the simulated bus is not connected")
+        with self._request_lock:
+            try:
+                self._conn.send((method, args, reply))
+                if not reply:
+                    return None
+                if not self._conn.poll(REPLY_TIMEOUT_S):
+                    raise BusError(self.ids, method, "the simulator process did not answer")
+                ok, value = self._conn.recv()
+            except (OSError, EOFError) as exc:
+                raise BusError(self.ids, method, f"the simulator process is gone ({exc})") from exc
+        self._count()
+        if not ok:
+            raise value
+        return value
+
+
+class _Held:
+    """The shared frame's lock, bounded: a stuck child is a bus error, never a hang."""
+
+    def __init__(self, lock: Any, ids: tuple[int, ...], instruction: str) -> None:
+        self.lock, self.ids, self.instruction = lock, ids, instruction
+
+    def __enter__(self) -> None:
+        if not self.lock.acquire(timeout=LOCK_TIMEOUT_S):
+            raise BusError(self.ids, self.instruction, "the simulator's shared state is locked")
+
+    def __exit__(self, *exc: object) -> None:
+        self.lock.release()
+
+
+# -- the child process -----------------------------------------------------------------
+def _child_main(config: SimBusConfig, conn: Connection, memory_name: str, lock: Any) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the server, which stops us
+    memory = SharedMemory(name=memory_name)
+    frame = np.ndarray((_FRAME_SIZE,), dtype=np.float64, buffer=memory.buf)
+    bus = SimBus(config)
+    bus.connect()
+    try:
+        _publish(bus, frame, lock)
+        conn.send("ready")
+        _serve(bus, conn, frame, lock)
+    finally:
+        del frame
+        memory.close()
+
+
+def _serve(bus: SimBus, conn: Connection, frame: np.ndarray, lock: Any) -> None:
+    """Step physics against the wall clock; answer requests the moment they arrive."""
+    dt = bus.twin.model.opt.timestep
+    last, goal_seq = time.monotonic(), 0.0
+    while True:
+        if conn.poll(STEP_S):
+            try:
+                request = conn.recv()
+            except EOFError:
+                return  # the parent is gone
+            if request is None:
+                return
+            _answer(bus, conn, *request)
+        with lock:
+            seq, goal = frame[_GOAL_SEQ], frame[_GOAL].copy()
+        if seq != goal_seq:
+            goal_seq = seq
+            bus.write_goal(goal)
+        now = time.monotonic()
+        due = min(now - last, MAX_CATCH_UP_S)  # after a stall, simulated time runs slow
+        steps = int(due / dt)
+        last = now - (due - steps * dt)
+        if steps:
+            bus.advance(steps * dt)
+            _publish(bus, frame, lock)
+
+
+def _answer(bus: SimBus, conn: Connection, method: str, args: tuple, reply: bool) -> None:
+    try:
+        result = (True, getattr(bus, method)(*args))
+    except (BusError, ValueError) as exc:
+        result = (False, exc)
+    if reply:
+        conn.send(result)
+
+
+def _publish(bus: SimBus, frame: np.ndarray, lock: Any) -> None:
+    state = bus.read_state()
+    codes = [float(servo.hardware_error) for servo in bus.twin.servos]
+    platform = bus.twin.platform_m
+    with lock:
+        frame[_POS], frame[_VEL], frame[_CUR] = (
+            state.position_rad,
+            state.velocity_rad_s,
+            state.current_a,
+        )
+        frame[_VOLT], frame[_TEMP] = state.voltage_v, state.temperature_c
+        frame[_MOVING], frame[_ERR] = state.moving, codes
+        frame[_STAMP], frame[_PLATFORM] = state.stamp_s, platform
