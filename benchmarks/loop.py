@@ -121,10 +121,27 @@ async def _jog_circle(seconds: float) -> None:
         await asyncio.sleep(0.1)
 
 
-def _cpu_s(pid: int) -> float:
+def _stat(pid: int) -> list[str]:
     with open(f"/proc/{pid}/stat") as file:
-        fields = file.read().rsplit(")", 1)[1].split()
+        return file.read().rsplit(")", 1)[1].split()
+
+
+def _cpu_s(pid: int) -> float:
+    fields = _stat(pid)
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _children_cpu_s(pid: int) -> float:
+    """CPU of the server's live child processes (the simulator, the servo emulator)."""
+    total = 0.0
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                if int(_stat(int(entry))[1]) == pid:
+                    total += _cpu_s(int(entry))
+            except (OSError, IndexError, ValueError):
+                continue  # gone meanwhile
+    return total
 
 
 async def _load(args: argparse.Namespace) -> list[int]:
@@ -156,9 +173,11 @@ def run_once(args: argparse.Namespace, rate_hz: float) -> None:
         if args.torque:
             _http("POST", "/api/torque", {"enabled": True})
         floor = None if args.no_floor else _start_floor(args.seconds, rate_hz)
-        cpu0, wall0 = _cpu_s(server.pid), time.monotonic()
+        cpu0, children0, wall0 = _cpu_s(server.pid), _children_cpu_s(server.pid), time.monotonic()
         received = asyncio.run(_load(args))
-        cpu = (_cpu_s(server.pid) - cpu0) / (time.monotonic() - wall0)
+        wall = time.monotonic() - wall0
+        cpu = (_cpu_s(server.pid) - cpu0) / wall
+        children = (_children_cpu_s(server.pid) - children0) / wall
         loop = _http("GET", "/api/status")["loop"]["since_start"]
         floor_line = floor.communicate(timeout=60)[0].strip() if floor else ""
     finally:
@@ -171,7 +190,8 @@ def run_once(args: argparse.Namespace, rate_hz: float) -> None:
         f"{args.backend:9} {rate_hz:6.0f} Hz target: measured {loop['measured_hz']:7.1f} Hz, "
         f"lateness p50 {loop['jitter_p50_ms']:.2f} ms p99 {loop['jitter_p99_ms']:.2f} ms, "
         f"worst {loop['worst_ms']:.2f} ms, overruns {loop['overruns']}/{loop['ticks']}, "
-        f"server CPU {100 * cpu:.0f} % of a core, telemetry msgs/client {messages}"
+        f"server CPU {100 * cpu:.0f} % of a core (+{100 * children:.0f} % in its child "
+        f"processes), telemetry msgs/client {messages}"
         + (f", scene clients {args.viser_clients} (msgs/client {min(scene)})" if scene else "")
         + (f", browsers on the scene {args.browsers}" if args.browsers else "")
     )

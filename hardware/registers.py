@@ -9,6 +9,7 @@ Everything above hardware/ sees SI units; ticks and raw units stop here.
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from dataclasses import dataclass
 
@@ -161,6 +162,7 @@ class HardwareErrorFlag(enum.IntFlag):
     OVERLOAD = 0x20
 
 
+@functools.lru_cache(maxsize=256)  # read for every servo on every tick: one byte, 256 answers
 def hardware_error_names(bits: int) -> tuple[str, ...]:
     """Names of the Hardware Error Status bits set in `bits` (unknown bits as 'bit N')."""
     names = [flag.name.lower() for flag in HardwareErrorFlag if bits & flag.value]

@@ -2,12 +2,12 @@
 
 In the server's process the twin's physics thread competed with the control loop for the
 GIL a few hundred times a second (docs/performance.md, "Control loop"). Here a child
-process owns a `SimBus` and steps it against the wall clock, 1 ms at a time; the loop's
+process owns a `SimBus` and steps it against the wall clock, 2 ms at a time; the loop's
 hot path never waits for it:
 
 - after every step the child publishes the joint state and the platform position into
-  shared memory; `read_state` copies the latest frame (at most one step old, as a real
-  bus read is a fraction of a millisecond old by the time it arrives);
+  shared memory; `read_state` copies the latest frame (at most one 2 ms step old, where a
+  real bus read is a fraction of a millisecond old by the time it arrives);
 - `write_goal` validates the goal here (the same `goal_ticks` as every bus) and leaves it
   in shared memory; the child applies it before its next step;
 - everything else (torque, gains, profile, reboot, base motion) is a request over a pipe
@@ -38,7 +38,7 @@ from hardware.registers import OperatingMode, hardware_error_names
 from hardware.sim.base_frame import BaseMotion
 from hardware.sim.sim_bus import MAX_CATCH_UP_S, SimBus, SimBusConfig
 
-STEP_S = 1e-3  # the child's physics chunk: the published state is at most this old
+STEP_S = 2e-3  # physics chunk = the most the published state lags (1 ms: 28 % of a core, not 22)
 LOCK_TIMEOUT_S = 0.05
 START_TIMEOUT_S = 60.0
 REPLY_TIMEOUT_S = 10.0

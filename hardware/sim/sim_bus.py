@@ -38,6 +38,7 @@ from hardware.sim.base_frame import BaseMotion
 from hardware.sim.twin import DeltaTwin, TwinConfig
 
 FIRMWARE_VERSION = 46
+MOVING_THRESHOLD_UNITS = Reg.MOVING_THRESHOLD.value.default  # looked up once: enums are slow
 MAX_CATCH_UP_S = 0.25  # as the emulator: after a stall, simulated time runs slow, never fast
 
 
@@ -224,12 +225,11 @@ class SimBus:
         twin, sign = self.twin, np.array([c.direction for c in self.joints], dtype=float)
         ticks = np.round(twin.shaft_rad / RAD_PER_TICK)
         outputs = twin.outputs
-        velocity = [velocity_to_rad_s(rad_s_to_velocity(v)) for v in twin.shaft_rad_s]
+        velocity_units = [rad_s_to_velocity(v) for v in twin.shaft_rad_s]
+        velocity = [velocity_to_rad_s(v) for v in velocity_units]
         current = [current_to_ampere(ampere_to_current(o.current_a)) for o in outputs]
         # Present Velocity's Moving flag: above Moving Threshold (10 units by default)
-        moving = [
-            abs(rad_s_to_velocity(v)) > Reg.MOVING_THRESHOLD.value.default for v in twin.shaft_rad_s
-        ]
+        moving = [abs(v) > MOVING_THRESHOLD_UNITS for v in velocity_units]
         return JointState(
             position_rad=np.array(
                 [cal.to_rad(t) for cal, t in zip(self.joints, ticks, strict=True)]
