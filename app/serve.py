@@ -86,5 +86,13 @@ def run(args: argparse.Namespace) -> int:
 
         print(f"deltadash: 3D scene on http://{scene_host(server.host)}:{server.viser_port}/",
               flush=True)  # fmt: skip
-    uvicorn.run(create_app(settings), host=server.host, port=server.http_port, log_level="info")
+    uvicorn.run(
+        create_app(settings),
+        host=server.host,
+        port=server.http_port,
+        log_level="info",
+        # telemetry is ~1 kB of JSON per message at 50 Hz per client: compressing it cost the
+        # server's main thread more than the JSON itself (py-spy), holding the loop's GIL
+        ws_per_message_deflate=False,
+    )
     return 0

@@ -19,7 +19,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ._arrays import as_vectors
+from ._arrays import as_vectors, is_scalar_triple, triple_floats
+from ._xp import FLOATS
 
 
 class _LegFrame(NamedTuple):
@@ -53,9 +54,39 @@ def jacobian(robot: Any, joints: Any) -> np.ndarray:
 
     NaN where FK fails; inf/NaN at a parallel (M) singularity.
     """
+    if is_scalar_triple(joints):  # the control loop's case, every tick: floats, no stacking
+        single = _jacobian_single(robot, triple_floats(joints, "joints"))
+        if single is not None:
+            return single
     frame = _leg_frame(robot, joints)
     with np.errstate(all="ignore"):
         return _inverse_rows(frame.w) * frame.v[..., None, :]
+
+
+def _jacobian_single(robot: Any, q: tuple[float, float, float]) -> np.ndarray | None:
+    """jacobian() of one joint triple in Python floats; None where the array path must
+    answer (FK fails, M singular), so both paths give the same NaN/inf there."""
+    point = robot.fk(q).points
+    if not np.isfinite(point).all():
+        return None
+    rows, speeds = [], []
+    for leg in range(3):
+        centre = robot._leg_centre(leg, q[leg], FLOATS)
+        first, _ = robot._leg_centre_derivatives(leg, q[leg])
+        w = [float(p) - c for p, c in zip(point, centre, strict=True)]
+        rows.append(w)
+        speeds.append(sum(a * float(b) for a, b in zip(w, first, strict=True)))
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = rows
+    # columns of M's adjugate: r1 x r2, r2 x r0, r0 x r1
+    adjugate = (
+        (b1 * c2 - b2 * c1, c1 * a2 - c2 * a1, a1 * b2 - a2 * b1),
+        (b2 * c0 - b0 * c2, c2 * a0 - c0 * a2, a2 * b0 - a0 * b2),
+        (b0 * c1 - b1 * c0, c0 * a1 - c1 * a0, a0 * b1 - a1 * b0),
+    )
+    det = a0 * adjugate[0][0] + a1 * adjugate[1][0] + a2 * adjugate[2][0]
+    if det == 0.0:
+        return None
+    return np.array([[adjugate[i][j] / det * speeds[j] for j in range(3)] for i in range(3)])
 
 
 def joint_velocity(robot: Any, joints: Any, point_velocity: Any) -> np.ndarray:
@@ -115,6 +146,9 @@ def dexterity(robot: Any, joints: Any) -> np.ndarray:
     fails.
     """
     jac = jacobian(robot, joints)
+    if jac.shape == (3, 3) and np.isfinite(jac).all():  # one triple: skip the masking
+        singular_values = np.linalg.svd(jac, compute_uv=False)
+        return np.float64(singular_values[-1] / singular_values[0])
     finite = np.isfinite(jac).all(axis=(-2, -1))
     safe = np.where(finite[..., None, None], jac, np.eye(3))
     singular_values = np.linalg.svd(safe, compute_uv=False)

@@ -121,3 +121,15 @@ def test_jacobian_equals_the_thesis_matrices():
     )
     V = np.diag(L * (k * np.sin(theta) - (L * np.sin(theta) + z) * np.cos(theta)))
     np.testing.assert_allclose(robot.jacobian(theta), np.linalg.solve(M, V), atol=1e-12)
+
+
+@given(robot_and_joints(shape=(6,)))
+def test_one_triple_gives_the_batch_answer(case):
+    """The control loop's scalar path (floats, one triple) and the array path agree,
+    including where FK fails or M is singular (NaN/inf in both)."""
+    robot, joints = case
+    batch_jac, batch_dex = robot.jacobian(joints), robot.dexterity(joints)
+    for k in range(joints.shape[0]):
+        np.testing.assert_allclose(robot.jacobian(joints[k]), batch_jac[k], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(robot.dexterity(joints[k]), batch_dex[k], rtol=1e-9, atol=1e-12)
+        assert np.shape(robot.dexterity(list(joints[k]))) == ()
