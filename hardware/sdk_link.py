@@ -25,6 +25,7 @@ from hardware.registers import Reg, decode, hardware_error_names, to_unsigned
 T = TypeVar("T")
 PROTOCOL_VERSION = 2.0
 EXTRA_BAUDRATES = (4_500_000,)  # X-series rates dynamixel-sdk's PortHandler does not list
+READ_BLOCK_S = 1e-3  # longest wait in one read of the port; the packet timeout still rules
 # What can escape the SDK on a bad packet or a vanished port: serial errors are OSErrors,
 # malformed packets surface as IndexError/ValueError deep in its parsing.
 _SDK_FAULTS = (OSError, IndexError, ValueError, TypeError)
@@ -83,6 +84,11 @@ class SdkLink:
             with contextlib.suppress(*_SDK_FAULTS, AttributeError):
                 port.closePort()  # openPort opened it at the SDK's default rate
             raise CommError([], "open", f"{self.port_name} refused baud rate {self.baudrate}")
+        # The SDK opens the port non-blocking and polls it in a Python loop until a status
+        # packet is whole: that loop held the GIL for the whole wait (the server's other
+        # threads then delayed the control tick). A short blocking read waits in select()
+        # without the GIL and still returns the moment the bytes asked for have arrived.
+        port.ser.timeout = READ_BLOCK_S
         self.port = port
         self._counters = _Counters()
 
