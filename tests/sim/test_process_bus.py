@@ -104,3 +104,25 @@ def test_after_disconnect_the_child_is_gone_and_calls_fail() -> None:
         sim.read_state()
     with pytest.raises(NotConnectedError):
         sim.torque(True)
+
+
+def test_a_dead_simulator_is_a_bus_error_not_a_frozen_robot() -> None:
+    sim = ProcessSimBus(SimBusConfig())
+    sim.connect()
+    try:
+        sim.read_state()
+        assert sim._process is not None
+        sim._process.kill()
+
+        def read_fails() -> bool:
+            try:
+                sim.read_state()
+            except BusError as exc:
+                return "stopped stepping" in str(exc)
+            return False
+
+        _wait_for(read_fails, "reads of a dead simulator to fail")
+        with pytest.raises(BusError):
+            sim.torque(True)
+    finally:
+        sim.disconnect()
