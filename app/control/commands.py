@@ -9,7 +9,9 @@ state to move (HTTP 409): e-stop or fault active, or torque off.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from concurrent.futures import Future
+from queue import Empty
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -28,6 +30,30 @@ class MotionRefused(RuntimeError):
 
 class CommandsMixin:
     """Command half of :class:`Controller` (split out to keep each file readable)."""
+
+    # ---- the queue between any thread and the control thread ----
+    def submit(self: Controller, command: Callable[[], Any]) -> Future:
+        """Run ``command()`` in the control thread at the start of the next tick."""
+        future: Future = Future()
+        if not self.running:
+            future.set_exception(RuntimeError("the control loop is not running"))
+        else:
+            self._commands.put((command, future))
+        return future
+
+    def _run_commands(self: Controller) -> list[tuple[Future, Any]]:
+        """Run every queued command (control thread); their outcomes, to answer later."""
+        outcomes: list[tuple[Future, Any]] = []
+        while True:
+            try:
+                command, future = self._commands.get_nowait()
+            except Empty:
+                return outcomes
+            if future.set_running_or_notify_cancel():
+                try:
+                    outcomes.append((future, command()))
+                except Exception as exc:
+                    outcomes.append((future, exc))
 
     # ---- public, any thread ----
     def set_goal(self: Controller, point: Any) -> Future:

@@ -14,7 +14,7 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import Future
-from queue import Empty, SimpleQueue
+from queue import SimpleQueue
 from typing import Any
 
 import numpy as np
@@ -122,15 +122,6 @@ class Controller(CommandsMixin):
         if listener in self._listeners:
             self._listeners.remove(listener)
 
-    def submit(self, command: Callable[[], Any]) -> Future:
-        """Run ``command()`` in the control thread at the start of the next tick."""
-        future: Future = Future()
-        if not self.running:
-            future.set_exception(RuntimeError("the control loop is not running"))
-        else:
-            self._commands.put((command, future))
-        return future
-
     # ---- the loop ----
     def _run(self) -> None:
         clock = TickClock(self.settings.loop.rate_hz, self.settings.loop.spin_s)
@@ -165,19 +156,6 @@ class Controller(CommandsMixin):
                     future.set_exception(outcome)
                 else:
                     future.set_result(outcome)
-
-    def _run_commands(self) -> list[tuple[Future, Any]]:
-        outcomes: list[tuple[Future, Any]] = []
-        while True:
-            try:
-                command, future = self._commands.get_nowait()
-            except Empty:
-                return outcomes
-            if future.set_running_or_notify_cancel():
-                try:
-                    outcomes.append((future, command()))
-                except Exception as exc:
-                    outcomes.append((future, exc))
 
     def _read(self) -> bool:
         try:
