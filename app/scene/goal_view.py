@@ -4,23 +4,29 @@ Dragging the gizmo sends the goal to the loop live (every drag update, not only 
 end) through ``controller.set_goal``, the same gate the REST API uses. A point outside the
 workspace is projected onto it on the server (``gate.clamp_point``); when the drag ends
 there the gizmo snaps back to the projected point. viser runs these callbacks on its own
-threads: they only call the controller's thread-safe methods, never the bus.
+threads: they only call the controller's thread-safe methods, never the bus. Saved goal
+points are kept in a JSON file (app/scene/goal_store.py) in the runs folder.
 """
 
 from __future__ import annotations
 
 import itertools
+import logging
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
+from pathlib import Path
 
 import numpy as np
 import viser
 
 from app.control.gate import GoalRejected
 from app.control.state import Snapshot
+from app.scene.goal_store import load_points, save_points
+
+log = logging.getLogger(__name__)
 
 INSIDE_COLOUR = (40, 180, 90)
 PROJECTED_COLOUR = (240, 140, 30)
@@ -39,8 +45,11 @@ def polyline(points: np.ndarray) -> np.ndarray:
 class GoalView:
     """Owns the goal gizmo, goal marker, saved points, path and trail handles."""
 
-    def __init__(self, server: viser.ViserServer, controller, trail_s: float = 4.0) -> None:
+    def __init__(
+        self, server: viser.ViserServer, controller, trail_s: float = 4.0, store: Path | None = None
+    ) -> None:
         self.server = server
+        self.store = store  # where saved points are kept across restarts (None: not kept)
         self.controller = controller
         self.gate = controller.gate
         self.trail_s = trail_s
@@ -67,6 +76,9 @@ class GoalView:
                                              thickness=0.0025, visible=False)  # fmt: skip
         self._saved_handles: list = []
         self.gizmo.on_update(self._on_gizmo)
+        if store is not None:
+            self.saved = load_points(store)
+            self._draw_saved()
 
     def _start_point(self, snap: Snapshot) -> np.ndarray:
         for point in (snap.goal_m, snap.point_commanded_m, snap.point_measured_m):
@@ -146,11 +158,22 @@ class GoalView:
             unique = f"{base} {n}"
         self.saved[unique] = np.asarray(point, dtype=np.float64).copy()
         self._draw_saved()
+        self._keep()
         return unique
 
     def delete(self, name: str) -> None:
         self.saved.pop(name, None)
         self._draw_saved()
+        self._keep()
+
+    def _keep(self) -> None:
+        if self.store is None:
+            return
+        try:
+            save_points(self.store, self.saved)
+        except OSError as exc:  # the points stay in memory; the panel says why they won't last
+            log.warning("goal points: cannot write %s: %s", self.store, exc)
+            self.message = f"goal points not saved to {self.store}: {exc.strerror or exc}"
 
     def go_to(self, name: str, on_done: Callable[[Future], None] | None = None) -> Future:
         """Smooth move to a saved point (controller.move); GoalRejected if it is out of reach."""

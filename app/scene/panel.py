@@ -83,6 +83,9 @@ class ControlPanel:
         self.gui_save_point.on_click(lambda _: self.save_point())
         self.gui_go_to.on_click(lambda _: self.go_to(self.gui_points.value))
         self.gui_delete_point.on_click(lambda _: self.delete_point(self.gui_points.value))
+        if self.goals.saved:  # kept from an earlier session
+            self._refresh_points(None)
+            self.gui_point_name.value = f"point {len(self.goals.saved) + 1}"
 
     # ---- callbacks (viser's threads) ----
     def _call(self, method, *args) -> None:

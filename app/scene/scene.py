@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import viser
 
+from app.scene.goal_store import FILE_NAME as POINTS_FILE
 from app.scene.goal_view import GoalView
 from app.scene.panel import ControlPanel
 from app.scene.robot_view import RobotView
@@ -77,7 +78,9 @@ class Scene:
                               position=(0.0, 0.0, floor))  # fmt: skip
         self.robot = RobotView(server, robot, "/robot")
         self.ghost = RobotView(server, robot, "/ghost", ghost=True)
-        self.goals = GoalView(server, self.controller)
+        runs_settings = getattr(settings, "runs", None)
+        store = runs_settings.folder_path / POINTS_FILE if runs_settings is not None else None
+        self.goals = GoalView(server, self.controller, store=store)
         self.panel = ControlPanel(server, self.controller, self.goals)
         self.tests = TestPanel(server, self.runs, self.goals.show_path)
         self.world = WorldView(server, _mount(settings))
