@@ -66,8 +66,9 @@ def predict(pose: Pose, velocity: np.ndarray, omega_body: np.ndarray, ahead_s: f
 class SimulatedDroneProvider:
     """Observations of a SimulatedDrone: its measurement stream, latency and rate included.
 
-    ``feel`` (optional) receives the true attitude, acceleration and body rate each tick,
-    so a simulated arm's base moves with the drone (gravity and base motion act on it).
+    ``feel`` (optional) receives the drone's true attitude, acceleration [m/s^2, world],
+    body rate [rad/s] and its rate of change [rad/s^2, body frame] each tick, so a simulated
+    arm's base moves with the drone (gravity and base motion act on it).
     """
 
     def __init__(self, drone: SimulatedDrone, feel: Callable[..., None] | None = None) -> None:
@@ -87,10 +88,13 @@ class SimulatedDroneProvider:
         return self.drone.true_state(t_s)[0]
 
     def _feel(self, t_s: float) -> None:
-        h = 1e-3
-        now, before = self.drone.true_state(t_s)[0], self.drone.true_state(t_s - h)[0]
-        omega = angular_velocity(before.quaternion, now.quaternion, h)
-        self.feel(now.quaternion, self.drone.acceleration(t_s), omega)
+        h = 1e-3  # the drone's true motion is smooth: central differences suffice
+        before, now, after = (self.drone.true_state(t_s + k * h)[0] for k in (-1, 0, 1))
+        rate_before = angular_velocity(before.quaternion, now.quaternion, h)
+        rate_after = angular_velocity(now.quaternion, after.quaternion, h)
+        omega = 0.5 * (rate_before + rate_after)
+        omega_dot = (rate_after - rate_before) / h
+        self.feel(now.quaternion, self.drone.acceleration(t_s), omega, omega_dot)
 
 
 class TrackerProvider:

@@ -16,6 +16,32 @@ if TYPE_CHECKING:
     from app.control.controller import Controller
 
 
+def base_motion(
+    mount: Pose,
+    drone_wxyz: np.ndarray,
+    drone_acceleration: np.ndarray,
+    omega_body: np.ndarray,
+    omega_dot_body: np.ndarray,
+):
+    """The Delta base's motion from the drone's: attitude R_d R_m, the acceleration of the
+    base origin (the drone's plus the lever arm's: R_d (w' x p_m + w x (w x p_m))), and the
+    turning rates in the base frame (R_m^T w, R_m^T w'), as hardware.sim.BaseMotion."""
+    from hardware.sim import BaseMotion
+
+    drone = Pose(np.zeros(3), np.asarray(drone_wxyz, dtype=float))
+    base = drone @ mount
+    w, w_dot = np.asarray(omega_body, dtype=float), np.asarray(omega_dot_body, dtype=float)
+    arm = np.asarray(mount.position, dtype=float)
+    lever = np.cross(w_dot, arm) + np.cross(w, np.cross(w, arm))
+    to_base = mount.rotation.T
+    return BaseMotion(
+        tuple(base.quaternion),
+        tuple(np.asarray(drone_acceleration, dtype=float) + drone.rotation @ lever),
+        tuple(to_base @ w),
+        tuple(to_base @ w_dot),
+    )
+
+
 class WorldService:
     """Owns the external pose tracker and listeners; builds hold sources for the loop."""
 
@@ -46,14 +72,10 @@ class WorldService:
         bus = self.controller.bus
         if not hasattr(bus, "set_base_motion"):
             return None
-        from hardware.sim import BaseMotion
+        mount = self.mount
 
-        def feel(quaternion, acceleration, omega) -> None:
-            # attitude and acceleration: the effective gravity, exact and cheap; the turning
-            # terms (Euler, Coriolis) cost a Python callback per physics step and are second
-            # order for a hovering drone, so they are left out here
-            del omega
-            bus.set_base_motion(BaseMotion(tuple(quaternion), tuple(acceleration)))
+        def feel(quaternion, acceleration, omega, omega_dot) -> None:
+            bus.set_base_motion(base_motion(mount, quaternion, acceleration, omega, omega_dot))
 
         return feel
 

@@ -72,7 +72,7 @@ class DeltaTwin:
         m.dof_frictionloss[self._motor_v] = servo.coulomb_friction_nm  # gearbox, sticks at rest
         self._platform_q = np.array([m.joint(j).qposadr[0] for j in PLATFORM_JOINTS])
         base = m.body("base").id
-        self._moving_bodies = [b for b in range(m.nbody) if b not in (0, base)]
+        self._moving_bodies = np.array([b for b in range(m.nbody) if b not in (0, base)])
         self._sign = np.array([c.direction for c in cfg.joints], dtype=float)
         self._zero = np.array([c.zero_offset_ticks * RAD_PER_TICK for c in cfg.joints])
         self.servos = [Xm430(servo) for _ in range(3)]

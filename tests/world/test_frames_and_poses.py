@@ -106,9 +106,9 @@ def test_simulated_drone_moves_the_simulated_base():
 
     felt = []
     drone = SimulatedDrone(DroneSimParams(seed=2))
-    provider = SimulatedDroneProvider(drone, lambda q, a, w: felt.append((q, a, w)))
+    provider = SimulatedDroneProvider(drone, lambda q, a, w, w_dot: felt.append((q, a)))
     provider.observe(1.0)
-    quaternion, acceleration, _ = felt[-1]
+    quaternion, acceleration = felt[-1]
     np.testing.assert_allclose(quaternion, drone.true_state(1.0)[0].quaternion)
     h = 1e-4
     expected = (drone.true_state(1.0 + h)[1] - drone.true_state(1.0 - h)[1]) / (2 * h)
