@@ -14,17 +14,7 @@ from hardware.errors import BusError, CommError, HardwareError, NotConnectedErro
 from hardware.registers import RAD_PER_TICK, OperatingMode
 from hardware.sim import BaseMotion, ProcessSimBus, SimBusConfig
 from kinematics import THESIS_DELTA
-
-WAIT_S = 30.0
-
-
-def _wait_for(condition, what: str) -> None:
-    end = time.monotonic() + WAIT_S
-    while time.monotonic() < end:
-        if condition():
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"timed out waiting for {what}")
+from tests.app.conftest import wait_for
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +42,7 @@ def test_the_relaxed_arm_falls_then_holds_a_goal(bus: ProcessSimBus) -> None:
     assert isinstance(bus, ServoBus)
     assert [info.servo_id for info in bus.scan()] == [1, 2, 3]
     # powered up with torque off: gravity swings the upper links down (theta grows)
-    _wait_for(lambda: bus.read_state().position_rad.min() > 1.0, "the arm to fall")
+    wait_for(lambda: bus.read_state().position_rad.min() > 1.0, "the arm to fall")
     bus.torque(True)
     bus.write_goal([0.3, 0.4, 0.5])
 
@@ -61,7 +51,7 @@ def test_the_relaxed_arm_falls_then_holds_a_goal(bus: ProcessSimBus) -> None:
         near = np.abs(state.position_rad - [0.3, 0.4, 0.5]).max() < 8 * RAD_PER_TICK
         return near and bool(np.all(state.current_a < 0))  # lifting against gravity
 
-    _wait_for(holding, "the goal to be reached and held")
+    wait_for(holding, "the goal to be reached and held")
     state = bus.read_state()
     ticks = state.position_rad / RAD_PER_TICK
     assert ticks == pytest.approx(np.round(ticks), abs=1e-9)  # whole ticks, as the servo
@@ -72,7 +62,7 @@ def test_the_relaxed_arm_falls_then_holds_a_goal(bus: ProcessSimBus) -> None:
 def test_the_external_measurement_agrees_with_fk_of_the_same_read(bus: ProcessSimBus) -> None:
     bus.torque(True)
     bus.write_goal([0.45, 0.45, 0.45])
-    _wait_for(lambda: not bus.read_state().moving.any(), "the arm to settle")
+    wait_for(lambda: not bus.read_state().moving.any(), "the arm to settle")
     state = bus.read_state()
     platform = bus.measure_platform(at_last_read=True)
     # encoder resolution (0.088 deg on ~0.16 m links) bounds the disagreement
@@ -121,7 +111,7 @@ def test_a_dead_simulator_is_a_bus_error_not_a_frozen_robot() -> None:
                 return "stopped stepping" in str(exc)
             return False
 
-        _wait_for(read_fails, "reads of a dead simulator to fail")
+        wait_for(read_fails, "reads of a dead simulator to fail")
         with pytest.raises(BusError):
             sim.torque(True)
     finally:
