@@ -174,8 +174,9 @@ class ProcessSimBus:
         if at_last_read and np.isfinite(self._platform_at_read).all():
             true = self._platform_at_read
         else:
+            frame = self._require_frame("measure platform")
             with self._frame_access("measure platform"):
-                true = self._require_frame("measure platform")[_PLATFORM].copy()
+                true = frame[_PLATFORM].copy()
         noise = (
             self._rng.normal(0.0, self.config.noise_std_m, 3) if self.config.noise_std_m else 0.0
         )

@@ -86,6 +86,8 @@ def test_after_disconnect_the_child_is_gone_and_calls_fail() -> None:
     sim = ProcessSimBus(SimBusConfig())
     with pytest.raises(NotConnectedError):
         sim.read_state()
+    with pytest.raises(NotConnectedError):
+        sim.measure_platform()
     sim.connect()
     process = sim._process
     sim.disconnect()
