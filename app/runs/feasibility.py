@@ -77,4 +77,7 @@ def _raise_at(index: int | None, reason: str, times_s: np.ndarray, points_m: np.
     if index is None:
         return
     point = ", ".join(f"{v:.4f}" for v in points_m[index])
-    raise GoalRejected(f"infeasible: {reason} at t = {times_s[index]:.3f} s, point [{point}] m")
+    message = f"infeasible: {reason} at t = {times_s[index]:.3f} s, point [{point}] m"
+    if index == 0:  # the approach starts where the robot is: that is what fails
+        message += "; the robot is there now: move it into the workspace first (a goal or jog)"
+    raise GoalRejected(message)

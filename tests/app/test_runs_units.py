@@ -97,6 +97,21 @@ def test_thesis_sinusoid_is_feasible_and_a_large_one_is_not():
         check_path(gate, times, points, near)
 
 
+def test_from_a_hanging_arm_the_refusal_says_to_move_it_in_first():
+    """Torque on with the arm hanging straight down (theta = 90 deg, below the workspace's
+    margin): the approach's first point is the robot itself, and the error says so."""
+    gate, hanging = _gate(), np.full(3, np.pi / 2)
+    start = THESIS_DELTA.fk(hanging).points
+    times, points = plan_sinusoid(SinusoidParams(), start).sample(0.005)
+    with pytest.raises(GoalRejected, match=r"at t = 0\.000 s.*move it into the workspace first"):
+        check_path(gate, times, points, hanging)
+    times, points = plan_sinusoid(SinusoidParams(amplitude_m=(0.2, 0.05, 0.08)),
+                                  np.array([0.0, 0.0, -0.24])).sample(0.005)  # fmt: skip
+    with pytest.raises(GoalRejected) as refused:  # later points: no such advice
+        check_path(gate, times, points, THESIS_DELTA.ik([0.0, 0.0, -0.24]).joints)
+    assert "first" not in str(refused.value)
+
+
 def test_too_fast_for_the_joints_is_refused():
     gate, start = _gate(), np.array([0.0, 0.0, -0.24])
     fast = SinusoidParams(amplitude_m=(0.0, 0.0, 0.05), frequency_hz=(0.0, 0.0, 6.0))
