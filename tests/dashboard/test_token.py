@@ -7,8 +7,8 @@ from typing import Any
 
 import pytest
 
-from tests.browser_support import browser_skip_reason, chromium_page
 from tests.dashboard.conftest import Server, serve, wait_for
+from tests.support.browser import browser_skip_reason, chromium_page
 
 SKIP = browser_skip_reason()
 pytestmark = pytest.mark.skipif(SKIP is not None, reason=str(SKIP))

@@ -9,8 +9,8 @@ import time
 import numpy as np
 from PIL import Image
 
-from tests.browser_support import chromium_page, require_browser, save_artifact
 from tests.scene.conftest import measured, wait_for
+from tests.support.browser import chromium_page, require_browser, save_artifact
 
 LEG_3_BLUE = np.array([60, 112, 214])  # leg 3 sits left of the panel in this view
 VIEWPORT = (880, 540)  # small: software WebGL renders every pixel on the CPU

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from app.scene.geometry import robot_lines, torus_mesh, torus_spec
 from app.scene.volume import reachable_volume, volume_field
 from kinematics import THESIS_DELTA, LinearDelta, RotaryDelta
-from tests.strategies import joint_range, linear_deltas, rotary_deltas
+from tests.support.strategies import joint_range, linear_deltas, rotary_deltas
 
 ALPHAS = (0.0, 2 * math.pi / 3, 4 * math.pi / 3)
 

@@ -12,8 +12,7 @@ from kinematics import (
     ShapeError,
     UnreachableError,
 )
-
-from .strategies import linear_deltas, rotary_deltas
+from tests.support.strategies import linear_deltas, rotary_deltas
 
 ALPHA = np.radians([0.0, 120.0, 240.0])
 

@@ -5,8 +5,7 @@ import pytest
 from hypothesis import given
 
 from kinematics import THESIS_DELTA, LinearDelta, RotaryDelta
-
-from .strategies import robot_and_joints
+from tests.support.strategies import robot_and_joints
 
 TOL_M = 1e-9
 WELL_CONDITIONED = 1e-3  # dexterity below this amplifies rounding past TOL_M

@@ -1,4 +1,4 @@
-"""Drone-mounted frames (thesis eq. 5.1-5.2) and the tool point, against hand-computed cases."""
+"""Drone-mounted frames (kinematics/pose.py, thesis eq. 5.1-5.2) against hand-computed cases."""
 
 import math
 
@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from kinematics import DeltaError, Pose, PoseError, Tool, base_to_world, world_to_base
+from kinematics import Pose, PoseError, base_to_world, world_to_base
 from kinematics.pose import unit_quaternion
 
 S = math.sqrt(0.5)
@@ -97,20 +97,3 @@ def test_small_drift_is_normalised_and_bad_positions_rejected():
     assert np.linalg.norm(q) == pytest.approx(1.0, abs=1e-15)
     with pytest.raises(PoseError, match="position"):
         Pose.from_arrays([math.inf, 0.0, 0.0])
-
-
-def test_tool_offset_and_wrist():
-    tool = Tool(offset_m=(0.02, 0.0, -0.05), wrist=True)
-    platform = np.array([0.0, 0.0, -0.24])
-    np.testing.assert_allclose(tool.tip(platform), [0.02, 0.0, -0.29])
-    np.testing.assert_allclose(tool.tip(platform, phi=math.pi / 2), [0.0, 0.02, -0.29], atol=1e-15)
-    tips = tool.tip(np.tile(platform, (2, 1)), phi=[0.3, -1.0])
-    np.testing.assert_allclose(tool.platform(tips, phi=[0.3, -1.0]), np.tile(platform, (2, 1)))
-    assert tool.length_m == pytest.approx(math.hypot(0.02, 0.05))
-
-
-def test_tool_without_wrist_refuses_phi_and_bad_offsets():
-    with pytest.raises(DeltaError, match="wrist"):
-        Tool(offset_m=(0.0, 0.0, -0.05)).tip([0.0, 0.0, -0.2], phi=0.5)
-    with pytest.raises(ValueError, match="offset_m"):
-        Tool(offset_m=(0.0, math.nan, 0.0))

@@ -5,8 +5,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from kinematics import THESIS_DELTA, RotaryDelta
-
-from .strategies import robot_and_joints
+from tests.support.strategies import robot_and_joints
 
 STEP = 1e-6  # central differences: truncation ~ STEP^2, rounding ~ eps / STEP
 

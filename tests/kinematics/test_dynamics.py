@@ -17,8 +17,7 @@ from kinematics.dynamics import (
     inverse_dynamics_joints,
     joint_motion,
 )
-
-from ..strategies import BATCH_SHAPES
+from tests.support.strategies import BATCH_SHAPES
 
 G0 = 9.81
 

@@ -1,0 +1,1 @@
+"""Helpers the tests import: hypothesis strategies, the browser driver."""
