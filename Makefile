@@ -17,6 +17,7 @@ run: $(BIN)/.installed
 
 test: $(BIN)/.installed browser
 	$(BIN)/ruff check .
+	$(BIN)/mypy kinematics
 	$(BIN)/pytest -q
 
 # The scene's browser test drives Debian's chromium (no browser download); if it cannot be
@@ -30,4 +31,4 @@ bench: $(BIN)/.installed
 	$(BIN)/python benchmarks/kinematics.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis .ruff_cache
+	rm -rf $(VENV) .pytest_cache .hypothesis .ruff_cache .mypy_cache

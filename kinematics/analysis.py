@@ -12,6 +12,7 @@ from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
+from ._arrays import triple_floats
 from .containment import certify_box, certify_cylinder
 
 
@@ -104,7 +105,7 @@ def largest_region(
         middle = 0.5 * (good + bad)
         good, bad = (middle, bad) if fits(middle) else (good, middle)
     lo, hi = bounds(good)
-    size = tuple(float(v) for v in good * ratio)
+    size = triple_floats(good * ratio, "size_m")
     return Fit(size, tuple(lo.tolist()), tuple(hi.tolist()), float(bad - good))
 
 

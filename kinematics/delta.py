@@ -139,8 +139,8 @@ class DeltaKinematics(ABC):
         with np.errstate(all="ignore"):
             for a in range(0, len(flat_q), CHUNK):
                 chunk = flat_q[a : a + CHUNK]
-                centres = [self._leg_centre(leg, chunk[:, leg], ARRAYS) for leg in range(3)]
-                columns = intersect_below(*centres, self.l)
+                c1, c2, c3 = [self._leg_centre(leg, chunk[:, leg], ARRAYS) for leg in range(3)]
+                columns = intersect_below(c1, c2, c3, self.l)
                 valid = self._fk_branch_ok(chunk.T, *columns)
                 for axis, column in enumerate(columns):
                     points[a : a + CHUNK, axis] = np.where(valid, column, np.nan)
@@ -149,10 +149,10 @@ class DeltaKinematics(ABC):
     def _fk_point(self, joints: Any) -> FKResult | None:
         q = triple_floats(joints, "joints")
         try:
-            centres = [self._leg_centre(leg, q[leg], FLOATS) for leg in range(3)]
+            c1, c2, c3 = [self._leg_centre(leg, q[leg], FLOATS) for leg in range(3)]
         except (OverflowError, ValueError):
             return None  # inf joints: let the NumPy path answer it
-        point = intersect_below_point(*centres, self.l)
+        point = intersect_below_point(c1, c2, c3, self.l)
         if not self._fk_branch_ok(q, *point):
             point = _NAN3
         return _single(point, (*q, *point), FKResult)
@@ -197,7 +197,9 @@ class DeltaKinematics(ABC):
 _UNIT_RADIAL = np.array([[c, s, 0.0] for c, s in zip(LEG_COS, LEG_SIN, strict=True)])
 
 
-def _broadcast_pair(a: np.ndarray, b: np.ndarray, name_a: str, name_b: str):
+def _broadcast_pair(
+    a: np.ndarray, b: np.ndarray, name_a: str, name_b: str
+) -> tuple[np.ndarray, np.ndarray]:
     try:
         shape = np.broadcast_shapes(a.shape, b.shape)
     except ValueError as exc:

@@ -138,7 +138,7 @@ def joint_acceleration(
         return numerator / frame.v
 
 
-def dexterity(robot: Any, joints: Any) -> np.ndarray:
+def dexterity(robot: Any, joints: Any) -> np.ndarray | np.float64:
     """Inverse condition number of the Jacobian, shape (*): 1 isotropic, 0 singular.
 
     Serial singularities (a leg stretched or folded) and parallel ones (M singular)

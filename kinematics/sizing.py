@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ._arrays import triple_floats
 from .dynamics import MassModel, inverse_dynamics
 from .rotary import RotaryDelta
 
@@ -115,7 +116,7 @@ def _fibonacci_sphere(n: int) -> np.ndarray:
 def _worst(values: np.ndarray, points: np.ndarray) -> Worst:
     """The largest entry of values (N, 3) and where it is."""
     index = np.unravel_index(int(np.nanargmax(values)), values.shape)
-    return Worst(float(values[index]), tuple(float(v) for v in points[index[0]]), int(index[1]))
+    return Worst(float(values[index]), triple_floats(points[index[0]], "point"), int(index[1]))
 
 
 def size_motors(

@@ -25,6 +25,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.optimize import differential_evolution
 
+from ._arrays import triple_floats
 from .containment import Containment, certify_box, unit_box_samples
 from .errors import InvalidGeometryError
 from .rotary import RotaryDelta
@@ -245,6 +246,7 @@ def synthesize(
         containment, extra_ok = check(problem, design, tol)
         if containment.contains is not False or round_ == rounds:
             break
+        assert containment.witness is not None  # certify_box names one whenever contains is False
         problem = _with_witness(problem, design, containment.witness)
     final = score(problem, np.array(design))
     return SynthesisResult(
@@ -257,7 +259,7 @@ def _with_witness(problem: Problem, design: Design, witness: np.ndarray) -> Prob
     """The problem with ``witness`` [m] added to the penalty samples (in unit coordinates)."""
     lower, upper = problem.volume.box(design.H)
     unit = (witness - lower) / np.where(upper > lower, upper - lower, 1.0)
-    extra = (*problem.extra_unit, tuple(float(u) for u in unit))
+    extra = (*problem.extra_unit, triple_floats(unit, "witness"))
     return Problem(problem.volume, problem.bounds, problem.per_edge, extra, problem.clearance_m)
 
 

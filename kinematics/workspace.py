@@ -76,7 +76,7 @@ def _feasible(robot: Any, q: np.ndarray, margin: float, z_max: float | None) -> 
 
 
 def _bisect(
-    robot: Any, inside: np.ndarray, outside: np.ndarray, margin: float, z_max
+    robot: Any, inside: np.ndarray, outside: np.ndarray, margin: float, z_max: float | None
 ) -> np.ndarray:
     for _ in range(60):
         middle = 0.5 * (inside + outside)
@@ -117,7 +117,9 @@ def project(robot: Any, point: Any, margin: float = 0.0, z_max: float | None = N
     return Projection(best, float(np.linalg.norm(best - goal)))
 
 
-def _refine(robot: Any, goal: np.ndarray, start: np.ndarray, margin: float, z_max) -> np.ndarray:
+def _refine(
+    robot: Any, goal: np.ndarray, start: np.ndarray, margin: float, z_max: float | None
+) -> np.ndarray:
     """Local least-distance solve from a feasible start; falls back to the start."""
     constraints = [
         {"type": "ineq", "fun": lambda q, i=i: -margin - robot._leg_signed_distance(i, *q)}
