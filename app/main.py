@@ -13,7 +13,6 @@ import contextlib
 import gc
 import sys
 from collections.abc import AsyncIterator, Callable
-from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -31,11 +30,12 @@ from app.control.controller import Controller
 from app.control.gate import GoalRejected
 from app.runs.manager import RunManager
 from app.scene import start_scene
+from app.static_files import static_dir
 from app.world.service import WorldService
 from hardware.errors import BusError
 
 GIL_SWITCH_S = 2.5e-4
-STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
+STATIC_DIR = static_dir()
 
 
 def _error(status: int, detail: str, **extra: Any) -> JSONResponse:
