@@ -19,6 +19,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 
 from app.api import dashboard, mav, robot, runs, telemetry
 from app.api.deps import Lease
@@ -114,7 +115,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
                 app.state.world.close()
                 await asyncio.to_thread(controller.stop)
 
-    app = FastAPI(
+    app = FastAPIOffline(  # /docs and /redoc from local assets: they work with no internet
         title="deltadash",
         description="Teleoperation API of a Delta robot. SI units (m, rad, s), base frame.",
         lifespan=lifespan,
