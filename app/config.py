@@ -33,14 +33,23 @@ from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
-from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
+from pydantic_settings import (
+    BaseSettings,
+    PydanticBaseSettingsSource,
+    SettingsConfigDict,
+    TomlConfigSettingsSource,
+)
 
 from kinematics import DeltaError, LinearDelta, RotaryDelta
 
+# The file is chosen at run time (``deltadash serve --config FILE``) while the sources are
+# built inside ``Settings()``; a context variable hands the path over without a global.
 _TOML_PATH: ContextVar[Path | None] = ContextVar("deltadash_config_path", default=None)
 
 
 class _Section(BaseModel):
+    """One ``[section]`` of the TOML file: unknown keys are errors, values are frozen."""
+
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
@@ -105,6 +114,8 @@ class HardwareSettings(_Section):
 
 
 class LoopSettings(_Section):
+    """The control loop's timing."""
+
     rate_hz: float = Field(200.0, gt=0, le=2000, description="control loop rate [Hz]")
     spin_s: float = Field(
         3e-4, ge=0, le=2e-3, description="busy-wait before each deadline [s] (timer slack)"
@@ -112,6 +123,8 @@ class LoopSettings(_Section):
 
 
 class LimitSettings(_Section):
+    """Where and how fast the platform may go; every goal passes these (app/control/gate.py)."""
+
     joint_speed_rad_s: float = Field(
         7.5, gt=0, description="largest commanded joint speed [rad/s] (XM430-W210: 8.1 no-load)"
     )
@@ -121,6 +134,8 @@ class LimitSettings(_Section):
 
 
 class JogSettings(_Section):
+    """Jerk-limited motion to a goal (jog steps, moves), per Cartesian axis."""
+
     max_velocity_m_s: float = Field(0.5, gt=0, description="jog speed per axis [m/s]")
     max_acceleration_m_s2: float = Field(4.0, gt=0, description="per axis [m/s^2]")
     max_jerk_m_s3: float = Field(100.0, gt=0, description="per axis [m/s^3]")
@@ -128,6 +143,8 @@ class JogSettings(_Section):
 
 
 class SafetySettings(_Section):
+    """When the loop faults, and what e-stop and shutdown do to the servos' torque."""
+
     following_error_rad: float = Field(0.35, gt=0, description="trip above this |cmd - meas|")
     following_error_time_s: float = Field(0.5, ge=0, description="... held this long [s]")
     max_missed_reads: int = Field(10, ge=1, description="fault after this many failed reads")
@@ -136,6 +153,8 @@ class SafetySettings(_Section):
 
 
 class ServerSettings(_Section):
+    """The HTTP/WebSocket server, the 3D scene and who may take control."""
+
     host: str = Field("127.0.0.1", description="bind address; others need a token")
     http_port: int = Field(8000, ge=0, le=65535, description="HTTP/WebSocket port")
     viser_port: int = Field(8080, ge=0, le=65535, description="3D scene port")
@@ -146,6 +165,8 @@ class ServerSettings(_Section):
 
 
 class RunSettings(_Section):
+    """Recorded runs: where their logs go and how they are followed and scored."""
+
     folder: str = Field("runs", description="where run logs and reports go (created)")
 
     @property
@@ -181,20 +202,6 @@ class WorldSettings(_Section):
     )
 
 
-class _TomlSource(PydanticBaseSettingsSource):
-    """The TOML file named by the current ``load_settings`` call."""
-
-    def get_field_value(self, field: Any, field_name: str) -> tuple[Any, str, bool]:
-        return None, field_name, False
-
-    def __call__(self) -> dict[str, Any]:
-        path = _TOML_PATH.get()
-        if path is None:
-            return {}
-        with open(path, "rb") as file:
-            return tomllib.load(file)
-
-
 class Settings(BaseSettings):
     """Everything ``deltadash serve`` can be told."""
 
@@ -215,7 +222,8 @@ class Settings(BaseSettings):
     def settings_customise_sources(
         cls, settings_cls: type[BaseSettings], init_settings: Any, env_settings: Any, **_: Any
     ) -> tuple[PydanticBaseSettingsSource, ...]:
-        return init_settings, env_settings, _TomlSource(settings_cls)
+        toml_file = TomlConfigSettingsSource(settings_cls, toml_file=_TOML_PATH.get())
+        return init_settings, env_settings, toml_file
 
 
 class ConfigError(ValueError):
@@ -231,6 +239,9 @@ def load_settings(path: str | Path | None = None, **overrides: Any) -> Settings:
         ConfigError: naming every bad field (``hardware.baud: ...``) or an unreadable file.
     """
     toml_path = Path(path) if path is not None else None
+    if toml_path is not None and not toml_path.is_file():
+        # pydantic-settings skips a missing file; a path given on purpose must exist.
+        raise ConfigError(f"cannot read config {toml_path}: not a file")
     token = _TOML_PATH.set(toml_path)
     try:
         return Settings(**overrides)

@@ -13,13 +13,13 @@ import contextlib
 import gc
 import sys
 from collections.abc import AsyncIterator, Callable
-from pathlib import Path
 from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 
 from app.api import dashboard, mav, robot, runs, telemetry
 from app.api.deps import Lease
@@ -31,11 +31,12 @@ from app.control.controller import Controller
 from app.control.gate import GoalRejected
 from app.runs.manager import RunManager
 from app.scene import start_scene
+from app.static_files import static_dir
 from app.world.service import WorldService
 from hardware.errors import BusError
 
 GIL_SWITCH_S = 2.5e-4
-STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
+STATIC_DIR = static_dir()
 
 
 def _error(status: int, detail: str, **extra: Any) -> JSONResponse:
@@ -114,7 +115,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
                 app.state.world.close()
                 await asyncio.to_thread(controller.stop)
 
-    app = FastAPI(
+    app = FastAPIOffline(  # /docs and /redoc from local assets: they work with no internet
         title="deltadash",
         description="Teleoperation API of a Delta robot. SI units (m, rad, s), base frame.",
         lifespan=lifespan,

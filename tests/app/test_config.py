@@ -50,3 +50,40 @@ def test_serve_refuses_a_bad_config_at_start(tmp_path, capsys):
     path.write_text("[loop]\nrate_hz = 0\n")
     assert main(["serve", "--config", str(path)]) == 2
     assert "loop.rate_hz" in capsys.readouterr().err
+
+
+JOINTS = "".join(
+    f"[[hardware.joints]]\nservo_id = {i}\nzero_offset_ticks = {2000 + i}\n" for i in (4, 5, 6)
+)
+
+
+def test_nested_sections_come_from_the_toml_file(tmp_path):
+    path = tmp_path / "robot.toml"
+    path.write_text('[hardware]\nbackend = "emulated"\n' + JOINTS)
+    hardware = load_settings(path).hardware
+    assert hardware.backend == "emulated"
+    assert [(j.servo_id, j.zero_offset_ticks) for j in hardware.joints] == [
+        (4, 2004),
+        (5, 2005),
+        (6, 2006),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        (JOINTS + "zero_ticks = 0\n", "hardware.joints.2.zero_ticks"),
+        ("[server]\nport = 8001\n", "server.port"),
+        ("[serve]\nhttp_port = 8001\n", "serve"),
+    ],
+)
+def test_a_wrong_key_names_its_dotted_path(tmp_path, text, field):
+    path = tmp_path / "typo.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=field.replace(".", r"\.") + ": Extra inputs"):
+        load_settings(path)
+
+
+def test_a_missing_config_file_is_an_error_not_the_defaults(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read config"):
+        load_settings(tmp_path / "absent.toml")
