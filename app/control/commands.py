@@ -16,16 +16,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from app.control.gate import GoalRejected
+from app.control.errors import GoalRejected, MotionRefused
 from app.control.sources import GoalSource, JogSource, Limits, MoveSource
 from hardware.errors import BusError
 
 if TYPE_CHECKING:
     from app.control.controller import Controller
-
-
-class MotionRefused(RuntimeError):
-    """The robot cannot move now (e-stop, fault or torque off); the message says which."""
 
 
 class CommandsMixin:

@@ -21,7 +21,8 @@ import numpy as np
 
 from app.config import Settings
 from app.control.commands import CommandsMixin
-from app.control.gate import Gate, GoalRejected
+from app.control.errors import GoalRejected
+from app.control.gate import Gate
 from app.control.safety import FollowingError, MissCounter, servo_faults
 from app.control.sources import GoalSource, Setpoint
 from app.control.state import Fault, Snapshot
