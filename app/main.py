@@ -26,9 +26,8 @@ from app.api.deps import Lease
 from app.api.serialize import floats
 from app.backends import open_backend
 from app.config import Settings
-from app.control.commands import MotionRefused
 from app.control.controller import Controller
-from app.control.gate import GoalRejected
+from app.control.errors import GoalRejected, MotionRefused
 from app.runs.manager import RunManager
 from app.scene import start_scene
 from app.static_files import static_dir

@@ -127,8 +127,7 @@ def print_stats(run: dict[str, Any]) -> None:
 
 
 def run_sinusoid(args: argparse.Namespace) -> int:
-    from app.control.commands import MotionRefused
-    from app.control.gate import GoalRejected
+    from app.control.errors import GoalRejected, MotionRefused
 
     try:
         params = _params(args)

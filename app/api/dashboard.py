@@ -25,9 +25,8 @@ from pydantic import BaseModel
 
 from app.api.deps import ControllerDep, TokenChecked
 from app.api.runs import SinusoidRequest
-from app.control.commands import MotionRefused
 from app.control.controller import Controller
-from app.control.gate import GoalRejected
+from app.control.errors import GoalRejected, MotionRefused
 from app.runs.trajectories import SinusoidParams, sinusoid_points
 
 router = APIRouter(tags=["dashboard"])

@@ -1,230 +1,232 @@
-"""Operator commands of the controller: goal, jog, move, torque, e-stop, reset.
+"""Operator commands: goal, jog, move, run, torque, e-stop, reset, as state transitions.
 
-Each public method checks its input in the caller's thread (the gate is pure), then queues
-the state change to run in the control thread; it returns a Future with the outcome.
-GoalRejected means the goal is bad (HTTP 422); MotionRefused that the robot is not in a
-state to move (HTTP 409): e-stop or fault active, or torque off.
+Each command is a plain function of the loop's state record (app/control/loop_state.py), a
+read-only context (gate, limits, servo ids) and, where it talks to the servos, the bus. The
+controller runs them in the control thread only, between ticks (app/control/controller.py);
+tests call them directly. MotionRefused means the robot is not in a state to move (e-stop
+or fault active, torque off; HTTP 409) and GoalRejected that the goal is bad (HTTP 422):
+either is raised before the state changes.
 """
 
 from __future__ import annotations
 
+import logging
 import math
-from collections.abc import Callable
-from concurrent.futures import Future
-from queue import Empty
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
 
-from app.control.gate import GoalRejected
+from app.config import Settings
+from app.control.errors import GoalRejected, MotionRefused
+from app.control.gate import Gate
+from app.control.loop_state import LoopState
 from app.control.sources import GoalSource, JogSource, Limits, MoveSource
+from app.control.state import Fault
+from hardware.bus import ServoBus
 from hardware.errors import BusError
+from kinematics import LinearDelta, RotaryDelta
 
-if TYPE_CHECKING:
-    from app.control.controller import Controller
-
-
-class MotionRefused(RuntimeError):
-    """The robot cannot move now (e-stop, fault or torque off); the message says which."""
+log = logging.getLogger(__name__)
 
 
-class CommandsMixin:
-    """Command half of :class:`Controller` (split out to keep each file readable)."""
+@dataclass(frozen=True)
+class CommandContext:
+    """What commands read and never change: the robot, its gate and the configured limits.
 
-    # ---- the queue between any thread and the control thread ----
-    def submit(self: Controller, command: Callable[[], Any]) -> Future:
-        """Run ``command()`` in the control thread at the start of the next tick."""
-        future: Future = Future()
-        if not self.running:
-            future.set_exception(RuntimeError("the control loop is not running"))
+    jog_limits: per-axis Cartesian limits of jogs and Cartesian moves [m/s, m/s^2, m/s^3];
+    joint_speed_rad_s: the joint speed limit that joint-space moves are scaled from;
+    estop_action: "hold" (hold position with torque on) or "release" (torque off).
+    """
+
+    robot: RotaryDelta | LinearDelta
+    gate: Gate
+    servo_ids: tuple[int, ...]
+    period_s: float
+    jog_limits: Limits
+    joint_speed_rad_s: float
+    estop_action: Literal["hold", "release"]
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> CommandContext:
+        robot = settings.robot.build()
+        joints = settings.hardware.joints
+        period_s = 1.0 / settings.loop.rate_hz
+        gate = Gate(
+            robot,
+            tuple(j.min_angle_rad for j in joints),  # type: ignore[arg-type]
+            tuple(j.max_angle_rad for j in joints),  # type: ignore[arg-type]
+            settings.limits.workspace_margin_m,
+            settings.limits.z_max_m,
+            settings.limits.min_dexterity,
+            settings.limits.joint_speed_rad_s * period_s,
+        )
+        jog = settings.jog
+        return cls(
+            robot,
+            gate,
+            tuple(j.servo_id for j in joints),
+            period_s,
+            Limits(jog.max_velocity_m_s, jog.max_acceleration_m_s2, jog.max_jerk_m_s3),
+            settings.limits.joint_speed_rad_s,
+            settings.safety.estop_action,
+        )
+
+
+# ---- safety helpers (the tick uses them too) ----
+def motion_allowed(state: LoopState) -> bool:
+    return state.torque and not state.estopped and not state.faults
+
+
+def require_motion(state: LoopState) -> None:
+    """Raise MotionRefused saying why the robot may not move now; return if it may."""
+    if state.estopped:
+        raise MotionRefused("e-stop is active: POST /api/reset first")
+    if state.faults:
+        raise MotionRefused(f"fault: {state.faults[0].reason}; POST /api/reset first")
+    if not state.torque:
+        raise MotionRefused('torque is off: POST /api/torque {"enabled": true} first')
+
+
+def record_fault(state: LoopState, fault: Fault) -> None:
+    """Record a fault (once per reason) and stop: hold where the robot is."""
+    if any(f.source == fault.source and f.reason == fault.reason for f in state.faults):
+        return
+    log.error("fault: %s", fault.reason)
+    state.faults.append(fault)
+    state.source = None
+
+
+def start_point(state: LoopState) -> np.ndarray:
+    """Where a new path starts: the commanded point, else the measured one."""
+    if np.isfinite(state.commanded_point_m).all():
+        return state.commanded_point_m
+    return state.point_m
+
+
+# ---- motion ----
+def check_move(
+    gate: Gate, point: Any, joints: Any, joint_space: bool, near_rad: np.ndarray
+) -> tuple[np.ndarray, bool]:
+    """A move's target and whether it is in joint space, checked in the caller's thread.
+
+    Exactly one of ``point`` [m] or ``joints`` [rad]; a point must be reachable from
+    ``near_rad``, and a joint-space move to a point goes to its joints.
+    """
+    if (point is None) == (joints is None):
+        raise GoalRejected("give exactly one of position_m or joints_rad")
+    if joints is not None:
+        return gate.check_joints(np.asarray(joints, dtype=np.float64)), True
+    goal = gate.check_point(point)
+    target = gate.solve(goal, near_rad)  # refuses a point with no usable joint solution
+    return (target, True) if joint_space else (goal, False)
+
+
+def jog_to(state: LoopState, ctx: CommandContext, goal: np.ndarray) -> list[float]:
+    """Jog towards ``goal`` [m] (already gated), starting a jog source if none is active."""
+    require_motion(state)
+    if not isinstance(state.source, JogSource):
+        state.source = JogSource(start_point(state), ctx.jog_limits, ctx.period_s)
+    state.source.set_target(goal)
+    state.goal_m = goal
+    return goal.tolist()
+
+
+def jog_by(state: LoopState, ctx: CommandContext, delta: np.ndarray) -> list[float]:
+    """Jog by ``delta`` [m] from the jog target (or from here), clamped onto what passes."""
+    require_motion(state)
+    base = state.goal_m if isinstance(state.source, JogSource) else start_point(state)
+    return jog_to(state, ctx, ctx.gate.clamp_towards(base, base + delta, state.reference_rad))
+
+
+def move(
+    state: LoopState,
+    ctx: CommandContext,
+    target: np.ndarray,
+    duration_s: float | None,
+    joint_space: bool,
+) -> dict:
+    """Smooth move to ``target``: joint angles [rad] if ``joint_space``, else a point [m]."""
+    require_motion(state)
+    if joint_space:
+        speed = ctx.joint_speed_rad_s
+        limits = Limits(0.5 * speed, 4.0 * speed, 40.0 * speed)
+        start = state.reference_rad
+        state.goal_m = ctx.robot.fk(target).points
+    else:
+        limits = ctx.jog_limits
+        start = start_point(state)
+        state.goal_m = target
+    source = MoveSource(start, target, limits, duration_s, joint_space=joint_space)
+    state.source = source
+    return {"duration_s": source.duration_s}
+
+
+def run_source(state: LoopState, source: GoalSource, start_m: np.ndarray, tol_m: float) -> str:
+    """Make ``source`` the active one if the robot is still within ``tol_m`` of ``start_m``."""
+    require_motion(state)
+    moved = float(np.linalg.norm(start_point(state) - start_m))
+    if math.isfinite(tol_m) and not moved <= tol_m:
+        raise MotionRefused(f"the robot moved {moved * 1e3:.1f} mm since the plan; start again")
+    state.source = source
+    return source.name
+
+
+def stop_source(state: LoopState, source: GoalSource) -> bool:
+    """Stop ``source`` if it is the active one (the robot holds); False if it was not."""
+    if state.source is not source:
+        return False
+    state.source = None
+    return True
+
+
+# ---- torque, e-stop, reset ----
+def torque_to(state: LoopState, bus: ServoBus, enabled: bool) -> bool:
+    """Torque on (holding where the robot is, so nothing moves) or off (stopping any source)."""
+    if enabled:
+        if state.estopped or state.faults:
+            require_motion(state)  # raises with the reason
+        if state.joints is None:
+            raise MotionRefused("no joint state read yet: check the bus")
+        hold = state.joints.position_rad
+        bus.write_goal(hold)  # where it is, so enabling torque moves nothing
+        bus.torque(True)
+        state.commanded_rad, state.commanded_point_m = hold.copy(), state.point_m.copy()
+    else:
+        state.source = None
+        bus.torque(False)
+    state.torque = enabled
+    return enabled
+
+
+def estop_now(state: LoopState, ctx: CommandContext, bus: ServoBus) -> str:
+    """Stop at once: hold where the robot is, or release torque, per ``ctx.estop_action``."""
+    state.source = None
+    state.estopped = True
+    try:
+        if ctx.estop_action == "release" or state.joints is None:
+            bus.torque(False)
+            state.torque = False
         else:
-            self._commands.put((command, future))
-        return future
+            bus.write_goal(state.joints.position_rad)
+            state.commanded_rad = state.joints.position_rad.copy()
+            state.commanded_point_m = state.point_m.copy()
+    except BusError as exc:  # still e-stopped; say the bus did not answer
+        state.warning = f"e-stop could not reach the servos: {exc}"
+    return ctx.estop_action
 
-    def _run_commands(self: Controller) -> list[tuple[Future, Any]]:
-        """Run every queued command (control thread); their outcomes, to answer later."""
-        outcomes: list[tuple[Future, Any]] = []
-        while True:
-            try:
-                command, future = self._commands.get_nowait()
-            except Empty:
-                return outcomes
-            if future.set_running_or_notify_cancel():
-                try:
-                    outcomes.append((future, command()))
-                except Exception as exc:
-                    outcomes.append((future, exc))
 
-    # ---- public, any thread ----
-    def set_goal(self: Controller, point: Any) -> Future:
-        """Jog target, checked strictly: outside the workspace is refused with the nearest."""
-        goal = self.gate.check_point(point)
-        near = self.snapshot().joints_measured_rad
-        self.gate.solve(goal, near if np.isfinite(near).all() else np.zeros(3))
-        return self.submit(lambda: self._jog_to(goal))
-
-    def jog(self: Controller, delta_m: Any) -> Future:
-        """Relative jog step [m]; a target outside the workspace is clamped onto it."""
-        delta = np.asarray(delta_m, dtype=np.float64)
-        if delta.shape != (3,) or not np.isfinite(delta).all():
-            raise GoalRejected(f"delta_m: expected 3 finite numbers, got {delta_m!r}")
-        return self.submit(lambda: self._jog_by(delta))
-
-    def move(
-        self: Controller,
-        point: Any = None,
-        joints: Any = None,
-        duration_s: float | None = None,
-        joint_space: bool = False,
-    ) -> Future:
-        """Smooth move-to a point (Cartesian or joint-space path) or to joint angles."""
-        if (point is None) == (joints is None):
-            raise GoalRejected("give exactly one of position_m or joints_rad")
-        if joints is not None:
-            target = self.gate.check_joints(np.asarray(joints, dtype=np.float64))
-            return self.submit(lambda: self._move(target, duration_s, True))
-        goal = self.gate.check_point(point)
-        near = self.snapshot().joints_measured_rad
-        target = self.gate.solve(goal, near if np.isfinite(near).all() else np.zeros(3))
-        if joint_space:
-            return self.submit(lambda: self._move(target, duration_s, True))
-        return self.submit(lambda: self._move(goal, duration_s, False))
-
-    def run_source(
-        self: Controller,
-        source: GoalSource,
-        expected_start_m: np.ndarray,
-        tolerance_m: float = 2e-3,
-    ) -> Future:
-        """Hand the loop a planned source that starts at ``expected_start_m`` [m].
-
-        The plan was checked from that point; if the robot has moved since, it is refused.
-        """
-        return self.submit(lambda: self._run_source(source, expected_start_m, tolerance_m))
-
-    def stop_source(self: Controller, source: GoalSource) -> Future:
-        """Stop ``source`` if it is still the active one; the robot holds where it is."""
-        return self.submit(lambda: self._stop_source(source))
-
-    def set_torque(self: Controller, enabled: bool) -> Future:
-        return self.submit(lambda: self._torque_to(enabled))
-
-    def estop(self: Controller) -> Future:
-        """Stop at once and hold or release per config; nothing moves until reset."""
-        if not self.running:  # no loop to queue on: act directly
-            future: Future = Future()
-            future.set_result(self._estop_now())
-            return future
-        return self.submit(self._estop_now)
-
-    def reset(self: Controller) -> Future:
-        """Clear e-stop and faults, rebooting servos that report hardware errors."""
-        return self.submit(self._reset_now)
-
-    # ---- control thread ----
-    def _require_motion(self: Controller) -> None:
-        if self._estopped:
-            raise MotionRefused("e-stop is active: POST /api/reset first")
-        if self._faults:
-            raise MotionRefused(f"fault: {self._faults[0].reason}; POST /api/reset first")
-        if not self._torque:
-            raise MotionRefused('torque is off: POST /api/torque {"enabled": true} first')
-
-    def _start_point(self: Controller) -> np.ndarray:
-        if np.isfinite(self._commanded_point).all():
-            return self._commanded_point
-        return self._point
-
-    def _jog_to(self: Controller, goal: np.ndarray) -> list[float]:
-        self._require_motion()
-        if not isinstance(self._source, JogSource):
-            jog = self.settings.jog
-            limits = Limits(jog.max_velocity_m_s, jog.max_acceleration_m_s2, jog.max_jerk_m_s3)
-            self._source = JogSource(self._start_point(), limits, self.period_s)
-        self._source.set_target(goal)
-        self._goal = goal
-        return goal.tolist()
-
-    def _jog_by(self: Controller, delta: np.ndarray) -> list[float]:
-        self._require_motion()
-        base = self._goal if isinstance(self._source, JogSource) else self._start_point()
-        near = self._commanded if self._commanded is not None else self._state.position_rad
-        return self._jog_to(self.gate.clamp_towards(base, base + delta, near))
-
-    def _move(self: Controller, target: np.ndarray, duration_s: float | None, joints: bool):
-        self._require_motion()
-        if joints:
-            speed = self.settings.limits.joint_speed_rad_s
-            limits = Limits(0.5 * speed, 4.0 * speed, 40.0 * speed)
-            start = self._commanded if self._commanded is not None else self._state.position_rad
-            self._goal = self.robot.fk(target).points
-        else:
-            jog = self.settings.jog
-            limits = Limits(jog.max_velocity_m_s, jog.max_acceleration_m_s2, jog.max_jerk_m_s3)
-            start = self._start_point()
-            self._goal = target
-        source = MoveSource(start, target, limits, duration_s, joint_space=joints)
-        self._source = source
-        return {"duration_s": source.duration_s}
-
-    def _run_source(self: Controller, source: GoalSource, start: np.ndarray, tol: float) -> str:
-        self._require_motion()
-        moved = float(np.linalg.norm(self._start_point() - start))
-        if math.isfinite(tol) and not moved <= tol:
-            raise MotionRefused(f"the robot moved {moved * 1e3:.1f} mm since the plan; start again")
-        self._source = source
-        return source.name
-
-    def _stop_source(self: Controller, source: GoalSource) -> bool:
-        if self._source is not source:
-            return False
-        self._source = None
-        return True
-
-    def _torque_to(self: Controller, enabled: bool) -> bool:
-        if enabled:
-            if self._estopped or self._faults:
-                self._require_motion()  # raises with the reason
-            if self._state is None:
-                raise MotionRefused("no joint state read yet: check the bus")
-            hold = self._state.position_rad
-            self.bus.write_goal(hold)  # where it is, so enabling torque moves nothing
-            self.bus.torque(True)
-            self._commanded, self._commanded_point = hold.copy(), self._point.copy()
-        else:
-            self._source = None
-            self.bus.torque(False)
-        self._torque = enabled
-        return enabled
-
-    def _estop_now(self: Controller) -> str:
-        self._source = None
-        self._estopped = True
-        try:
-            if self.settings.safety.estop_action == "release" or self._state is None:
-                self.bus.torque(False)
-                self._torque = False
-            else:
-                self.bus.write_goal(self._state.position_rad)
-                self._commanded = self._state.position_rad.copy()
-                self._commanded_point = self._point.copy()
-        except BusError as exc:  # still e-stopped; say the bus did not answer
-            self._warning = f"e-stop could not reach the servos: {exc}"
-        return self.settings.safety.estop_action
-
-    def _reset_now(self: Controller) -> dict:
-        failing = [
-            sid
-            for sid, errors in zip(self.servo_ids, self._snapshot.hardware_errors, strict=True)
-            if errors
-        ]
-        if failing:
-            self.bus.reboot(failing)
-            self._torque = False  # a reboot leaves torque off
-        self._faults.clear()
-        self._estopped = False
-        self._warning = None
-        self._following.reset()
-        self._misses.ok()
-        self._source = None
-        return {"rebooted": failing}
+def reset_now(state: LoopState, ctx: CommandContext, bus: ServoBus) -> dict:
+    """Clear e-stop and faults, rebooting the servos whose last read had hardware errors."""
+    errors = state.joints.hardware_errors if state.joints is not None else ((),) * 3
+    failing = [sid for sid, names in zip(ctx.servo_ids, errors, strict=True) if names]
+    if failing:
+        bus.reboot(failing)
+        state.torque = False  # a reboot leaves torque off
+    state.faults.clear()
+    state.estopped = False
+    state.warning = None
+    state.following.reset()
+    state.misses.ok()
+    state.source = None
+    return {"rebooted": failing}

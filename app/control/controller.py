@@ -14,74 +14,51 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import Future
-from queue import SimpleQueue
+from queue import Empty, SimpleQueue
 from typing import Any
 
 import numpy as np
 
 from app.config import Settings
-from app.control.commands import CommandsMixin
-from app.control.gate import Gate, GoalRejected
-from app.control.safety import FollowingError, MissCounter, servo_faults
+from app.control import commands
+from app.control.commands import CommandContext, record_fault
+from app.control.errors import GoalRejected
+from app.control.loop_state import LoopState
+from app.control.safety import servo_faults
 from app.control.sources import GoalSource, Setpoint
 from app.control.state import Fault, Snapshot
 from app.control.timing import TickClock, TimingRecorder
-from hardware.bus import JointState, ServoBus
+from hardware.bus import ServoBus
 from hardware.errors import BusError
 
 log = logging.getLogger(__name__)
 Listener = Callable[[Snapshot], None]
 
 
-class Controller(CommandsMixin):
-    """Runs the control loop for one robot on one bus. start() / stop() from the lifespan."""
+class Controller:
+    """Runs the control loop for one robot on one bus. start() / stop() from the lifespan.
+
+    ``state`` belongs to the control thread (the tick and the queued commands). The public
+    methods check their input in the caller's thread (the gate is pure) and queue the change;
+    each returns a Future with the outcome, answered once the snapshot shows the change.
+    """
 
     def __init__(
         self, settings: Settings, bus: ServoBus, backend: str, backend_description: str = ""
     ) -> None:
         self.settings = settings
-        self.robot = settings.robot.build()
-        self.bus = bus
-        self.backend = backend
+        self.ctx = CommandContext.from_settings(settings)
+        self.robot, self.gate = self.ctx.robot, self.ctx.gate
+        self.servo_ids, self.period_s = self.ctx.servo_ids, self.ctx.period_s
+        self.bus, self.backend = bus, backend
         self.backend_description = backend_description or backend
-        self.servo_ids = tuple(j.servo_id for j in settings.hardware.joints)
-        self.period_s = 1.0 / settings.loop.rate_hz
-        joints = settings.hardware.joints
-        self.gate = Gate(
-            self.robot,
-            tuple(j.min_angle_rad for j in joints),  # type: ignore[arg-type]
-            tuple(j.max_angle_rad for j in joints),  # type: ignore[arg-type]
-            settings.limits.workspace_margin_m,
-            settings.limits.z_max_m,
-            settings.limits.min_dexterity,
-            settings.limits.joint_speed_rad_s * self.period_s,
-        )
         self.timing = TimingRecorder(settings.loop.rate_hz)
+        self.state = LoopState.initial(settings.safety, self.period_s)
         self._commands: SimpleQueue[tuple[Callable[[], Any], Future]] = SimpleQueue()
         self._listeners: list[Listener] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._misses = MissCounter(settings.safety.max_missed_reads)
-        self._following = FollowingError(
-            settings.safety.following_error_rad, settings.safety.following_error_time_s
-        )
-        self._source: GoalSource | None = None
-        self._faults: list[Fault] = []
-        self._torque = False
-        self._estopped = False
-        self._warning: str | None = None
-        self._state: JointState | None = None
-        self._point = np.full(3, np.nan)
-        self._commanded: np.ndarray | None = None
-        self._commanded_point = np.full(3, np.nan)
-        self._goal = np.full(3, np.nan)
-        self._tick = 0
-        self._phase = ""
-        self._extra: dict | None = None
         self._external = getattr(bus, "measure_platform", None)
-        self._external_m = np.full(3, np.nan)
-        self._lateness_s = 0.0
-        self._dt_s = self.period_s
         self._t0 = time.monotonic()
         self._snapshot = Snapshot()
         self.pose_status: Callable[[], dict] | None = None  # set by the world service
@@ -99,8 +76,8 @@ class Controller(CommandsMixin):
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
-        self._source = None  # ruckig objects must not outlive the interpreter's shutdown
-        if self.settings.safety.torque_off_on_exit and self._torque:
+        self.state.source = None  # ruckig objects must not outlive the interpreter's shutdown
+        if self.settings.safety.torque_off_on_exit and self.state.torque:
             try:
                 self.bus.torque(False)
             except BusError as exc:
@@ -122,32 +99,106 @@ class Controller(CommandsMixin):
         if listener in self._listeners:
             self._listeners.remove(listener)
 
-    # ---- the loop ----
+    # ---- commands, from any thread ----
+    def submit(self, command: Callable[[], Any]) -> Future:
+        """Run ``command()`` in the control thread at the start of the next tick."""
+        future: Future = Future()
+        if not self.running:
+            future.set_exception(RuntimeError("the control loop is not running"))
+        else:
+            self._commands.put((command, future))
+        return future
+
+    def set_goal(self, point: Any) -> Future:
+        """Jog target, checked strictly: outside the workspace is refused with the nearest."""
+        goal = self.gate.check_point(point)
+        self.gate.solve(goal, self._near_measured())
+        return self.submit(lambda: commands.jog_to(self.state, self.ctx, goal))
+
+    def jog(self, delta_m: Any) -> Future:
+        """Relative jog step [m]; a target outside the workspace is clamped onto it."""
+        delta = np.asarray(delta_m, dtype=np.float64)
+        if delta.shape != (3,) or not np.isfinite(delta).all():
+            raise GoalRejected(f"delta_m: expected 3 finite numbers, got {delta_m!r}")
+        return self.submit(lambda: commands.jog_by(self.state, self.ctx, delta))
+
+    def move(
+        self,
+        point: Any = None,
+        joints: Any = None,
+        duration_s: float | None = None,
+        joint_space: bool = False,
+    ) -> Future:
+        """Smooth move-to a point (Cartesian or joint-space path) or to joint angles."""
+        target, joint_space = commands.check_move(
+            self.gate, point, joints, joint_space, self._near_measured()
+        )
+        return self.submit(
+            lambda: commands.move(self.state, self.ctx, target, duration_s, joint_space)
+        )
+
+    def run_source(
+        self, source: GoalSource, expected_start_m: np.ndarray, tolerance_m: float = 2e-3
+    ) -> Future:
+        """Hand the loop a planned source that starts at ``expected_start_m`` [m].
+
+        The plan was checked from that point; if the robot has moved since, it is refused.
+        """
+        return self.submit(
+            lambda: commands.run_source(self.state, source, expected_start_m, tolerance_m)
+        )
+
+    def stop_source(self, source: GoalSource) -> Future:
+        """Stop ``source`` if it is still the active one; the robot holds where it is."""
+        return self.submit(lambda: commands.stop_source(self.state, source))
+
+    def set_torque(self, enabled: bool) -> Future:
+        return self.submit(lambda: commands.torque_to(self.state, self.bus, enabled))
+
+    def estop(self) -> Future:
+        """Stop at once and hold or release per config; nothing moves until reset."""
+        if not self.running:  # no loop to queue on: act directly
+            future: Future = Future()
+            future.set_result(commands.estop_now(self.state, self.ctx, self.bus))
+            return future
+        return self.submit(lambda: commands.estop_now(self.state, self.ctx, self.bus))
+
+    def reset(self) -> Future:
+        """Clear e-stop and faults, rebooting servos that report hardware errors."""
+        return self.submit(lambda: commands.reset_now(self.state, self.ctx, self.bus))
+
+    def _near_measured(self) -> np.ndarray:
+        near = self.snapshot().joints_measured_rad
+        return near if np.isfinite(near).all() else np.zeros(3)
+
+    # ---- the loop (control thread) ----
     def _run(self) -> None:
         clock = TickClock(self.settings.loop.rate_hz, self.settings.loop.spin_s)
         previous: float | None = None
         while not self._stop.is_set():
             deadline, lateness = clock.wait_next()
             # sources advance by the scheduled time elapsed, which includes skipped slots
-            self._dt_s = self.period_s if previous is None else deadline - previous
-            previous = deadline
-            self._lateness_s = lateness
+            self.state.dt_s = self.period_s if previous is None else deadline - previous
+            previous, self.state.lateness_s = deadline, lateness
             started = time.perf_counter()
             try:
-                self._step()
+                self.step()
             except Exception as exc:  # a bug must stop motion, not the loop
                 log.exception("control tick failed")
-                self._fault(Fault("loop", f"internal error: {exc!r}", time_s=self._now()))
+                fault = Fault("loop", f"internal error: {exc!r}", time_s=self._now())
+                record_fault(self.state, fault)
             self.timing.record(deadline, lateness, time.perf_counter() - started)
 
-    def _step(self) -> None:
-        self._tick += 1
+    def step(self) -> None:
+        """One tick (the thread calls it each period; tests may call it on an unstarted one)."""
+        self.state.tick += 1
         outcomes = self._run_commands()
         try:
-            if self._read() and self._state is not None and self._state.faulted:
+            joints = self.state.joints if self._read() else None
+            if joints is not None and joints.faulted:
                 now = self._now()
-                for fault in servo_faults(self.servo_ids, self._state.hardware_errors, now):
-                    self._fault(fault)
+                for fault in servo_faults(self.servo_ids, joints.hardware_errors, now):
+                    record_fault(self.state, fault)
             self._advance()
             self._publish()
         finally:
@@ -157,134 +208,106 @@ class Controller(CommandsMixin):
                 else:
                     future.set_result(outcome)
 
+    def _run_commands(self) -> list[tuple[Future, Any]]:
+        """Run every queued command; their outcomes, to answer after this tick's publish."""
+        outcomes: list[tuple[Future, Any]] = []
+        while True:
+            try:
+                command, future = self._commands.get_nowait()
+            except Empty:
+                return outcomes
+            if future.set_running_or_notify_cancel():
+                try:
+                    outcomes.append((future, command()))
+                except Exception as exc:
+                    outcomes.append((future, exc))
+
     def _read(self) -> bool:
+        state = self.state
         try:
-            state = self.bus.read_state()
+            joints = self.bus.read_state()
         except BusError as exc:
-            if self._misses.miss():
-                self._fault(
-                    Fault(
-                        "bus", f"{self._misses.consecutive} reads failed: {exc}", time_s=self._now()
-                    )
-                )
+            if state.misses.miss():
+                reason = f"{state.misses.consecutive} reads failed: {exc}"
+                record_fault(state, Fault("bus", reason, time_s=self._now()))
             return False
-        self._misses.ok()
-        self._state = state
-        self._point = self.robot.fk(state.position_rad).points
+        state.misses.ok()
+        state.joints = joints
+        state.point_m = self.robot.fk(joints.position_rad).points
         if self._external is not None:  # the simulator's "motion capture" of the platform,
-            self._external_m = self._external(at_last_read=True)  # at the read's instant
+            state.external_m = self._external(at_last_read=True)  # at the read's instant
         return True
 
     def _advance(self) -> None:
-        if self._source is None or not self._motion_allowed() or self._state is None:
+        state, source = self.state, self.state.source
+        if source is None or not commands.motion_allowed(state) or state.joints is None:
             return
-        source = self._source
-        setpoint = source.next(self._dt_s)
-        self._phase, self._extra = setpoint.phase, setpoint.extra
+        setpoint = source.next(state.dt_s)
+        state.phase, state.extra = setpoint.phase, setpoint.extra
         if setpoint.fault is not None:
-            self._fault(Fault("source", f"{source.name}: {setpoint.fault}", time_s=self._now()))
+            fault = Fault("source", f"{source.name}: {setpoint.fault}", time_s=self._now())
+            record_fault(state, fault)
             return
         if setpoint.goal_m is not None:
-            self._goal = setpoint.goal_m
+            state.goal_m = setpoint.goal_m
         if setpoint.point_m is None and setpoint.joints_rad is None:
-            self._warning = setpoint.warning  # the source asks to hold where we are
+            state.warning = setpoint.warning  # the source asks to hold where we are
         else:
             self._follow(setpoint)
-        if setpoint.finished and self._source is source:
-            self._source = None
+        if setpoint.finished and state.source is source:
+            state.source = None
 
     def _follow(self, setpoint: Setpoint) -> None:
-        joints = self._setpoint_joints(setpoint)
-        if joints is None:
+        if (joints := self._setpoint_joints(setpoint)) is None:
             return
-        self._write(joints, setpoint)
-        fault = self._following.check(self._now(), self._commanded, self._state.position_rad)
+        self._write(joints)
+        state = self.state
+        fault = state.following.check(self._now(), state.commanded_rad, state.joints.position_rad)
         if fault is not None:
-            self._fault(fault)
+            record_fault(state, fault)
 
     def _setpoint_joints(self, setpoint: Setpoint) -> np.ndarray | None:
-        near = self._commanded if self._commanded is not None else self._state.position_rad
         try:
             if setpoint.joints_rad is not None:
                 return self.gate.check_joints(setpoint.joints_rad)
-            return self.gate.solve(self.gate.clamp_point(setpoint.point_m), near)
+            point = self.gate.clamp_point(setpoint.point_m)
+            return self.gate.solve(point, self.state.reference_rad)
         except GoalRejected as exc:
-            self._warning = f"holding: {exc}"  # the path crossed a limit: stay put
+            self.state.warning = f"holding: {exc}"  # the path crossed a limit: stay put
             return None
 
-    def _write(self, joints: np.ndarray, setpoint: Setpoint) -> None:
-        previous = self._commanded if self._commanded is not None else self._state.position_rad
-        joints = self.gate.limit_step(joints, previous)
+    def _write(self, joints: np.ndarray) -> None:
+        state = self.state
+        joints = self.gate.limit_step(joints, state.reference_rad)
         try:
             self.bus.write_goal(joints)
         except BusError as exc:
-            if self._misses.miss():
-                self._fault(Fault("bus", f"goal writes failing: {exc}", time_s=self._now()))
+            if state.misses.miss():
+                record_fault(state, Fault("bus", f"goal writes failing: {exc}", time_s=self._now()))
             return
-        self._commanded = joints
-        self._commanded_point = self.robot.fk(joints).points
-        self._warning = None
-
-    def _motion_allowed(self) -> bool:
-        return self._torque and not self._estopped and not self._faults
-
-    def _fault(self, fault: Fault) -> None:
-        """Record a fault (once per reason) and stop: hold where the robot is."""
-        if any(f.source == fault.source and f.reason == fault.reason for f in self._faults):
-            return
-        log.error("fault: %s", fault.reason)
-        self._faults.append(fault)
-        self._source = None
+        state.commanded_rad = joints
+        state.commanded_point_m = self.robot.fk(joints).points
+        state.warning = None
 
     def _now(self) -> float:
         return time.monotonic() - self._t0
 
     def _publish(self) -> None:
-        state = self._state
-        nan3 = np.full(3, np.nan)
-        commanded = self._commanded if self._commanded is not None else nan3
-        self._snapshot = Snapshot(
-            time_s=self._now(),
-            tick=self._tick,
-            mode=self.mode,
-            torque=self._torque,
-            estopped=self._estopped,
-            faults=tuple(self._faults),
-            warning=self._warning,
-            joints_measured_rad=state.position_rad if state else nan3,
-            point_measured_m=self._point,
-            joints_commanded_rad=commanded,
-            point_commanded_m=self._commanded_point,
-            goal_m=self._goal,
-            velocity_rad_s=state.velocity_rad_s if state else nan3,
-            current_a=state.current_a if state else nan3,
-            voltage_v=state.voltage_v if state else nan3,
-            temperature_c=state.temperature_c if state else nan3,
-            moving=tuple(bool(m) for m in state.moving) if state else (False,) * 3,
-            hardware_errors=state.hardware_errors if state else ((),) * 3,
-            missed_reads=self._misses.total,
-            phase=self._phase if self._source else "",
-            lateness_ms=self._lateness_s * 1e3,
-            extra=self._extra if self._source else None,
-            external_m=self._external_m,
-        )
+        self._snapshot = self.state.snapshot(self._now())
         for listener in tuple(self._listeners):  # a listener may remove itself
             listener(self._snapshot)
 
+    # ---- read from the control thread (e.g. in a listener) ----
     @property
     def measured_point(self) -> np.ndarray:
         """This tick's measured platform position (call from the control thread)."""
-        return self._point
+        return self.state.point_m
 
     @property
     def current_source(self) -> GoalSource | None:
         """The active goal source (read it from the control thread, e.g. in a listener)."""
-        return self._source
+        return self.state.source
 
     @property
     def mode(self) -> str:
-        if self._estopped:
-            return "estop"
-        if self._faults:
-            return "fault"
-        return self._source.name if self._source is not None else "idle"
+        return self.state.mode

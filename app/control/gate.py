@@ -15,20 +15,10 @@ from typing import Any
 
 import numpy as np
 
+from app.control.errors import GoalRejected
 from kinematics import DeltaError, LinearDelta, RotaryDelta
 
 FAR_M = 10.0  # goals beyond this are scaled back before projecting (still refused)
-
-
-class GoalRejected(ValueError):
-    """A goal failed the gate; ``nearest`` is the closest acceptable point when known."""
-
-    def __init__(self, reason: str, nearest: np.ndarray | None = None) -> None:
-        if nearest is not None:
-            mm = ", ".join(f"{v:.4f}" for v in nearest)
-            reason = f"{reason}; nearest reachable point [{mm}] m"
-        super().__init__(reason)
-        self.nearest = nearest
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.control.gate import Gate, GoalRejected
+from app.control.errors import GoalRejected
+from app.control.gate import Gate
 
 
 def _first(mask: np.ndarray) -> int | None:

@@ -13,8 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from app.control.commands import MotionRefused
-from app.control.gate import GoalRejected
+from app.control.errors import GoalRejected, MotionRefused
 from app.runs.feasibility import check_path
 from app.runs.logs import RunLog
 from app.runs.recorder import Recorder

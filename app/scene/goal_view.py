@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app.control.gate import GoalRejected
+from app.control.errors import GoalRejected
 from app.control.state import Snapshot
 from app.scene.goal_store import load_points, save_points
 

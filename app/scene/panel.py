@@ -14,8 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import viser
 
-from app.control.commands import MotionRefused
-from app.control.gate import GoalRejected
+from app.control.errors import GoalRejected, MotionRefused
 from app.control.state import Snapshot
 
 if TYPE_CHECKING:

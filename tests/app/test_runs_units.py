@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 
 from app.config import load_settings
-from app.control.gate import Gate, GoalRejected
+from app.control.errors import GoalRejected
+from app.control.gate import Gate
 from app.runs.feasibility import check_path
 from app.runs.logs import COLUMNS, RunLog, read_messages
 from app.runs.paths import ChirpParams, WaypointParams

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from app.config import load_settings
-from app.control.gate import Gate, GoalRejected
+from app.control.errors import GoalRejected
+from app.control.gate import Gate
 from app.control.safety import FollowingError, MissCounter
 from app.control.timing import TickClock, TimingRecorder
 from kinematics import THESIS_DELTA

@@ -1,0 +1,109 @@
+"""The control loop's mutable state: one record, owned by the control thread alone.
+
+The tick (app/control/controller.py) and the operator commands (app/control/commands.py)
+are functions that take this record and change it; no other thread reads it. What other
+threads see is the immutable :class:`~app.control.state.Snapshot` made from it each tick.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from app.config import SafetySettings
+from app.control.safety import FollowingError, MissCounter
+from app.control.sources import GoalSource
+from app.control.state import Fault, Snapshot
+from hardware.bus import JointState
+
+
+def _nan3() -> np.ndarray:
+    return np.full(3, np.nan)
+
+
+@dataclass
+class LoopState:
+    """Everything the loop remembers between ticks; arrays are (3,), NaN where unknown.
+
+    joints: the last successful read; point_m: FK of it (the measured platform position);
+    commanded_rad / commanded_point_m: the last goal written to the servos (None / NaN before
+    any); goal_m: the active goal (a jog target, a move's end, a run's nominal point);
+    external_m: the simulator's own measurement of the platform at the last read.
+    """
+
+    misses: MissCounter
+    following: FollowingError
+    source: GoalSource | None = None
+    torque: bool = False
+    estopped: bool = False
+    faults: list[Fault] = field(default_factory=list)
+    warning: str | None = None
+    joints: JointState | None = None
+    point_m: np.ndarray = field(default_factory=_nan3)
+    commanded_rad: np.ndarray | None = None
+    commanded_point_m: np.ndarray = field(default_factory=_nan3)
+    goal_m: np.ndarray = field(default_factory=_nan3)
+    external_m: np.ndarray = field(default_factory=_nan3)
+    tick: int = 0
+    phase: str = ""
+    extra: dict | None = None
+    dt_s: float = 0.0  # scheduled time since the previous tick (sources advance by it)
+    lateness_s: float = 0.0
+
+    @classmethod
+    def initial(cls, safety: SafetySettings, period_s: float) -> LoopState:
+        """The state before the first read: torque off, no source, no faults."""
+        return cls(
+            MissCounter(safety.max_missed_reads),
+            FollowingError(safety.following_error_rad, safety.following_error_time_s),
+            dt_s=period_s,
+        )
+
+    @property
+    def mode(self) -> str:
+        if self.estopped:
+            return "estop"
+        if self.faults:
+            return "fault"
+        return self.source.name if self.source is not None else "idle"
+
+    @property
+    def reference_rad(self) -> np.ndarray:
+        """The joints the next command starts from: the commanded ones, else the measured."""
+        if self.commanded_rad is not None:
+            return self.commanded_rad
+        if self.joints is None:  # commands check for this first; the tick never asks then
+            raise RuntimeError("no joint state read yet")
+        return self.joints.position_rad
+
+    def snapshot(self, time_s: float) -> Snapshot:
+        """The immutable record other threads read, as of now."""
+        state = self.joints
+        nan3 = _nan3()
+        commanded = self.commanded_rad if self.commanded_rad is not None else nan3
+        return Snapshot(
+            time_s=time_s,
+            tick=self.tick,
+            mode=self.mode,
+            torque=self.torque,
+            estopped=self.estopped,
+            faults=tuple(self.faults),
+            warning=self.warning,
+            joints_measured_rad=state.position_rad if state else nan3,
+            point_measured_m=self.point_m,
+            joints_commanded_rad=commanded,
+            point_commanded_m=self.commanded_point_m,
+            goal_m=self.goal_m,
+            velocity_rad_s=state.velocity_rad_s if state else nan3,
+            current_a=state.current_a if state else nan3,
+            voltage_v=state.voltage_v if state else nan3,
+            temperature_c=state.temperature_c if state else nan3,
+            moving=tuple(bool(m) for m in state.moving) if state else (False,) * 3,
+            hardware_errors=state.hardware_errors if state else ((),) * 3,
+            missed_reads=self.misses.total,
+            phase=self.phase if self.source else "",
+            lateness_ms=self.lateness_s * 1e3,
+            extra=self.extra if self.source else None,
+            external_m=self.external_m,
+        )

@@ -1,0 +1,557 @@
+"""The controller's state machine on a LoopState and a fake bus: no thread, no HTTP, no sim.
+
+One table row per transition (torque, e-stop in each mode, reset, faults, source hand-over,
+refusals): a starting state, one command, and what must hold after it, including exactly
+which calls reached the bus. Then the tick itself, driven by Controller.step() on a
+controller that was never started.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+from unittest.mock import ANY
+
+import numpy as np
+import pytest
+
+from app.config import load_settings
+from app.control import commands
+from app.control.commands import CommandContext
+from app.control.controller import Controller
+from app.control.errors import MotionRefused
+from app.control.loop_state import LoopState
+from app.control.sources import JogSource, MoveSource, Setpoint
+from app.control.state import Fault
+from hardware.bus import JointState
+from hardware.errors import CommError
+
+SETTINGS = load_settings()
+CTX = {
+    "hold": CommandContext.from_settings(SETTINGS),
+    "release": dataclasses.replace(CommandContext.from_settings(SETTINGS), estop_action="release"),
+}
+ROBOT = CTX["hold"].robot
+HOME_M = np.array([0.0, 0.0, -0.22])
+HOME_RAD = tuple(float(q) for q in ROBOT.ik(HOME_M).joints)  # inside every limit
+NO_ERRORS: tuple[tuple[str, ...], ...] = ((), (), ())
+SERVO_2_OVERLOAD = ((), ("overload",), ())
+FAULT = Fault("following", "joint 2 lags its command")
+
+
+class FakeBus:
+    """Records torque / write_goal / reboot; reads back an ideal servo (or a stuck one)."""
+
+    def __init__(self, errors: tuple[tuple[str, ...], ...] = NO_ERRORS) -> None:
+        self.calls: list[tuple] = []
+        self.position = np.array(HOME_RAD)
+        self.errors = errors
+        self.fail_reads = self.fail_writes = self.stuck = False
+
+    def torque(self, enabled: bool) -> None:
+        self._fail_if(self.fail_writes, "write torque")
+        self.calls.append(("torque", enabled))
+
+    def write_goal(self, positions_rad) -> None:
+        self._fail_if(self.fail_writes, "sync write goal")
+        self.calls.append(("write_goal", tuple(float(q) for q in positions_rad)))
+        if not self.stuck:
+            self.position = np.array(positions_rad, dtype=np.float64)
+
+    def reboot(self, ids=None) -> None:
+        self.calls.append(("reboot", tuple(ids)))
+        self.errors = NO_ERRORS
+
+    def read_state(self) -> JointState:
+        self._fail_if(self.fail_reads, "sync read state")
+        return JointState(
+            position_rad=self.position.copy(),
+            velocity_rad_s=np.zeros(3),
+            current_a=np.zeros(3),
+            voltage_v=np.full(3, 12.0),
+            temperature_c=np.full(3, 30.0),
+            moving=np.zeros(3, dtype=bool),
+            hardware_errors=self.errors,
+            stamp_s=0.0,
+        )
+
+    @staticmethod
+    def _fail_if(failing: bool, instruction: str) -> None:
+        if failing:
+            raise CommError((1, 2, 3), instruction, "no status packet (fake)")
+
+
+class RunSource:
+    """A stand-in for a planned run (sinusoid, chirp): asks the loop to hold where it is."""
+
+    def __init__(self, name: str = "sinusoid", fault: str | None = None) -> None:
+        self.name, self.fault = name, fault
+
+    def next(self, dt_s: float) -> Setpoint:
+        return Setpoint(fault=self.fault)
+
+
+OTHER_RUN = RunSource("chirp")  # the source a command hands over (or fails to stop)
+
+
+@dataclass(frozen=True)
+class Given:
+    """The state before the command: read the robot, torque, e-stop, a fault, a source."""
+
+    read: bool = True
+    torque: bool = False
+    estopped: bool = False
+    faulted: bool = False
+    source: str | None = None  # "jog", "move" or "run"
+    errors: tuple[tuple[str, ...], ...] = NO_ERRORS
+    estop_action: str = "hold"
+    bus_fails: bool = False
+
+
+def arrange(given: Given) -> tuple[LoopState, CommandContext, FakeBus]:
+    ctx = CTX[given.estop_action]
+    state = LoopState.initial(SETTINGS.safety, ctx.period_s)
+    bus = FakeBus(given.errors)
+    if given.read:
+        state.joints = bus.read_state()
+        state.point_m = ROBOT.fk(state.joints.position_rad).points
+    if given.torque:
+        state.torque = True
+        state.commanded_rad = np.array(HOME_RAD)
+        state.commanded_point_m = ROBOT.fk(state.commanded_rad).points
+    state.estopped = given.estopped
+    if given.faulted:
+        state.faults.append(FAULT)
+    if given.source == "jog":
+        state.source = JogSource(HOME_M, ctx.jog_limits, ctx.period_s)
+        state.source.set_target(HOME_M + [0.01, 0, 0])
+        state.goal_m = HOME_M + [0.01, 0, 0]
+    elif given.source == "move":
+        state.source = MoveSource(HOME_M, HOME_M + [0, 0.01, 0], ctx.jog_limits, None, False)
+    elif given.source == "run":
+        state.source = RunSource()
+    bus.fail_reads = bus.fail_writes = given.bus_fails
+    return state, ctx, bus
+
+
+@dataclass(frozen=True)
+class Then:
+    """What must hold after the command (``refused``: a regex of the MotionRefused)."""
+
+    mode: str
+    torque: bool
+    calls: tuple = ()
+    result: Any = field(default_factory=lambda: ANY)  # ANY: not checked
+    refused: str | None = None
+    faults: int = 0
+    same_source: bool | None = None  # the active source object is (not) the one before
+    warning: str | None = None
+
+
+Command = Callable[[LoopState, CommandContext, FakeBus], Any]
+GOAL = HOME_M + [0.0, 0.02, -0.01]
+HOLD = (("write_goal", HOME_RAD),)
+RELEASE = (("torque", False),)
+REBOOT_2 = (("reboot", (2,)),)
+ON = {"torque": True}
+estop: Command = commands.estop_now
+reset: Command = commands.reset_now
+
+
+def torque_on(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
+    return commands.torque_to(state, bus, True)
+
+
+def torque_off(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
+    return commands.torque_to(state, bus, False)
+
+
+def jog(state: LoopState, ctx: CommandContext, bus: FakeBus) -> list[float]:
+    return commands.jog_to(state, ctx, GOAL)
+
+
+def jog_up(state: LoopState, ctx: CommandContext, bus: FakeBus) -> list[float]:
+    return commands.jog_by(state, ctx, np.array([0.0, 0.0, 0.01]))
+
+
+def move(state: LoopState, ctx: CommandContext, bus: FakeBus) -> dict:
+    return commands.move(state, ctx, GOAL, None, False)
+
+
+def move_joints(state: LoopState, ctx: CommandContext, bus: FakeBus) -> dict:
+    return commands.move(state, ctx, np.array(HOME_RAD) + 0.05, 0.5, True)
+
+
+def run(state: LoopState, ctx: CommandContext, bus: FakeBus) -> str:
+    return commands.run_source(state, OTHER_RUN, HOME_M, 2e-3)
+
+
+def run_moved(state: LoopState, ctx: CommandContext, bus: FakeBus) -> str:
+    return commands.run_source(state, OTHER_RUN, HOME_M + 0.01, 2e-3)  # 17.3 mm away
+
+
+def stop_other(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
+    return commands.stop_source(state, OTHER_RUN)
+
+
+def stop_active(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
+    assert state.source is not None
+    return commands.stop_source(state, state.source)
+
+
+def fault(state: LoopState, ctx: CommandContext, bus: FakeBus) -> None:
+    commands.record_fault(state, FAULT)
+
+
+# fmt: off
+TABLE = [  # given, command, then: one row per transition
+    # torque
+    pytest.param(
+        Given(), torque_on, Then("idle", True, HOLD + (("torque", True),), True),
+        id="torque on: holds where it is, then enables",
+    ),
+    pytest.param(
+        Given(**ON, source="jog"), torque_off, Then("idle", False, RELEASE, False),
+        id="torque off stops a jog",
+    ),
+    pytest.param(
+        Given(**ON, source="run"), torque_off, Then("idle", False, RELEASE, False),
+        id="torque off stops a run",
+    ),
+    pytest.param(
+        Given(read=False), torque_on, Then("idle", False, refused="no joint state"),
+        id="torque on before any read: refused",
+    ),
+    pytest.param(
+        Given(estopped=True), torque_on, Then("estop", False, refused="e-stop"),
+        id="torque on while e-stopped: refused",
+    ),
+    pytest.param(
+        Given(faulted=True), torque_on, Then("fault", False, refused="fault: joint 2", faults=1),
+        id="torque on while faulted: refused",
+    ),
+    # e-stop, in each mode
+    pytest.param(
+        Given(**ON, source="move"), estop, Then("estop", True, HOLD, "hold"),
+        id="e-stop (hold) during a move: holds, torque stays on",
+    ),
+    pytest.param(
+        Given(**ON, source="jog", estop_action="release"),
+        estop,
+        Then("estop", False, RELEASE, "release"),
+        id="e-stop (release) during a jog: torque off",
+    ),
+    pytest.param(
+        Given(**ON, source="run", estop_action="release"),
+        estop,
+        Then("estop", False, RELEASE, "release"),
+        id="e-stop (release) during a run",
+    ),
+    pytest.param(
+        Given(read=False), estop, Then("estop", False, RELEASE, "hold"),
+        id="e-stop (hold) before any read: releases",
+    ),
+    pytest.param(
+        Given(**ON, source="jog", bus_fails=True),
+        estop,
+        Then("estop", True, (), "hold", warning="e-stop could not reach"),
+        id="e-stop with a silent bus: still e-stopped, says so",
+    ),
+    pytest.param(
+        Given(**ON, faulted=True), estop, Then("estop", True, HOLD, "hold", faults=1),
+        id="e-stop while faulted: e-stop shows first",
+    ),
+    # reset
+    pytest.param(
+        Given(**ON, estopped=True), reset, Then("idle", True, (), {"rebooted": []}),
+        id="reset after a hold e-stop: torque stays on",
+    ),
+    pytest.param(
+        Given(**ON, faulted=True), reset, Then("idle", True, (), {"rebooted": []}),
+        id="reset a fault with no servo errors: nothing rebooted",
+    ),
+    pytest.param(
+        Given(**ON, faulted=True, errors=SERVO_2_OVERLOAD),
+        reset,
+        Then("idle", False, REBOOT_2, {"rebooted": [2]}),
+        id="reset with servo 2 in error: reboots it, torque off",
+    ),
+    pytest.param(
+        Given(**ON, estopped=True, faulted=True, errors=SERVO_2_OVERLOAD),
+        reset,
+        Then("idle", False, REBOOT_2, {"rebooted": [2]}),
+        id="reset e-stop and fault together",
+    ),
+    pytest.param(
+        Given(**ON, source="jog"), reset, Then("idle", True, (), {"rebooted": []}),
+        id="reset with nothing wrong stops the source",
+    ),
+    # faults during motion
+    pytest.param(
+        Given(**ON, source="jog"), fault, Then("fault", True, faults=1),
+        id="fault during a jog: source dropped",
+    ),
+    pytest.param(
+        Given(**ON, source="move"), fault, Then("fault", True, faults=1),
+        id="fault during a move: source dropped",
+    ),
+    pytest.param(
+        Given(**ON, source="run"), fault, Then("fault", True, faults=1),
+        id="fault during a run: source dropped",
+    ),
+    pytest.param(
+        Given(**ON, faulted=True), fault, Then("fault", True, faults=1),
+        id="the same fault twice is recorded once",
+    ),
+    # motion refused
+    pytest.param(
+        Given(), jog, Then("idle", False, refused="torque is off"),
+        id="jog with torque off: refused",
+    ),
+    pytest.param(
+        Given(**ON, estopped=True), jog, Then("estop", True, refused="e-stop"),
+        id="jog while e-stopped: refused",
+    ),
+    pytest.param(
+        Given(**ON, faulted=True), move, Then("fault", True, refused="fault", faults=1),
+        id="move while faulted: refused",
+    ),
+    pytest.param(
+        Given(), move_joints, Then("idle", False, refused="torque is off"),
+        id="joint move with torque off: refused",
+    ),
+    pytest.param(
+        Given(**ON, estopped=True, source=None), run, Then("estop", True, refused="e-stop"),
+        id="run while e-stopped: refused",
+    ),
+    pytest.param(
+        Given(**ON, faulted=True), run, Then("fault", True, refused="fault", faults=1),
+        id="run while faulted: refused",
+    ),
+    pytest.param(
+        Given(**ON, source="run"),
+        run_moved,
+        Then("sinusoid", True, refused="moved 17.3 mm", same_source=True),
+        id="run refused: the robot moved since the plan",
+    ),
+    # motion started, and one source replacing another
+    pytest.param(
+        Given(**ON), jog, Then("jog", True, (), GOAL.tolist()),
+        id="jog from idle",
+    ),
+    pytest.param(
+        Given(**ON, source="jog"),
+        jog_up,
+        Then("jog", True, (), pytest.approx([0.01, 0.0, -0.21]), same_source=True),
+        id="jog by a step retargets the active jog",
+    ),
+    pytest.param(
+        Given(**ON, source="move"), jog, Then("jog", True, same_source=False),
+        id="a jog replaces a move",
+    ),
+    pytest.param(
+        Given(**ON, source="run"), jog, Then("jog", True, same_source=False),
+        id="a jog replaces a run",
+    ),
+    pytest.param(
+        Given(**ON, source="jog"), move, Then("move", True, same_source=False),
+        id="a move replaces a jog",
+    ),
+    pytest.param(
+        Given(**ON, source="jog"), move_joints, Then("move-joints", True, same_source=False),
+        id="a joint move replaces a jog",
+    ),
+    pytest.param(
+        Given(**ON, source="move"), run, Then("chirp", True, (), "chirp", same_source=False),
+        id="a run replaces a move",
+    ),
+    pytest.param(
+        Given(**ON, source="run"), run, Then("chirp", True, (), "chirp", same_source=False),
+        id="a run replaces another run",
+    ),
+    pytest.param(
+        Given(**ON, source="run"), stop_other, Then("sinusoid", True, (), False, same_source=True),
+        id="stop a source that is not the active one: nothing",
+    ),
+    pytest.param(
+        Given(**ON, source="run"), stop_active, Then("idle", True, (), True),
+        id="stop the active source: holds",
+    ),
+]
+# fmt: on
+
+
+@pytest.mark.parametrize(("given", "command", "then"), TABLE)
+def test_transition(given: Given, command: Command, then: Then) -> None:
+    state, ctx, bus = arrange(given)
+    before = state.source
+    if then.refused is not None:
+        with pytest.raises(MotionRefused, match=then.refused):
+            command(state, ctx, bus)
+    else:
+        assert command(state, ctx, bus) == then.result
+    assert (state.mode, state.torque) == (then.mode, then.torque)
+    assert state.estopped == (then.mode == "estop")
+    assert len(state.faults) == then.faults
+    if then.mode in ("estop", "fault"):
+        assert state.source is None, "a source survived the stop"
+    assert tuple(bus.calls) == then.calls
+    if then.same_source is not None:
+        assert (state.source is before) == then.same_source
+    if then.warning is None:
+        assert state.warning is None
+    else:
+        assert then.warning in state.warning
+
+
+def test_reset_clears_the_safety_detectors() -> None:
+    state, ctx, bus = arrange(Given(**ON, faulted=True))
+    state.misses.miss()
+    state.following.check(0.0, np.zeros(3), np.ones(3))  # over the limit since t = 0
+    commands.reset_now(state, ctx, bus)
+    assert state.misses.consecutive == 0
+    assert state.following.check(10.0, np.zeros(3), np.ones(3)) is None  # the timer restarted
+
+
+def test_torque_on_commands_the_measured_pose() -> None:
+    state, ctx, bus = arrange(Given())
+    commands.torque_to(state, bus, True)
+    np.testing.assert_array_equal(state.commanded_rad, HOME_RAD)
+    np.testing.assert_allclose(state.commanded_point_m, HOME_M, atol=1e-9)
+
+
+@pytest.mark.parametrize("torque", [False, True])
+@pytest.mark.parametrize("estopped", [False, True])
+@pytest.mark.parametrize("faulted", [False, True])
+def test_motion_is_allowed_exactly_when_not_refused(torque, estopped, faulted) -> None:
+    state, _, _ = arrange(Given(torque=torque, estopped=estopped, faulted=faulted))
+    try:
+        commands.require_motion(state)
+        refused = False
+    except MotionRefused:
+        refused = True
+    expected = torque and not estopped and not faulted
+    assert commands.motion_allowed(state) == (not refused) == expected
+
+
+# ---- the tick, without the thread ----
+def controller(bus: FakeBus, **overrides) -> Controller:
+    return Controller(load_settings(**overrides) if overrides else SETTINGS, bus, "fake")
+
+
+def writes(bus: FakeBus) -> int:
+    return sum(call[0] == "write_goal" for call in bus.calls)
+
+
+def test_a_tick_reads_publishes_and_writes_nothing_when_idle() -> None:
+    bus = FakeBus()
+    loop = controller(bus)
+    loop.step()
+    snap = loop.snapshot()
+    assert (snap.tick, snap.mode, snap.torque) == (1, "idle", False)
+    np.testing.assert_array_equal(snap.joints_measured_rad, HOME_RAD)
+    np.testing.assert_allclose(snap.point_measured_m, HOME_M, atol=1e-9)
+    assert bus.calls == []
+
+
+def test_a_jog_is_ticked_towards_its_goal_and_a_servo_error_stops_it() -> None:
+    bus = FakeBus()
+    loop = controller(bus)
+    loop.step()
+    commands.torque_to(loop.state, bus, True)
+    commands.jog_to(loop.state, loop.ctx, GOAL)
+    for _ in range(10):
+        loop.step()
+    assert loop.snapshot().mode == "jog" and writes(bus) == 1 + 10
+    moved = np.linalg.norm(loop.snapshot().point_commanded_m - HOME_M)
+    assert 0 < moved < np.linalg.norm(GOAL - HOME_M)
+    bus.errors, before = SERVO_2_OVERLOAD, writes(bus)
+    loop.step()
+    snap = loop.snapshot()
+    assert snap.mode == "fault" and writes(bus) == before  # nothing written once faulted
+    assert [f.servo_id for f in snap.faults] == [2] and "overload" in snap.faults[0].reason
+    assert commands.reset_now(loop.state, loop.ctx, bus) == {"rebooted": [2]}
+    loop.step()
+    snap = loop.snapshot()
+    assert (snap.mode, snap.torque, snap.faults) == ("idle", False, ())
+
+
+@pytest.mark.parametrize("stopped", ["torque", "estopped", "faults"])
+def test_the_tick_writes_nothing_unless_motion_is_allowed(stopped: str) -> None:
+    """Defence in depth: even a source left behind by a bug does not reach the servos."""
+    bus = FakeBus()
+    loop = controller(bus)
+    loop.step()
+    commands.torque_to(loop.state, bus, True)
+    commands.jog_to(loop.state, loop.ctx, GOAL)
+    setattr(loop.state, stopped, {"torque": False, "estopped": True, "faults": [FAULT]}[stopped])
+    before = writes(bus)
+    for _ in range(5):
+        loop.step()
+    assert writes(bus) == before
+
+
+def test_a_move_runs_to_its_end_and_the_loop_goes_idle() -> None:
+    bus = FakeBus()
+    loop = controller(bus)
+    loop.step()
+    commands.torque_to(loop.state, bus, True)
+    result = commands.move(loop.state, loop.ctx, GOAL, None, False)
+    ticks = int(np.ceil(result["duration_s"] / loop.period_s)) + 1
+    for _ in range(ticks):
+        loop.step()
+    assert loop.snapshot().mode == "idle"
+    np.testing.assert_allclose(loop.snapshot().point_measured_m, GOAL, atol=1e-6)
+
+
+def test_a_run_that_reports_a_fault_stops_with_a_source_fault() -> None:
+    bus = FakeBus()
+    loop = controller(bus)
+    loop.step()
+    commands.torque_to(loop.state, bus, True)
+    commands.run_source(loop.state, RunSource(fault="the drone link dropped"), HOME_M, 2e-3)
+    loop.step()
+    snap = loop.snapshot()
+    assert snap.mode == "fault" and snap.faults[0].source == "source"
+    assert "sinusoid: the drone link dropped" in snap.faults[0].reason
+
+
+def test_reads_failing_max_missed_reads_times_fault_the_bus() -> None:
+    bus = FakeBus()
+    loop = controller(bus, safety={"max_missed_reads": 3})
+    loop.step()
+    bus.fail_reads = True
+    loop.step()
+    loop.step()
+    assert loop.snapshot().mode == "idle" and loop.snapshot().missed_reads == 2
+    loop.step()
+    snap = loop.snapshot()
+    assert snap.mode == "fault" and snap.faults[0].source == "bus"
+    assert "3 reads failed" in snap.faults[0].reason
+
+
+def test_a_stuck_servo_trips_the_following_error() -> None:
+    bus = FakeBus()
+    loop = controller(bus, safety={"following_error_rad": 0.05, "following_error_time_s": 0.0})
+    loop.step()
+    commands.torque_to(loop.state, bus, True)
+    commands.move(loop.state, loop.ctx, np.array(HOME_RAD) + 0.3, None, True)
+    bus.stuck = True
+    for _ in range(200):
+        loop.step()
+        if loop.snapshot().faults:
+            break
+    snap = loop.snapshot()
+    assert snap.mode == "fault" and snap.faults[0].source == "following"
+
+
+def test_estop_without_the_loop_acts_at_once_and_other_commands_are_refused() -> None:
+    bus = FakeBus()
+    loop = controller(bus)
+    loop.step()
+    assert loop.estop().result(timeout=0) == "hold"
+    assert loop.state.estopped and bus.calls == [("write_goal", HOME_RAD)]
+    with pytest.raises(RuntimeError, match="not running"):
+        loop.set_torque(True).result(timeout=0)
