@@ -12,8 +12,8 @@ import numpy as np
 from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.api.deps import ControlClient, ControllerDep, TokenChecked, websocket_token_ok
-from app.api.models import Accepted, Vector3
+from app.server.api.deps import ControlClient, ControllerDep, TokenChecked, websocket_token_ok
+from app.server.api.models import Accepted, Vector3
 from app.world.drone_sim import DroneSimParams
 from app.world.inputs import sample_from_json
 from kinematics import PoseError

@@ -6,8 +6,8 @@ import asyncio
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
-from app.api import serialize
-from app.api.deps import websocket_token_ok
+from app.server.api import serialize
+from app.server.api.deps import websocket_token_ok
 
 router = APIRouter(tags=["telemetry"])
 

@@ -21,21 +21,21 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 
-from app.api import dashboard, mav, robot, runs, telemetry
-from app.api.deps import Lease
-from app.api.serialize import floats
-from app.backends import open_backend
 from app.config import Settings
 from app.control.commands import MotionRefused
 from app.control.controller import Controller
 from app.control.gate import GoalRejected
 from app.runs.manager import RunManager
 from app.scene import start_scene
+from app.server.api import dashboard, mav, robot, runs, telemetry
+from app.server.api.deps import Lease
+from app.server.api.serialize import floats
+from app.server.backends import open_backend
 from app.world.service import WorldService
 from hardware.errors import BusError
 
 GIL_SWITCH_S = 2.5e-4
-STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
+STATIC_DIR = Path(__file__).resolve().parents[2] / "static"
 
 
 def _error(status: int, detail: str, **extra: Any) -> JSONResponse:

@@ -23,12 +23,12 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse
 from pydantic import BaseModel
 
-from app.api.deps import ControllerDep, TokenChecked
-from app.api.runs import SinusoidRequest
 from app.control.commands import MotionRefused
 from app.control.controller import Controller
 from app.control.gate import GoalRejected
 from app.runs.trajectories import SinusoidParams, sinusoid_points
+from app.server.api.deps import ControllerDep, TokenChecked
+from app.server.api.runs import SinusoidRequest
 
 router = APIRouter(tags=["dashboard"])
 PLOTLY_JS = Path(plotly.__file__).resolve().parent / "package_data" / "plotly.min.js"

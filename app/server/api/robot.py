@@ -8,9 +8,9 @@ from typing import Any
 
 from fastapi import APIRouter, HTTPException, Request
 
-from app.api import serialize
-from app.api.deps import ControlClient, ControllerDep, Lease, TokenChecked
-from app.api.models import (
+from app.server.api import serialize
+from app.server.api.deps import ControlClient, ControllerDep, Lease, TokenChecked
+from app.server.api.models import (
     Accepted,
     GoalRequest,
     JogRequest,

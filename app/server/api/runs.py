@@ -10,12 +10,12 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.api.deps import ControlClient
 from app.runs.logs import read_messages
 from app.runs.manager import Run, RunManager
 from app.runs.paths import ChirpParams, StepParams, WaypointParams
 from app.runs.stats import error_stats, window_mask
 from app.runs.trajectories import SinusoidParams
+from app.server.api.deps import ControlClient
 
 router = APIRouter(tags=["runs"])
 Finite = Annotated[float, Field(allow_inf_nan=False)]
