@@ -87,10 +87,10 @@ def _remote(url: str, params: SinusoidParams) -> dict[str, Any]:
 
 
 def _headless(params: SinusoidParams, backend: str) -> dict[str, Any]:
-    from app.backends import open_backend
     from app.config import load_settings
     from app.control.controller import Controller
     from app.runs.manager import RunManager
+    from app.server.backends import open_backend
 
     settings = load_settings(hardware={"backend": backend})
     with open_backend(settings) as opened:

@@ -67,7 +67,7 @@ def check_exposure(settings: Settings) -> None:
 def run(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from app.main import create_app
+    from app.server import create_app
 
     try:
         settings = load_settings(args.config, **_overrides(args))

@@ -22,11 +22,11 @@ from pathlib import Path
 _HERE = Path(__file__).resolve().parent
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 
-from app.backends import open_backend  # noqa: E402
 from app.config import load_settings  # noqa: E402
 from app.control.controller import Controller  # noqa: E402
 from app.runs.manager import RunManager  # noqa: E402
 from app.runs.trajectories import SinusoidParams  # noqa: E402
+from app.server.backends import open_backend  # noqa: E402
 from app.world.drone_sim import DroneSimParams  # noqa: E402
 from app.world.service import WorldService  # noqa: E402
 

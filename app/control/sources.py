@@ -14,6 +14,8 @@ from typing import Protocol
 import numpy as np
 from ruckig import InputParameter, OutputParameter, Result, Ruckig
 
+from app.control.errors import GoalRejected
+
 
 @dataclass(frozen=True)
 class Setpoint:
@@ -133,5 +135,5 @@ def _plan(inp: InputParameter):
     trajectory = Trajectory(3)
     result = Ruckig(3).calculate(inp, trajectory)
     if result not in (Result.Working, Result.Finished):
-        raise ValueError(f"no smooth path to the target ({result})")
+        raise GoalRejected(f"no smooth path to the target ({result})")
     return trajectory

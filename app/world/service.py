@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from app.control.errors import GoalRejected
 from app.world.drone_sim import DroneSimParams, SimulatedDrone
 from app.world.hold import HoldSource, PoseProvider, SimulatedDroneProvider, TrackerProvider
 from app.world.inputs import MavlinkPoseListener, UdpPoseListener
@@ -95,7 +96,8 @@ class WorldService:
         if goal_world is None:
             seen = provider.observe(0.0)
             if seen.pose is None:
-                raise ValueError(f"no drone pose yet (source {seen.state}): cannot hold 'current'")
+                reason = f"no drone pose yet (source {seen.state}): cannot hold 'current'"
+                raise GoalRejected(reason)
             here = controller.snapshot().point_measured_m
             goal_world = (seen.pose @ self.mount).apply(here)
         lead = controller.settings.world.servo_lag_s if compensate else None

@@ -10,9 +10,9 @@ from collections.abc import Callable, Iterator
 import pytest
 from fastapi.testclient import TestClient
 
-from app.backends import open_backend
 from app.config import load_settings
-from app.main import create_app
+from app.server import create_app
+from app.server.backends import open_backend
 
 WAIT_S = 30.0  # generous bound for convergence on a loaded 2-core machine; not a timing test
 

@@ -8,7 +8,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.config import load_settings
-from app.main import create_app
+from app.server import create_app
 
 ASSET = re.compile(r"""(?:src|href)=["']([^"']+)["']""")
 

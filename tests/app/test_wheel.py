@@ -32,7 +32,7 @@ from typing import Any
 
 import pytest
 
-from tests.browser_support import chromium_page
+from tests.support.browser import chromium_page
 
 REPO = Path(__file__).resolve().parents[2]
 STATIC = REPO / "static"

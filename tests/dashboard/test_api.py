@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.api.dashboard import peak_joint_speed
 from app.config import load_settings
-from app.main import create_app
 from app.runs.trajectories import SinusoidParams
+from app.server import create_app
+from app.server.api.dashboard import peak_joint_speed
 from tests.app.conftest import wait_for
 
 

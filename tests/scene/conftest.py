@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.backends import open_backend
 from app.config import load_settings
-from app.main import create_app
+from app.server import create_app
+from app.server.backends import open_backend
 from tests.app.conftest import wait_for  # noqa: F401 - shared with the scene's tests
 
 

@@ -9,10 +9,10 @@ import logging
 import numpy as np
 from fastapi.testclient import TestClient
 
-from app.backends import open_backend
 from app.config import load_settings
-from app.main import create_app
 from app.scene.goal_store import FILE_NAME, load_points, save_points
+from app.server import create_app
+from app.server.backends import open_backend
 
 
 def test_points_round_trip_exactly_and_leave_no_temporary_file(tmp_path):

@@ -19,15 +19,19 @@ from typing import Any
 
 import numpy as np
 import plotly
-from fastapi import APIRouter, HTTPException, Request
+from fastapi import APIRouter, HTTPException
 from fastapi.responses import FileResponse
 from pydantic import BaseModel
 
-from app.api.deps import ControllerDep, TokenChecked
-from app.api.runs import SinusoidRequest
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
+from app.runs.manager import RunManager
 from app.runs.trajectories import SinusoidParams, sinusoid_points
+from app.scene import Scene
+from app.server.api.deps import ControllerDep, RunsDep, SceneDep, SettingsDep, TokenChecked
+from app.server.api.responses import InfoOut
+from app.server.api.runs import SinusoidRequest
+from app.server.errors import INVALID, UNAUTHORISED, UNAVAILABLE
 
 router = APIRouter(tags=["dashboard"])
 PLOTLY_JS = Path(plotly.__file__).resolve().parent / "package_data" / "plotly.min.js"
@@ -44,21 +48,19 @@ class SinusoidCheck(BaseModel):
     peak_acceleration_m_s2: float
 
 
-def _viser_port(request: Request) -> int | None:
+def _viser_port(scene: Scene | None) -> int | None:
     """The port viser is bound to (port 0 in the config means a free one), None if no scene."""
-    scene = getattr(request.app.state, "scene", None)
     if scene is None:
         return None
     server = getattr(scene, "server", None)
     return server.get_port() if server is not None else scene.port
 
 
-@router.get("/api/info")
-def get_info(request: Request) -> dict[str, Any]:
+@router.get("/api/info", response_model=InfoOut)
+def get_info(settings: SettingsDep, scene: SceneDep) -> dict[str, Any]:
     """Viser port, token requirement and the limits the page shows beside its controls."""
-    settings = request.app.state.settings
     return {
-        "viser_port": _viser_port(request),
+        "viser_port": _viser_port(scene),
         "token_required": settings.server.token is not None,
         "telemetry_hz": settings.server.telemetry_hz,
         "jog_max_velocity_m_s": settings.jog.max_velocity_m_s,
@@ -84,9 +86,9 @@ def peak_joint_speed(controller: Controller, params: SinusoidParams) -> float | 
     return float(np.nanmax(speed)) if np.isfinite(speed).any() else None
 
 
-def check_sinusoid(request: Request, controller: Controller, params: SinusoidParams) -> dict:
+def check_sinusoid(runs: RunManager, controller: Controller, params: SinusoidParams) -> dict:
     try:
-        request.app.state.runs.plan(params)
+        runs.plan(params)
         detail = None
     except (GoalRejected, MotionRefused) as exc:
         detail = str(exc)
@@ -101,12 +103,16 @@ def check_sinusoid(request: Request, controller: Controller, params: SinusoidPar
     ).model_dump()
 
 
-@router.post("/api/tests/sinusoid/check", response_model=SinusoidCheck)
+@router.post(
+    "/api/tests/sinusoid/check",
+    response_model=SinusoidCheck,
+    responses={**UNAUTHORISED, **INVALID, **UNAVAILABLE},
+)
 async def post_sinusoid_check(
-    body: SinusoidRequest, request: Request, controller: ControllerDep, _: TokenChecked
+    body: SinusoidRequest, runs: RunsDep, controller: ControllerDep, _: TokenChecked
 ):
     """Plan and check a sinusoid from where the robot is, without moving; never starts it."""
-    return await asyncio.to_thread(check_sinusoid, request, controller, body.params())
+    return await asyncio.to_thread(check_sinusoid, runs, controller, body.params())
 
 
 @router.get("/vendor/plotly.min.js", include_in_schema=False)

@@ -9,17 +9,27 @@ from dataclasses import asdict
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.api.deps import ControlClient, ControllerDep, TokenChecked, websocket_token_ok
-from app.api.models import Accepted, Vector3
+from app.control.errors import GoalRejected
+from app.server.api.deps import (
+    ControlClient,
+    ControllerDep,
+    RunsDep,
+    TokenChecked,
+    WorldDep,
+    websocket_token_ok,
+)
+from app.server.api.models import Accepted, Finite, Vector3
+from app.server.api.responses import PoseAccepted, PoseInputStatus, RunStarted
+from app.server.errors import CONTROL, INVALID, UNAUTHORISED
 from app.world.drone_sim import DroneSimParams
 from app.world.inputs import sample_from_json
+from app.world.service import WorldService
 from kinematics import PoseError
 
 router = APIRouter(tags=["drone"])
-Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 
 class PoseBody(BaseModel):
@@ -65,26 +75,26 @@ class HoldTestRequest(BaseModel):
         return DroneSimParams(**{name: getattr(self, name) for name in fields})
 
 
-def _push(request_app: Any, data: dict[str, Any]) -> dict[str, Any]:
-    tracker = request_app.state.world.tracker
+def _push(world: WorldService, data: dict[str, Any]) -> dict[str, Any]:
+    tracker = world.tracker
     accepted = tracker.push(sample_from_json(data))
     return {"accepted": accepted, "input": tracker.status()}
 
 
-@router.post("/mav/pose")
-def post_pose(body: PoseBody, request: Request, _: TokenChecked) -> dict[str, Any]:
+@router.post("/mav/pose", response_model=PoseAccepted, responses={**UNAUTHORISED, **INVALID})
+def post_pose(body: PoseBody, world: WorldDep, _: TokenChecked) -> dict[str, Any]:
     """One pose sample; out-of-order, duplicate or jumping samples are dropped (accepted=false)."""
-    return _push(request.app, body.model_dump())
+    return _push(world, body.model_dump())
 
 
-@router.get("/mav/pose")
-def get_pose_status(request: Request) -> dict[str, Any]:
+@router.get("/mav/pose", response_model=PoseInputStatus)
+def get_pose_status(world: WorldDep) -> dict[str, Any]:
     """The pose input's health: state (ok/stale/lost/none), age, rate, counters."""
-    return request.app.state.world.tracker.status()
+    return world.tracker.status()
 
 
 @router.websocket("/mav/pose")
-async def stream_poses(websocket: WebSocket) -> None:
+async def stream_poses(websocket: WebSocket, world: WorldDep) -> None:
     """A stream of pose JSON objects (same fields as POST); bad ones are answered with an error."""
     if not websocket_token_ok(websocket):
         await websocket.close(code=1008, reason="missing or wrong token (?token=)")
@@ -94,21 +104,20 @@ async def stream_poses(websocket: WebSocket) -> None:
         while True:
             text = await websocket.receive_text()
             try:
-                _push(websocket.app, json.loads(text))
+                _push(world, json.loads(text))
             except (ValueError, KeyError, TypeError, PoseError) as exc:
                 await websocket.send_json({"error": str(exc)})
     except WebSocketDisconnect:
         return
 
 
-@router.post("/hold", response_model=Accepted)
+@router.post("/hold", response_model=Accepted, responses=CONTROL)
 async def post_hold(
-    body: HoldRequest, request: Request, controller: ControllerDep, _: ControlClient
+    body: HoldRequest, world: WorldDep, controller: ControllerDep, _: ControlClient
 ) -> Accepted:
     """Start mode hold-world: the tool stays at a world point while the drone drifts."""
-    world = request.app.state.world
     if body.frame == "world" and body.position_m is None:
-        raise ValueError("position_m: required with frame 'world'")
+        raise GoalRejected("position_m: required with frame 'world'")
     provider = world.provider(DroneSimParams() if body.source == "simulated" else None)
     goal = None if body.frame == "current" else np.asarray(body.position_m)
     source = world.hold_source(goal, provider, body.latency_compensation)
@@ -118,11 +127,10 @@ async def post_hold(
     return Accepted(result={"goal_world_m": source.goal_world.tolist()})
 
 
-@router.post("/tests/hold")
-async def post_hold_test(body: HoldTestRequest, request: Request, _: ControlClient):
+@router.post("/tests/hold", response_model=RunStarted, responses=CONTROL)
+async def post_hold_test(body: HoldTestRequest, world: WorldDep, runs: RunsDep, _: ControlClient):
     """Hold the current tool position in the world under a simulated drifting drone, as a run
     with world-frame stats (stats.world.{x,y,z}) and the time the goal spent outside."""
-    world, runs = request.app.state.world, request.app.state.runs
     provider = world.provider(body.drone())
     source = world.hold_source(None, provider, body.latency_compensation)
     source.duration_s = body.duration_s + source.approach_s

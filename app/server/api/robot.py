@@ -6,11 +6,11 @@ import asyncio
 from concurrent.futures import Future
 from typing import Any
 
-from fastapi import APIRouter, HTTPException, Request
+from fastapi import APIRouter, HTTPException
 
-from app.api import serialize
-from app.api.deps import ControlClient, ControllerDep, Lease, TokenChecked
-from app.api.models import (
+from app.server.api import serialize
+from app.server.api.deps import ControlClient, ControllerDep, LeaseDep, SettingsDep, TokenChecked
+from app.server.api.models import (
     Accepted,
     GoalRequest,
     JogRequest,
@@ -18,6 +18,8 @@ from app.api.models import (
     MoveRequest,
     TorqueRequest,
 )
+from app.server.api.responses import LeaseOut, StatusOut
+from app.server.errors import CONFLICT, CONTROL, INVALID, UNAUTHORISED, UNAVAILABLE
 
 router = APIRouter(tags=["robot"])
 COMMAND_TIMEOUT_S = 2.0
@@ -29,25 +31,25 @@ async def _outcome(future: Future) -> Accepted:
     return Accepted(result=result)
 
 
-@router.get("/status")
+@router.get("/status", response_model=StatusOut, responses=UNAVAILABLE)
 def get_status(controller: ControllerDep) -> dict[str, Any]:
     """Mode, backend, faults, joints, measured and commanded platform, goal and loop timing."""
     return serialize.status(controller)
 
 
-@router.post("/goal", response_model=Accepted)
+@router.post("/goal", response_model=Accepted, responses=CONTROL)
 async def post_goal(body: GoalRequest, controller: ControllerDep, _: ControlClient):
     """Move the platform to a goal (base frame); refused with the nearest point if outside."""
     return await _outcome(controller.set_goal(body.position_m))
 
 
-@router.post("/jog", response_model=Accepted)
+@router.post("/jog", response_model=Accepted, responses=CONTROL)
 async def post_jog(body: JogRequest, controller: ControllerDep, _: ControlClient):
     """Relative jog step [m]; a target outside the workspace is clamped onto its boundary."""
     return await _outcome(controller.jog(body.delta_m))
 
 
-@router.post("/move", response_model=Accepted)
+@router.post("/move", response_model=Accepted, responses=CONTROL)
 async def post_move(body: MoveRequest, controller: ControllerDep, _: ControlClient):
     """Smooth move-to a point or joint angles, along a Cartesian or joint-space path."""
     future = controller.move(
@@ -59,36 +61,38 @@ async def post_move(body: MoveRequest, controller: ControllerDep, _: ControlClie
     return await _outcome(future)
 
 
-@router.post("/torque", response_model=Accepted)
+@router.post("/torque", response_model=Accepted, responses=CONTROL)
 async def post_torque(body: TorqueRequest, controller: ControllerDep, _: ControlClient):
     """Enable torque (holding where the robot is) or relax the servos."""
     return await _outcome(controller.set_torque(body.enabled))
 
 
-@router.post("/estop", response_model=Accepted)
+@router.post(
+    "/estop", response_model=Accepted, responses={**UNAUTHORISED, **INVALID, **UNAVAILABLE}
+)
 async def post_estop(controller: ControllerDep, _: TokenChecked):
     """Stop at once; holds or releases torque per config. Needs no lease: anyone may stop."""
     return await _outcome(controller.estop())
 
 
-@router.post("/reset", response_model=Accepted)
+@router.post("/reset", response_model=Accepted, responses=CONTROL)
 async def post_reset(controller: ControllerDep, _: ControlClient):
     """Clear e-stop and faults; reboots servos that report hardware errors."""
     return await _outcome(controller.reset())
 
 
-@router.get("/lease")
-def get_lease(request: Request) -> dict[str, Any]:
+@router.get("/lease", response_model=LeaseOut)
+def get_lease(lease: LeaseDep) -> dict[str, Any]:
     """Who holds control now (null when nobody does)."""
-    lease: Lease = request.app.state.lease
     return {"holder": lease.holder if lease.active() else None}
 
 
-@router.post("/lease")
-def post_lease(body: LeaseRequest, request: Request, _: TokenChecked) -> dict[str, Any]:
+@router.post("/lease", response_model=LeaseOut, responses={**UNAUTHORISED, **CONFLICT, **INVALID})
+def post_lease(
+    body: LeaseRequest, lease: LeaseDep, settings: SettingsDep, _: TokenChecked
+) -> dict[str, Any]:
     """Take the control lease; taking it from another client needs take_over=true."""
-    lease: Lease = request.app.state.lease
     if lease.active() and lease.holder != body.client and not body.take_over:
         raise HTTPException(409, f"control is held by {lease.holder!r}; set take_over=true")
-    lease.renew(body.client, request.app.state.settings.server.lease_timeout_s)
+    lease.renew(body.client, settings.server.lease_timeout_s)
     return {"holder": body.client}

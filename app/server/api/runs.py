@@ -6,20 +6,22 @@ import asyncio
 from typing import Annotated, Any
 
 import numpy as np
-from fastapi import APIRouter, HTTPException, Request
+from fastapi import APIRouter, HTTPException
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.api.deps import ControlClient
+from app.control.errors import GoalRejected
 from app.runs.logs import read_messages
 from app.runs.manager import Run, RunManager
 from app.runs.paths import ChirpParams, StepParams, WaypointParams
 from app.runs.stats import error_stats, window_mask
 from app.runs.trajectories import SinusoidParams
+from app.server.api.deps import ControlClient, RunsDep
+from app.server.api.models import Vector3
+from app.server.api.responses import RunOut, RunStarted, WindowStats
+from app.server.errors import CONTROL, INVALID, NOT_FOUND
 
 router = APIRouter(tags=["runs"])
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Triple = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 _DEFAULT = SinusoidParams()
 FILES = {"log.mcap": "application/octet-stream", "log.csv": "text/csv", "report.png": "image/png"}
 
@@ -28,12 +30,12 @@ class SinusoidRequest(BaseModel):
     """Per-axis sinusoid; every field optional, defaults are the thesis test (ch. 6.1)."""
 
     model_config = ConfigDict(extra="forbid")
-    amplitude_m: Triple = list(_DEFAULT.amplitude_m)
+    amplitude_m: Vector3 = list(_DEFAULT.amplitude_m)
     frequency_hz: Annotated[
         list[Annotated[float, Field(ge=0, le=20)]], Field(min_length=3, max_length=3)
     ] = list(_DEFAULT.frequency_hz)
-    phase_rad: Triple = list(_DEFAULT.phase_rad)
-    offset_m: Triple = list(_DEFAULT.offset_m)
+    phase_rad: Vector3 = list(_DEFAULT.phase_rad)
+    offset_m: Vector3 = list(_DEFAULT.offset_m)
     duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = _DEFAULT.duration_s
     feedforward: bool = False
 
@@ -56,7 +58,7 @@ class ChirpRequest(BaseModel):
     amplitude_m: Annotated[float, Field(gt=0, le=0.2, allow_inf_nan=False)] = 0.02
     f0_hz: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = 0.2
     f1_hz: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = 3.0
-    offset_m: Triple = list(_DEFAULT.offset_m)
+    offset_m: Vector3 = list(_DEFAULT.offset_m)
     duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = 10.0
     feedforward: bool = False
 
@@ -71,7 +73,7 @@ class StepRequest(BaseModel):
     axis: Annotated[int, Field(ge=0, le=2, description="0 = x, 1 = y, 2 = z")] = 2
     size_m: Annotated[float, Field(ge=-0.05, le=0.05, allow_inf_nan=False)] = 0.005
     step_at_s: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False)] = 0.5
-    offset_m: Triple = list(_DEFAULT.offset_m)
+    offset_m: Vector3 = list(_DEFAULT.offset_m)
     duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = 2.0
 
     def params(self) -> StepParams:
@@ -82,7 +84,7 @@ class WaypointsRequest(BaseModel):
     """Points [m] reached at times [s] (first at 0), resting at each; minimum-jerk between."""
 
     model_config = ConfigDict(extra="forbid")
-    points_m: Annotated[list[Triple], Field(min_length=2, max_length=1000)]
+    points_m: Annotated[list[Vector3], Field(min_length=2, max_length=1000)]
     times_s: Annotated[
         list[Annotated[float, Field(ge=0, allow_inf_nan=False)]],
         Field(min_length=2, max_length=1000),
@@ -91,74 +93,73 @@ class WaypointsRequest(BaseModel):
 
     def params(self) -> WaypointParams:
         points = tuple(tuple(p) for p in self.points_m)
-        return WaypointParams(points, tuple(self.times_s), self.feedforward)  # type: ignore[arg-type]
+        try:
+            return WaypointParams(points, tuple(self.times_s), self.feedforward)  # type: ignore[arg-type]
+        except ValueError as exc:  # counts and order the schema cannot say
+            raise GoalRejected(str(exc)) from exc
 
 
-def _runs(request: Request) -> RunManager:
-    return request.app.state.runs
-
-
-def _run(request: Request, run_id: str) -> Run:
-    run = _runs(request).get(run_id)
+def _run(runs: RunManager, run_id: str) -> Run:
+    run = runs.get(run_id)
     if run is None:
         raise HTTPException(404, f"no run {run_id!r}")
     return run
 
 
-@router.post("/tests/sinusoid")
-async def start_sinusoid(body: SinusoidRequest, request: Request, _: ControlClient):
+@router.post("/tests/sinusoid", response_model=RunStarted, responses=CONTROL)
+async def start_sinusoid(body: SinusoidRequest, runs: RunsDep, _: ControlClient):
     """Check the whole path, then run it; 422 names the first infeasible time and point."""
-    run = await asyncio.to_thread(_runs(request).start_sinusoid, body.params())
+    run = await asyncio.to_thread(runs.start_sinusoid, body.params())
     return {"run_id": run.run_id}
 
 
-@router.post("/tests/chirp")
-async def start_chirp(body: ChirpRequest, request: Request, _: ControlClient):
+@router.post("/tests/chirp", response_model=RunStarted, responses=CONTROL)
+async def start_chirp(body: ChirpRequest, runs: RunsDep, _: ControlClient):
     """A frequency sweep f0 -> f1 on one axis; checked like the sinusoid."""
-    run = await asyncio.to_thread(_runs(request).start, body.params(), "chirp")
+    run = await asyncio.to_thread(runs.start, body.params(), "chirp")
     return {"run_id": run.run_id}
 
 
-@router.post("/tests/step")
-async def start_step(body: StepRequest, request: Request, _: ControlClient):
+@router.post("/tests/step", response_model=RunStarted, responses=CONTROL)
+async def start_step(body: StepRequest, runs: RunsDep, _: ControlClient):
     """A step on one axis; small steps pass the joint-speed limit unchanged."""
-    run = await asyncio.to_thread(_runs(request).start, body.params(), "step")
+    run = await asyncio.to_thread(runs.start, body.params(), "step")
     return {"run_id": run.run_id}
 
 
-@router.post("/tests/waypoints")
-async def start_waypoints(body: WaypointsRequest, request: Request, _: ControlClient):
+@router.post("/tests/waypoints", response_model=RunStarted, responses=CONTROL)
+async def start_waypoints(body: WaypointsRequest, runs: RunsDep, _: ControlClient):
     """Timed waypoints (pick-and-place, raster); checked like the sinusoid."""
-    run = await asyncio.to_thread(_runs(request).start, body.params(), "waypoints")
+    run = await asyncio.to_thread(runs.start, body.params(), "waypoints")
     return {"run_id": run.run_id}
 
 
-@router.get("/runs")
-def list_runs(request: Request) -> list[dict[str, Any]]:
+@router.get("/runs", response_model=list[RunOut])
+def list_runs(runs: RunsDep) -> list[dict[str, Any]]:
     """All runs, newest first, with state and stats."""
-    return [run.as_dict() for run in _runs(request).list()]
+    return [run.as_dict() for run in runs.list()]
 
 
-@router.get("/runs/{run_id}")
-def get_run(run_id: str, request: Request) -> dict[str, Any]:
+@router.get("/runs/{run_id}", response_model=RunOut, responses={**NOT_FOUND, **INVALID})
+def get_run(run_id: str, runs: RunsDep) -> dict[str, Any]:
     """One run: state, parameters, conditions, stats.tracking.{x,y,z}.{mean_m, rmse_m, ...}."""
-    return _run(request, run_id).as_dict()
+    return _run(runs, run_id).as_dict()
 
 
-@router.post("/runs/{run_id}/abort")
-async def abort_run(run_id: str, request: Request, _: ControlClient) -> dict[str, Any]:
+@router.post("/runs/{run_id}/abort", response_model=RunOut, responses={**CONTROL, **NOT_FOUND})
+async def abort_run(run_id: str, runs: RunsDep, _: ControlClient) -> dict[str, Any]:
     """Stop a running run; the robot holds where it is and the log stays readable."""
-    run = _run(request, run_id)
-    await asyncio.to_thread(_runs(request).abort, run_id)
+    run = _run(runs, run_id)
+    await asyncio.to_thread(runs.abort, run_id)
     return run.as_dict()
 
 
-@router.get("/runs/{run_id}/stats")
+@router.get("/runs/{run_id}/stats", response_model=WindowStats, responses={**NOT_FOUND, **INVALID})
 def window_stats(
-    run_id: str, request: Request, start_s: float | None = None, end_s: float | None = None
+    run_id: str, runs: RunsDep, start_s: float | None = None, end_s: float | None = None
 ) -> dict[str, Any]:
     """Tracking stats recomputed over [start_s, end_s] of run time (any phase), from the log."""
-    run = _run(request, run_id)
+    run = _run(runs, run_id)
     rows = read_messages(run.folder / "log.mcap")
     if not rows:
         raise HTTPException(404, "the run has no samples")
@@ -174,12 +175,16 @@ def window_stats(
     }
 
 
-@router.get("/runs/{run_id}/{name}")
-def run_file(run_id: str, name: str, request: Request) -> FileResponse:
+@router.get(
+    "/runs/{run_id}/{name}",
+    response_class=FileResponse,
+    responses={200: {"content": {t: {} for t in FILES.values()}}, **NOT_FOUND, **INVALID},
+)
+def run_file(run_id: str, name: str, runs: RunsDep) -> FileResponse:
     """log.mcap, log.csv (written as the run goes) or report.png (when it has ended)."""
     if name not in FILES:
         raise HTTPException(404, f"no file {name!r}; files are {', '.join(FILES)}")
-    path = _run(request, run_id).folder / name
+    path = _run(runs, run_id).folder / name
     if not path.exists():
         raise HTTPException(404, f"{name} is not written yet")
     return FileResponse(path, media_type=FILES[name], filename=f"{run_id}-{name}")

@@ -2,8 +2,7 @@
 
 Startup opens the configured backend (simulator, emulator or real servos) and starts the
 controller's thread; shutdown stops motion, relaxes the servos per config and closes the
-bus. Errors map to HTTP codes in one place: a bad goal is 422, a robot that cannot move
-now is 409, a bus that does not answer is 503; never a 500 for operator input.
+bus. Errors map to HTTP codes in one place, app/server/errors.py.
 """
 
 from __future__ import annotations
@@ -13,73 +12,24 @@ import contextlib
 import gc
 import sys
 from collections.abc import AsyncIterator, Callable
-from typing import Any
 
-from fastapi import FastAPI, Request
-from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 
-from app.api import dashboard, mav, robot, runs, telemetry
-from app.api.deps import Lease
-from app.api.serialize import floats
-from app.backends import open_backend
 from app.config import Settings
 from app.control.controller import Controller
-from app.control.errors import GoalRejected, MotionRefused
 from app.runs.manager import RunManager
 from app.scene import start_scene
+from app.server.api import dashboard, mav, robot, runs, telemetry
+from app.server.api.deps import Lease
+from app.server.backends import open_backend
+from app.server.errors import install_error_handlers
 from app.static_files import static_dir
 from app.world.service import WorldService
-from hardware.errors import BusError
 
 GIL_SWITCH_S = 2.5e-4
 STATIC_DIR = static_dir()
-
-
-def _error(status: int, detail: str, **extra: Any) -> JSONResponse:
-    return JSONResponse({"detail": detail, **extra}, status_code=status)
-
-
-def _field_errors(exc: RequestValidationError) -> str:
-    """'position_m.1: Input should be a finite number' per error; never echoes raw input."""
-    parts = []
-    for error in exc.errors():
-        location = ".".join(str(p) for p in error["loc"] if p != "body") or "body"
-        parts.append(f"{location}: {error['msg']}")
-    return "; ".join(parts)
-
-
-def _install_error_handlers(app: FastAPI) -> None:
-    @app.exception_handler(RequestValidationError)
-    async def invalid_request(_: Request, exc: RequestValidationError) -> JSONResponse:
-        return _error(422, _field_errors(exc))
-
-    @app.exception_handler(GoalRejected)
-    async def goal_rejected(_: Request, exc: GoalRejected) -> JSONResponse:
-        nearest = None if exc.nearest is None else floats(exc.nearest)
-        return _error(422, str(exc), nearest_m=nearest)
-
-    @app.exception_handler(MotionRefused)
-    async def motion_refused(_: Request, exc: MotionRefused) -> JSONResponse:
-        return _error(409, str(exc))
-
-    @app.exception_handler(BusError)
-    async def bus_error(_: Request, exc: BusError) -> JSONResponse:
-        return _error(503, f"servo bus: {exc}")
-
-    @app.exception_handler(TimeoutError)
-    async def timeout(_: Request, exc: TimeoutError) -> JSONResponse:
-        return _error(503, "the control loop did not answer in time")
-
-    @app.exception_handler(RuntimeError)
-    async def runtime(_: Request, exc: RuntimeError) -> JSONResponse:
-        return _error(503, str(exc))
-
-    @app.exception_handler(ValueError)
-    async def value_error(_: Request, exc: ValueError) -> JSONResponse:
-        return _error(422, str(exc))
 
 
 def create_app(settings: Settings, backend_opener: Callable = open_backend) -> FastAPI:
@@ -121,7 +71,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
     )
     app.state.settings = settings
     app.state.lease = Lease()
-    _install_error_handlers(app)
+    install_error_handlers(app)
     app.include_router(robot.router, prefix="/api")
     app.include_router(telemetry.router, prefix="/api")
     app.include_router(runs.router, prefix="/api")

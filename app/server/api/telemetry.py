@@ -1,30 +1,42 @@
-"""Telemetry WebSocket: the loop's state at a steady rate (default 50 Hz)."""
+"""Telemetry WebSocket: the loop's state at a steady rate (default 50 Hz).
+
+WebSockets are not in OpenAPI; ``GET /api/telemetry`` answers the latest message, so the
+message's schema (``TelemetryMessage``) is in /openapi.json and a client can poll it."""
 
 from __future__ import annotations
 
 import asyncio
+from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
-from app.api import serialize
-from app.api.deps import websocket_token_ok
+from app.server.api import serialize
+from app.server.api.deps import ControllerDep, SettingsDep, websocket_token_ok
+from app.server.api.responses import TelemetryMessage
+from app.server.errors import UNAVAILABLE
 
 router = APIRouter(tags=["telemetry"])
 
 
+@router.get("/telemetry", response_model=TelemetryMessage, responses=UNAVAILABLE)
+def latest_telemetry(controller: ControllerDep) -> dict[str, Any]:
+    """The latest telemetry message: the same JSON the WebSocket streams, once."""
+    return serialize.telemetry(controller.snapshot(), controller)
+
+
 @router.websocket("/telemetry")
-async def telemetry(websocket: WebSocket) -> None:
+async def telemetry(
+    websocket: WebSocket, controller: ControllerDep, settings: SettingsDep
+) -> None:
     """Stream snapshots as JSON; ``?hz=`` sets the rate (1-200, default from config)."""
     if not websocket_token_ok(websocket):
         await websocket.close(code=1008, reason="missing or wrong token (?token=)")
         return
-    settings = websocket.app.state.settings
     try:
         hz = float(websocket.query_params.get("hz", settings.server.telemetry_hz))
     except ValueError:
         hz = settings.server.telemetry_hz
     period = 1.0 / min(max(hz, 1.0), 200.0)
-    controller = websocket.app.state.controller
     await websocket.accept()
     last_tick = -1
     try:

@@ -1,0 +1,231 @@
+"""Response bodies of the API: what the dashboard (static/js/) and any client read.
+
+Built from what serialize.py and the routers produce (same names, same nesting), with
+``extra="forbid"`` so a key added on one side and not the other fails the tests instead of
+being dropped silently. SI units, base frame; null where a value is unknown (no read yet,
+FK failed).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+MaybeFloat = float | None
+MaybeVector3 = Annotated[
+    list[MaybeFloat], Field(min_length=3, max_length=3, description="3 values, null if unknown")
+]
+
+
+class _Out(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class FaultOut(_Out):
+    """Why the robot stopped: source is bus, servo, following, gate or loop."""
+
+    source: str
+    reason: str
+    servo_id: int | None = None
+    time_s: float
+
+
+class JointsStatus(_Out):
+    servo_ids: list[int]
+    position_rad: MaybeVector3
+    commanded_rad: MaybeVector3
+    velocity_rad_s: MaybeVector3
+    current_a: MaybeVector3
+    voltage_v: MaybeVector3
+    temperature_c: MaybeVector3
+    moving: list[bool]
+    hardware_errors: list[list[str]] = Field(description="per servo, its hardware error flags")
+
+
+class PlatformStatus(_Out):
+    """The platform (end effector) [m]: measured (FK), commanded, their difference, and an
+    external measurement (e.g. motion capture) when one is fed in."""
+
+    position_m: MaybeVector3
+    commanded_m: MaybeVector3
+    error_m: MaybeVector3 = Field(description="commanded - measured [m]")
+    external_m: MaybeVector3
+
+
+class GoalStatus(_Out):
+    position_m: MaybeVector3
+
+
+class TimingStatsOut(_Out):
+    """Loop timing; jitter is how late a tick started after its deadline [ms]."""
+
+    target_hz: float
+    measured_hz: float
+    period_mean_ms: float
+    jitter_p50_ms: float
+    jitter_p99_ms: float
+    worst_ms: float
+    overruns: int
+    ticks: int
+
+
+class LoopStatus(TimingStatsOut):
+    """The last 10 s at top level (overruns and ticks since start), and both in full."""
+
+    since_start: TimingStatsOut
+    last_10s: TimingStatsOut
+
+
+class BusStatusOut(_Out):
+    """Counters since connect, and reads the loop missed."""
+
+    missed_reads: int
+    transactions: int
+    failed_tries: int
+    retries: int
+    failures: int
+
+
+class PoseInputStatus(_Out):
+    """The drone pose input's health."""
+
+    state: str = Field(description="ok | stale | lost | none")
+    age_s: float | None = Field(description="since the last accepted sample [s]")
+    rate_hz: float
+    accepted: int
+    dropped: int
+    jumps: int
+
+
+class StatusOut(_Out):
+    """GET /api/status: everything about the robot now."""
+
+    mode: str
+    backend: str = Field(description="sim | emulated | dynamixel")
+    backend_description: str
+    torque: bool
+    estopped: bool
+    faults: list[FaultOut]
+    warning: str | None
+    time_s: float
+    joints: JointsStatus
+    ee: PlatformStatus
+    goal: GoalStatus
+    loop: LoopStatus
+    bus: BusStatusOut
+    pose: PoseInputStatus | None
+    phase: str = Field(description="a run's phase (approach, timed, stop); empty otherwise")
+
+
+class TelemetryLoop(_Out):
+    measured_hz: float
+    jitter_p99_ms: float
+    overruns: int
+
+
+class WorldFrame(_Out):
+    """Hold-in-world with a known drone pose: world frame [m], error = goal - measured."""
+
+    goal_m: MaybeVector3
+    measured_m: MaybeVector3
+    error_m: MaybeVector3
+
+
+class TelemetryMessage(_Out):
+    """One message of the telemetry WebSocket (/api/telemetry), one per loop tick sent."""
+
+    t: float = Field(description="loop time [s]")
+    tick: int
+    mode: str
+    goal_m: MaybeVector3
+    commanded_joints_rad: MaybeVector3
+    measured_joints_rad: MaybeVector3
+    commanded_m: MaybeVector3
+    measured_m: MaybeVector3
+    error_m: MaybeVector3 = Field(description="commanded - measured [m]")
+    loop: TelemetryLoop
+    faults: list[FaultOut]
+    world: WorldFrame | None
+
+
+class AxisStats(_Out):
+    """Errors on one axis [m] (reference - measured); NaN-free samples only."""
+
+    mean_m: float
+    rmse_m: float
+    std_m: float
+    max_abs_m: float
+    share_under_1cm: float
+    share_under_1mm: float
+
+
+class ErrorStats(_Out):
+    x: AxisStats
+    y: AxisStats
+    z: AxisStats
+    samples: int
+
+
+class WorldStats(ErrorStats):
+    """Hold runs: world-frame errors, time outside the workspace, and errors inside only."""
+
+    outside_s: float
+    inside_only: ErrorStats
+
+
+class RunStats(BaseModel):
+    """Empty while a run goes; tracking (goal vs FK), validation (FK vs external) when
+    measured, world for hold runs."""
+
+    model_config = ConfigDict(extra="allow")  # runs saved by older versions load as they are
+    tracking: ErrorStats | None = None
+    validation: ErrorStats | None = None
+    world: WorldStats | None = None
+
+
+class RunOut(_Out):
+    """One run, as saved in its run.json."""
+
+    run_id: str
+    kind: str = Field(description="sinusoid | chirp | step | waypoints | hold")
+    params: dict[str, Any]
+    conditions: dict[str, Any] = Field(description="robot, backend, loop rate, joints")
+    state: str = Field(description="running | done | aborted")
+    reason: str | None
+    started_at: float = Field(description="Unix time [s]")
+    ended_at: float | None
+    samples: int
+    stats: RunStats
+    has_report: bool
+
+
+class RunStarted(_Out):
+    run_id: str
+
+
+class WindowStats(_Out):
+    tracking: ErrorStats
+    start_s: float | None
+    end_s: float | None
+
+
+class LeaseOut(_Out):
+    holder: str | None = Field(description="who holds control; null when nobody does")
+
+
+class PoseAccepted(_Out):
+    accepted: bool = Field(description="false for out-of-order, duplicate or jumping samples")
+    input: PoseInputStatus
+
+
+class InfoOut(_Out):
+    """Facts the dashboard cannot read from status."""
+
+    viser_port: int | None
+    token_required: bool
+    telemetry_hz: float
+    jog_max_velocity_m_s: float
+    jog_step_m: float
+    joint_speed_limit_rad_s: float
+    loop_rate_hz: float

@@ -1,0 +1,121 @@
+"""Errors to HTTP: only the project's own exception types become operator errors.
+
+A bad goal is 422 (with the nearest reachable point when known), a robot that cannot move
+now is 409, a bus or control loop that does not answer is 503, a missing token 401. Any
+other exception is a bug: a 500 with a generic body, its traceback in the log, never
+dressed as something the operator did.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, ConfigDict, Field
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from app.control.errors import GoalRejected, MotionRefused
+from app.server.api.serialize import floats
+from hardware.errors import BusError
+from kinematics import PoseError
+
+log = logging.getLogger(__name__)
+INTERNAL_ERROR = "internal server error (a bug): see the server log"
+
+
+class ErrorBody(BaseModel):
+    """Every error response: what went wrong, in words."""
+
+    model_config = ConfigDict(extra="forbid")
+    detail: str
+    nearest_m: list[float | None] | None = Field(
+        None, description="422 for a goal outside the workspace: the nearest reachable point [m]"
+    )
+
+
+def _response(description: str) -> dict[str, Any]:
+    return {"model": ErrorBody, "description": description}
+
+
+UNAUTHORISED = {401: _response("missing or wrong token (Authorization: Bearer <token>)")}
+NOT_FOUND = {404: _response("no such run or file")}
+CONFLICT = {409: _response("the robot cannot move now, or another client holds control")}
+INVALID = {422: _response("invalid body or goal; nearest_m when a point is out of reach")}
+UNAVAILABLE = {503: _response("the servo bus or the control loop did not answer")}
+CONTROL = {**UNAUTHORISED, **CONFLICT, **INVALID, **UNAVAILABLE}
+"""What a control route (token, lease, command to the loop) can answer besides 200."""
+
+
+def _error(status: int, detail: str, **extra: Any) -> JSONResponse:
+    return JSONResponse({"detail": detail, **extra}, status_code=status)
+
+
+def _field_errors(exc: RequestValidationError) -> str:
+    """'position_m.1: Input should be a finite number' per error; never echoes raw input."""
+    parts = []
+    for error in exc.errors():
+        location = ".".join(str(p) for p in error["loc"] if p != "body") or "body"
+        parts.append(f"{location}: {error['msg']}")
+    return "; ".join(parts)
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    """Map the project's exceptions to 401/409/422/503; anything else is a logged 500."""
+
+    @app.exception_handler(RequestValidationError)
+    async def invalid_request(_: Request, exc: RequestValidationError) -> JSONResponse:
+        return _error(422, _field_errors(exc))
+
+    @app.exception_handler(GoalRejected)
+    async def goal_rejected(_: Request, exc: GoalRejected) -> JSONResponse:
+        nearest = None if exc.nearest is None else floats(exc.nearest)
+        return _error(422, str(exc), nearest_m=nearest)
+
+    @app.exception_handler(PoseError)
+    async def pose_error(_: Request, exc: PoseError) -> JSONResponse:
+        return _error(422, str(exc))
+
+    @app.exception_handler(MotionRefused)
+    async def motion_refused(_: Request, exc: MotionRefused) -> JSONResponse:
+        return _error(409, str(exc))
+
+    @app.exception_handler(BusError)
+    async def bus_error(_: Request, exc: BusError) -> JSONResponse:
+        return _error(503, f"servo bus: {exc}")
+
+    @app.exception_handler(TimeoutError)  # a command the control loop did not answer in time
+    async def timeout(_: Request, exc: TimeoutError) -> JSONResponse:
+        return _error(503, "the control loop did not answer in time")
+
+    app.add_middleware(BugsAre500)
+
+
+class BugsAre500:
+    """ASGI middleware: an exception no handler took is logged with its traceback and
+    answered 500 with a generic body (Starlette's own last resort would re-raise it to the
+    server, which logs it a second time, and answer in plain text)."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = False
+
+        async def tracked_send(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, receive, tracked_send)
+        except Exception:
+            log.exception("%s %s failed (a bug)", scope["method"], scope["path"])
+            if started:  # too late for a status code; let the server close the connection
+                raise
+            await _error(500, INTERNAL_ERROR)(scope, receive, send)
