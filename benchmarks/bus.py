@@ -31,9 +31,9 @@ _HERE = Path(__file__).resolve().parent
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 
 from hardware.calibration import JointCalibration  # noqa: E402
-from hardware.dynamixel import DynamixelBus, DynamixelConfig  # noqa: E402
+from hardware.dynamixel.control_table import STATE_BLOCK_SIZE, Reg  # noqa: E402
+from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig  # noqa: E402
 from hardware.emulator import ServoEmulator  # noqa: E402
-from hardware.registers import STATE_BLOCK_SIZE, Reg  # noqa: E402
 
 IDS = (1, 2, 3)
 

@@ -1,9 +1,9 @@
 """The servo-bus interface the control loop uses, and the values that cross it.
 
 The loop sees radians, rad/s, amperes, volts and degrees Celsius; ticks and register units
-stay below this line (hardware/registers.py, hardware/dynamixel.py). A read that fails
+stay below this line (hardware/dynamixel/control_table.py, driver.py). A read that fails
 raises (hardware/errors.py); it never returns a state built from a partial or corrupt reply.
-Implementations: `DynamixelBus` (hardware/dynamixel.py) on a real or emulated bus.
+Implementations: `DynamixelBus` (hardware/dynamixel/driver.py) on a real or emulated bus.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from hardware.registers import OperatingMode
+from hardware.dynamixel.control_table import OperatingMode
 
 
 @dataclass(frozen=True)

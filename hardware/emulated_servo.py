@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from hardware.protocol import ALERT_BIT, Instruction, StatusError
-from hardware.registers import Reg
+from hardware.dynamixel.control_table import Reg
+from hardware.dynamixel.protocol import ALERT_BIT, Instruction, StatusError
 from hardware.servo_table import ControlTable
 
 _READ_INSTRUCTIONS = {

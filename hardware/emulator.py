@@ -20,9 +20,8 @@ import tty
 from collections.abc import Iterable
 
 from hardware import emulator_groups
-from hardware.emulated_servo import EmulatedServo, Faults, Reply
-from hardware.motion import MotionModel, SimpleServoModel
-from hardware.protocol import (
+from hardware.dynamixel.control_table import RAD_PER_TICK, Reg
+from hardware.dynamixel.protocol import (
     BROADCAST_ID,
     Instruction,
     Packet,
@@ -31,8 +30,9 @@ from hardware.protocol import (
     frame,
     unstuff,
 )
-from hardware.protocol import status_packet as _status_packet
-from hardware.registers import RAD_PER_TICK, Reg
+from hardware.dynamixel.protocol import status_packet as _status_packet
+from hardware.emulated_servo import EmulatedServo, Faults, Reply
+from hardware.motion import MotionModel, SimpleServoModel
 from hardware.servo_dynamics import advance_servos
 
 _log = logging.getLogger(__name__)

@@ -13,8 +13,8 @@ import threading
 from collections.abc import Sequence
 from typing import TextIO
 
+from hardware.dynamixel.control_table import Reg
 from hardware.emulator import ServoEmulator
-from hardware.registers import Reg
 
 
 def parse_ids(text: str) -> list[int]:

@@ -10,8 +10,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from hardware.dynamixel.protocol import (
+    BROADCAST_ID,
+    HEADER,
+    Instruction,
+    Packet,
+    StatusError,
+    crc16,
+)
 from hardware.emulated_servo import Reply
-from hardware.protocol import BROADCAST_ID, HEADER, Instruction, Packet, StatusError, crc16
 
 # dynamixel-sdk's receive buffer (RXPACKET_MAX_LEN); no real reply is longer.
 MAX_PACKET_BYTES = 1024

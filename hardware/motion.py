@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
-from hardware.registers import OperatingMode
+from hardware.dynamixel.control_table import OperatingMode
 
 MAX_CATCH_UP_S = 0.25
 

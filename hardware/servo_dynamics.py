@@ -1,8 +1,8 @@
 """Glue between emulated control tables and a MotionModel: commands out, present values in.
 
 Each step reads every servo's goal, limit, profile and gain items, converts them to SI
-units (hardware/registers.py), steps the model, and writes Present Position (quantized to
-ticks), Velocity, Current, Moving and the trajectory items back into the tables.
+units (hardware/dynamixel/control_table.py), steps the model, and writes Present Position
+(quantized to ticks), Velocity, Current, Moving and the trajectory items back into the tables.
 """
 
 from __future__ import annotations
@@ -10,9 +10,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 
-from hardware.emulated_servo import EmulatedServo
-from hardware.motion import MotionCommand, MotionModel, MotionState
-from hardware.registers import (
+from hardware.dynamixel.control_table import (
     RAD_PER_TICK,
     OperatingMode,
     Reg,
@@ -22,6 +20,8 @@ from hardware.registers import (
     rad_s_to_velocity,
     velocity_to_rad_s,
 )
+from hardware.emulated_servo import EmulatedServo
+from hardware.motion import MotionCommand, MotionModel, MotionState
 
 INPUT_VOLTAGE_UNITS = 120  # 12.0 V supply
 TEMPERATURE_C = 30

@@ -8,8 +8,7 @@ Error) and inside the limits other items set (Data Limit Error).
 
 from __future__ import annotations
 
-from hardware.protocol import StatusError
-from hardware.registers import (
+from hardware.dynamixel.control_table import (
     CONTROL_TABLE_SIZE,
     Access,
     Area,
@@ -17,6 +16,7 @@ from hardware.registers import (
     Reg,
     decode,
 )
+from hardware.dynamixel.protocol import StatusError
 
 _VALID_MODES = {int(mode) for mode in OperatingMode}
 # The e-manual: Min/Max Position Limit bound Goal Position in Position Control Mode only

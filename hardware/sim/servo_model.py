@@ -29,13 +29,13 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from hardware.motion import MotionCommand
-from hardware.registers import (
+from hardware.dynamixel.control_table import (
     RAD_PER_TICK,
     RAD_S_PER_VELOCITY_UNIT,
     HardwareErrorFlag,
     OperatingMode,
 )
+from hardware.motion import MotionCommand
 from hardware.sim.servo_profile import ProfileState, step_profile
 
 RPM = 2.0 * math.pi / 60.0

@@ -20,8 +20,8 @@ import mujoco
 import numpy as np
 
 from hardware.calibration import JointCalibration
+from hardware.dynamixel.control_table import RAD_PER_TICK, OperatingMode
 from hardware.motion import MotionCommand
-from hardware.registers import RAD_PER_TICK, OperatingMode
 from hardware.sim.base_frame import BaseMotion, apply_frame_forces
 from hardware.sim.masses import THESIS_MASSES, DeltaMasses
 from hardware.sim.mjcf import MOTOR_JOINTS, PLATFORM_JOINTS, SimOptions, build_mjcf

@@ -16,9 +16,9 @@ import dynamixel_sdk as sdk
 import pytest
 
 from hardware.calibration import JointCalibration
-from hardware.dynamixel import DynamixelBus, DynamixelConfig
+from hardware.dynamixel.control_table import Reg
+from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig
 from hardware.emulator import ServoEmulator
-from hardware.registers import Reg
 
 IDS = (1, 2, 3)
 BAUD = 1_000_000  # a standard rate: pyserial sets it on a pty with plain termios

@@ -11,11 +11,7 @@ import pytest
 
 from hardware.bus import PositionGains, ServoBus
 from hardware.calibration import JointCalibration
-from hardware.dynamixel import DynamixelBus
-from hardware.emulator import ServoEmulator
-from hardware.errors import BusError, CommError, NotConnectedError, ServoStatusError
-from hardware.motion import MotionCommand, MotionState
-from hardware.registers import (
+from hardware.dynamixel.control_table import (
     RAD_PER_TICK,
     HardwareErrorFlag,
     OperatingMode,
@@ -23,6 +19,10 @@ from hardware.registers import (
     acceleration_to_rad_s2,
     velocity_to_rad_s,
 )
+from hardware.dynamixel.driver import DynamixelBus
+from hardware.emulator import ServoEmulator
+from hardware.errors import BusError, CommError, NotConnectedError, ServoStatusError
+from hardware.motion import MotionCommand, MotionState
 from tests.hardware.conftest import IDS, fast, make_config
 
 

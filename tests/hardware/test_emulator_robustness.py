@@ -5,9 +5,9 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hardware.dynamixel.control_table import CONTROL_TABLE_SIZE, Reg
+from hardware.dynamixel.protocol import Instruction, Packet
 from hardware.emulator import ServoEmulator
-from hardware.protocol import Instruction, Packet
-from hardware.registers import CONTROL_TABLE_SIZE, Reg
 
 instructions = st.sampled_from([int(i) for i in Instruction] + [0x00, 0x07, 0x7F, 0xFF])
 packet_ids = st.sampled_from([1, 2, 3, 9, 0xFE])

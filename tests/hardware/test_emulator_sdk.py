@@ -5,9 +5,9 @@ from __future__ import annotations
 import dynamixel_sdk as sdk
 import pytest
 
+from hardware.dynamixel.control_table import HardwareErrorFlag, Reg
+from hardware.dynamixel.protocol import StatusError
 from hardware.emulator import ServoEmulator
-from hardware.protocol import StatusError
-from hardware.registers import HardwareErrorFlag, Reg
 
 OK = sdk.COMM_SUCCESS
 

@@ -6,9 +6,9 @@ documented packets rather than to whatever the SDK tolerates.
 
 from __future__ import annotations
 
+from hardware.dynamixel.control_table import Reg
+from hardware.dynamixel.protocol import Instruction, PacketReader, StatusError, instruction_packet
 from hardware.emulator import ServoEmulator
-from hardware.protocol import Instruction, PacketReader, StatusError, instruction_packet
-from hardware.registers import Reg
 from tests.hardware.conftest import RawPort
 from tests.hardware.test_protocol import EMANUAL
 

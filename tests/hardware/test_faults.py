@@ -12,10 +12,10 @@ import time
 import pytest
 
 from hardware.bus import PositionGains
-from hardware.dynamixel import DynamixelBus
+from hardware.dynamixel.control_table import HardwareErrorFlag, Reg
+from hardware.dynamixel.driver import DynamixelBus
 from hardware.emulator import ServoEmulator
 from hardware.errors import BusError, CommError
-from hardware.registers import HardwareErrorFlag, Reg
 from tests.hardware.conftest import make_config
 
 

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from hardware.dynamixel.control_table import OperatingMode
 from hardware.motion import MotionCommand, SimpleServoModel
-from hardware.registers import OperatingMode
 
 
 def run(model: SimpleServoModel, command: MotionCommand, seconds: float, dt: float = 0.005):

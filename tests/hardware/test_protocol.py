@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hardware.protocol import (
+from hardware.dynamixel.protocol import (
     Instruction,
     PacketReader,
     crc16,

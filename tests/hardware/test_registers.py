@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hardware.registers import (
+from hardware.dynamixel.control_table import (
     STATE_BLOCK_SIZE,
     STATE_BLOCK_START,
     Access,

@@ -8,9 +8,9 @@ import pytest
 
 from hardware.bus import PositionGains
 from hardware.calibration import JointCalibration
-from hardware.dynamixel import DynamixelBus, DynamixelConfig
+from hardware.dynamixel.control_table import RAD_PER_TICK
+from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig
 from hardware.emulator import ServoEmulator
-from hardware.registers import RAD_PER_TICK
 from hardware.sim.motion_model import TwinMotionModel
 from tests.hardware.conftest import fast
 

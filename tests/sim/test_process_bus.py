@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from hardware.bus import PositionGains, ServoBus
+from hardware.dynamixel.control_table import RAD_PER_TICK, OperatingMode
 from hardware.errors import BusError, CommError, HardwareError, NotConnectedError, ServoStatusError
-from hardware.registers import RAD_PER_TICK, OperatingMode
 from hardware.sim import BaseMotion, ProcessSimBus, SimBusConfig
 from kinematics import THESIS_DELTA
 from tests.app.conftest import wait_for

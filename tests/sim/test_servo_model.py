@@ -7,8 +7,8 @@ from dataclasses import replace
 
 import pytest
 
+from hardware.dynamixel.control_table import RAD_PER_TICK, HardwareErrorFlag, OperatingMode
 from hardware.motion import MotionCommand
-from hardware.registers import RAD_PER_TICK, HardwareErrorFlag, OperatingMode
 from hardware.sim.servo_model import RPM, XM430_W210, Xm430, Xm430Params
 from hardware.sim.servo_profile import ProfileState, step_profile
 

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from hardware.bus import PositionGains, ServoBus
-from hardware.errors import BusError, HardwareError, NotConnectedError
-from hardware.registers import (
+from hardware.dynamixel.control_table import (
     AMPERE_PER_CURRENT_UNIT,
     RAD_PER_TICK,
     HardwareErrorFlag,
     OperatingMode,
 )
+from hardware.errors import BusError, HardwareError, NotConnectedError
 from hardware.sim.sim_bus import SimBus, SimBusConfig
 
 

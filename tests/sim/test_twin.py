@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from hardware.registers import RAD_PER_TICK, HardwareErrorFlag
+from hardware.dynamixel.control_table import RAD_PER_TICK, HardwareErrorFlag
 from hardware.sim.masses import DeltaMasses
 from hardware.sim.servo_model import XM430_W210
 from hardware.sim.twin import DeltaTwin, TwinConfig, hold_command

@@ -22,9 +22,7 @@ import numpy as np
 
 from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
 from hardware.calibration import JointCalibration, goal_ticks
-from hardware.errors import BusError, CommError, HardwareError
-from hardware.protocol import ALERT_BIT
-from hardware.registers import (
+from hardware.dynamixel.control_table import (
     MODEL_NUMBER_XM430_W210,
     STATE_BLOCK_SIZE,
     STATE_BLOCK_START,
@@ -37,7 +35,9 @@ from hardware.registers import (
     velocity_to_rad_s,
     voltage_to_volt,
 )
-from hardware.sdk_link import SdkLink, comm_reason, status_reason
+from hardware.dynamixel.link import SdkLink, comm_reason, status_reason
+from hardware.dynamixel.protocol import ALERT_BIT
+from hardware.errors import BusError, CommError, HardwareError
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,9 @@
 """XM430-W210 control table as data, and the unit conversions at the bus boundary.
 
 The table follows the ROBOTIS e-manual (XM430-W210, Protocol 2.0, firmware 45+). Both the
-driver (hardware/dynamixel.py) and the emulator (hardware/servo_table.py) read it, so an
-address typo would show up on both sides of the tests rather than hide behind one of them.
+driver (hardware/dynamixel/driver.py) and the emulator (hardware/emulator/memory.py) read it,
+so an address typo would show up on both sides of the tests rather than hide behind one of
+them.
 Everything above hardware/ sees SI units; ticks and raw units stop here.
 """
 

@@ -18,9 +18,9 @@ from typing import TypeVar
 import dynamixel_sdk as sdk
 
 from hardware.bus import BusStats
+from hardware.dynamixel.control_table import Reg, decode, hardware_error_names, to_unsigned
+from hardware.dynamixel.protocol import ALERT_BIT, StatusError
 from hardware.errors import CommError, NotConnectedError, ServoStatusError
-from hardware.protocol import ALERT_BIT, StatusError
-from hardware.registers import Reg, decode, hardware_error_names, to_unsigned
 
 T = TypeVar("T")
 PROTOCOL_VERSION = 2.0
