@@ -72,7 +72,7 @@ def _emulator_process(ids: list[int]) -> Iterator[str]:
     command = [
         sys.executable,
         "-m",
-        "hardware.emulator_cli",
+        "hardware.emulator",
         "--return-delay-us",
         "0",
         "--ids",

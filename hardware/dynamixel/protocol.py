@@ -1,6 +1,6 @@
 """Dynamixel Protocol 2.0 framing: CRC-16, byte stuffing, instruction and status packets.
 
-Used by the emulator (hardware/emulator.py) to speak the wire format the real servos speak;
+Used by the emulator (hardware/emulator/) to speak the wire format the real servos speak;
 the driver leaves framing to dynamixel-sdk. Packet layout (e-manual, Protocol 2.0):
 
     FF FF FD 00 | ID | LEN_L LEN_H | INST | PARAM... | CRC_L CRC_H

@@ -21,8 +21,8 @@ from hardware.dynamixel.control_table import (
 )
 from hardware.dynamixel.driver import DynamixelBus
 from hardware.emulator import ServoEmulator
+from hardware.emulator.shaft_motion import MotionCommand, MotionState
 from hardware.errors import BusError, CommError, NotConnectedError, ServoStatusError
-from hardware.motion import MotionCommand, MotionState
 from tests.hardware.conftest import IDS, fast, make_config
 
 

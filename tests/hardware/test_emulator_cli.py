@@ -59,7 +59,7 @@ def test_run_prints_a_port_the_sdk_can_ping() -> None:
 
 def test_module_entry_point_runs_and_stops_on_sigterm() -> None:
     process = subprocess.Popen(
-        [sys.executable, "-m", "hardware.emulator_cli", "--ids", "1"],
+        [sys.executable, "-m", "hardware.emulator", "--ids", "1"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

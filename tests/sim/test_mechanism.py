@@ -11,8 +11,8 @@ import pytest
 from hardware.sim.base_frame import BaseMotion
 from hardware.sim.masses import DeltaMasses, gravity_torques
 from hardware.sim.mjcf import SimOptions, build_mjcf
-from hardware.sim.servo_model import XM430_W210
 from hardware.sim.twin import DeltaTwin, TwinConfig
+from hardware.sim.xm430 import XM430_W210
 from kinematics import THESIS_DELTA, RotaryDelta
 
 OTHER_DESIGN = RotaryDelta(L=0.12, l=0.30, R=0.10, r=0.03)

@@ -9,8 +9,8 @@ import numpy as np
 
 from hardware.dynamixel.control_table import RAD_PER_TICK, HardwareErrorFlag
 from hardware.sim.masses import DeltaMasses
-from hardware.sim.servo_model import XM430_W210
 from hardware.sim.twin import DeltaTwin, TwinConfig, hold_command
+from hardware.sim.xm430 import XM430_W210
 from kinematics import THESIS_DELTA
 from kinematics.dynamics import MassModel, inverse_dynamics
 

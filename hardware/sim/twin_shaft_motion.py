@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from hardware.motion import MAX_CATCH_UP_S, MotionCommand, MotionState
-from hardware.sim.servo_model import ServoOutput
+from hardware.emulator.shaft_motion import MAX_CATCH_UP_S, MotionCommand, MotionState
 from hardware.sim.twin import DeltaTwin, TwinConfig
+from hardware.sim.xm430 import ServoOutput
 
 
 class TwinMotionModel:

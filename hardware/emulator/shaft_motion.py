@@ -1,11 +1,13 @@
-"""Motion models for the emulator: what the emulated servos' shafts do between packets.
+"""Shaft motion for the emulator: what the emulated servos' shafts do between packets.
 
-The emulator (hardware/emulator.py) turns each servo's control table into a
-`MotionCommand`, steps the model by the wall time elapsed since the last packet, and writes
-the returned `MotionState` back as Present Position (quantized to ticks), Velocity and
-Current. A model sees all servos at once, in the emulator's servo order, so a model of the
-coupled mechanism (the MuJoCo twin of a later issue) fits the same interface as the
-independent `SimpleServoModel` below.
+The emulated bus (hardware/emulator/emulated_bus.py, through stepping.py) turns each
+servo's control table into a `MotionCommand`, steps the `MotionModel` by the wall time
+elapsed since the last packet, and writes the returned `MotionState` back as Present
+Position (quantized to ticks), Velocity and Current. A model sees all servos at once, in the
+emulator's servo order, so a model of the coupled mechanism (the MuJoCo twin,
+hardware/sim/twin_shaft_motion.py) fits the same interface as the independent
+`SimpleServoModel` below. `MotionCommand` is also what the simulator's XM430 model
+(hardware/sim/xm430.py) takes.
 
 Angles here are servo shaft angles [rad] = raw ticks * 2 pi / 4096, not calibrated joint
 angles: the servo knows nothing of the calibration. A twin maps them through

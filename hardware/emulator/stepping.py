@@ -1,4 +1,4 @@
-"""Glue between emulated control tables and a MotionModel: commands out, present values in.
+"""Stepping the shafts: emulated control tables -> MotionModel -> present values back.
 
 Each step reads every servo's goal, limit, profile and gain items, converts them to SI
 units (hardware/dynamixel/control_table.py), steps the model, and writes Present Position
@@ -20,8 +20,8 @@ from hardware.dynamixel.control_table import (
     rad_s_to_velocity,
     velocity_to_rad_s,
 )
-from hardware.emulated_servo import EmulatedServo
-from hardware.motion import MotionCommand, MotionModel, MotionState
+from hardware.emulator.emulated_servo import EmulatedServo
+from hardware.emulator.shaft_motion import MotionCommand, MotionModel, MotionState
 
 INPUT_VOLTAGE_UNITS = 120  # 12.0 V supply
 TEMPERATURE_C = 30

@@ -4,7 +4,7 @@ One servo, stepped at the firmware's control period with the shaft's angle and s
 whatever moves the shaft (the MuJoCo twin, or the emulator through a MotionModel):
 
 1. Encoder: the shaft angle read as whole ticks (4096 per turn), as the firmware sees it.
-2. Profile (hardware.sim.servo_profile): Goal Position shaped by Profile Velocity and
+2. Profile (hardware.sim.xm430_profile): Goal Position shaped by Profile Velocity and
    Acceleration into a desired position, velocity and acceleration.
 3. Position PID with feed-forward, in control-table units as the e-manual documents them:
    PWM = KpP e + KiP sum(e) + KdP de + KFF1 v_d + KFF2 a_d, KpP = P / 128, KiP = I / 65536,
@@ -35,8 +35,8 @@ from hardware.dynamixel.control_table import (
     HardwareErrorFlag,
     OperatingMode,
 )
-from hardware.motion import MotionCommand
-from hardware.sim.servo_profile import ProfileState, step_profile
+from hardware.emulator.shaft_motion import MotionCommand
+from hardware.sim.xm430_profile import ProfileState, step_profile
 
 RPM = 2.0 * math.pi / 60.0
 PWM_FULL_SCALE = 885

@@ -2,7 +2,7 @@
 
 The servo answers the instructions addressed to it alone (ping, read, write, reg write,
 action, factory reset, reboot, clear) with a status packet's parameters and error number;
-framing, broadcast and group instructions are the emulator's (hardware/emulator.py).
+framing, broadcast and group instructions are the bus's (hardware/emulator/emulated_bus.py).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from hardware.dynamixel.control_table import Reg
 from hardware.dynamixel.protocol import ALERT_BIT, Instruction, StatusError
-from hardware.servo_table import ControlTable
+from hardware.emulator.memory import ServoMemory
 
 _READ_INSTRUCTIONS = {
     Instruction.READ,
@@ -51,11 +51,11 @@ class EmulatedServo:
     """Control table plus the per-servo state that lives outside it."""
 
     def __init__(self, servo_id: int) -> None:
-        self.table = ControlTable(servo_id)
+        self.table = ServoMemory(servo_id)
         self.faults = Faults()
         self.registered: tuple[int, bytes] | None = None
         self.reboots = 0
-        # (command bytes, MotionCommand) of hardware.servo_dynamics, so unchanged tables
+        # (command bytes, MotionCommand) of hardware.emulator.stepping, so unchanged tables
         # are not decoded again on every packet.
         self.command_cache: tuple[bytes, object] | None = None
 

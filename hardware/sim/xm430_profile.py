@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from hardware.motion import MotionCommand
+from hardware.emulator.shaft_motion import MotionCommand
 
 
 class ProfileState(NamedTuple):

@@ -11,7 +11,7 @@ from hardware.calibration import JointCalibration
 from hardware.dynamixel.control_table import RAD_PER_TICK
 from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig
 from hardware.emulator import ServoEmulator
-from hardware.sim.motion_model import TwinMotionModel
+from hardware.sim.twin_shaft_motion import TwinMotionModel
 from tests.hardware.conftest import fast
 
 

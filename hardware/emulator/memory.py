@@ -41,7 +41,7 @@ def _owner_map() -> list[Reg | None]:
 _OWNER = _owner_map()
 
 
-class ControlTable:
+class ServoMemory:
     """Bytes 0 .. CONTROL_TABLE_SIZE-1 of one XM430-W210, initialised to factory defaults."""
 
     def __init__(self, servo_id: int = 1) -> None:
