@@ -23,7 +23,7 @@ from hardware.dynamixel.driver import DynamixelBus
 from hardware.emulator import ServoEmulator
 from hardware.emulator.shaft_motion import MotionCommand, MotionState
 from hardware.errors import BusError, CommError, NotConnectedError, ServoStatusError
-from tests.hardware.conftest import IDS, fast, make_config
+from tests.support.servo_emulator import IDS, fast, make_config
 
 
 class FixedModel:

@@ -12,7 +12,7 @@ from hardware.dynamixel.control_table import RAD_PER_TICK
 from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig
 from hardware.emulator import ServoEmulator
 from hardware.sim.twin_shaft_motion import TwinMotionModel
-from tests.hardware.conftest import fast
+from tests.support.servo_emulator import fast
 
 
 def test_reset_places_the_arm_at_the_shaft_angles() -> None:

@@ -9,8 +9,8 @@ from __future__ import annotations
 from hardware.dynamixel.control_table import Reg
 from hardware.dynamixel.protocol import Instruction, PacketReader, StatusError, instruction_packet
 from hardware.emulator import ServoEmulator
-from tests.hardware.conftest import RawPort
-from tests.hardware.test_protocol import EMANUAL
+from tests.support.emanual import EMANUAL
+from tests.support.servo_emulator import RawPort
 
 
 def packet(name: str) -> bytes:

@@ -16,7 +16,7 @@ from hardware.dynamixel.control_table import HardwareErrorFlag, Reg
 from hardware.dynamixel.driver import DynamixelBus
 from hardware.emulator import ServoEmulator
 from hardware.errors import BusError, CommError
-from tests.hardware.conftest import make_config
+from tests.support.servo_emulator import make_config
 
 
 @pytest.mark.parametrize("fault", ["drop_replies", "corrupt_replies", "wrong_id_replies"])

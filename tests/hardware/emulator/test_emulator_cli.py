@@ -12,7 +12,7 @@ import dynamixel_sdk as sdk
 import pytest
 
 from hardware import emulator_cli
-from tests.hardware.conftest import BAUD
+from tests.support.servo_emulator import BAUD
 
 
 def test_parse_ids() -> None:

@@ -14,7 +14,7 @@ from hardware.dynamixel.control_table import RAD_PER_TICK, OperatingMode
 from hardware.errors import BusError, CommError, HardwareError, NotConnectedError, ServoStatusError
 from hardware.sim import BaseMotion, ProcessSimBus, SimBusConfig
 from kinematics import THESIS_DELTA
-from tests.app.conftest import wait_for
+from tests.support.wait import wait_for
 
 
 @pytest.fixture(scope="module")
