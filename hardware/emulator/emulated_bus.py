@@ -26,8 +26,8 @@ from hardware.dynamixel.protocol import (
     status_packet,
     unstuff,
 )
-from hardware.emulator import group_instructions
 from hardware.emulator.emulated_servo import EmulatedServo, Faults, Reply
+from hardware.emulator.group_instructions import handle_group
 from hardware.emulator.shaft_motion import MotionModel, SimpleServoModel
 from hardware.emulator.stepping import advance_servos
 
@@ -146,7 +146,7 @@ class EmulatedBus:
 
     def _broadcast(self, packet: Packet) -> list[tuple[EmulatedServo, bytes]]:
         if packet.instruction in _GROUP:
-            return group_instructions.handle_group(self._listening, packet)
+            return handle_group(self._listening, packet)
         if packet.instruction == Instruction.PING:
             sent: list[tuple[EmulatedServo, bytes]] = []
             for servo in sorted(self._alive(), key=lambda s: s.servo_id):
