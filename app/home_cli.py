@@ -37,7 +37,7 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from app.server.backends import _calibrations
-    from hardware.dynamixel import DynamixelBus, DynamixelConfig
+    from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig
     from hardware.errors import BusError
     from hardware.homing import home_bus
 

@@ -5,7 +5,7 @@ Usage: python benchmarks/bus.py [--ticks 10000] [--emulator process|thread]
 One tick = DynamixelBus.write_goal (one Sync Write of Goal Position to 3 servos) plus
 DynamixelBus.read_state (one Sync Read of the 25-byte state block, 3 status packets), the
 exact per-tick path of the control loop, units converted. By default the emulator runs in
-its own process (``python -m hardware.emulator_cli``) like a separate device on the wire;
+its own process (``python -m hardware.emulator``) like a separate device on the wire;
 ``--emulator thread`` runs it in this process, where it competes for the GIL with the SDK's
 polling reads. Return Delay Time is 0 (the factory 500 us would add 1.5 ms per tick).
 Prints p50/p99/max per tick, the loop rate p99 allows, and the wire-time arithmetic for
@@ -31,9 +31,9 @@ _HERE = Path(__file__).resolve().parent
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 
 from hardware.calibration import JointCalibration  # noqa: E402
-from hardware.dynamixel import DynamixelBus, DynamixelConfig  # noqa: E402
+from hardware.dynamixel.control_table import STATE_BLOCK_SIZE, Reg  # noqa: E402
+from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig  # noqa: E402
 from hardware.emulator import ServoEmulator  # noqa: E402
-from hardware.registers import STATE_BLOCK_SIZE, Reg  # noqa: E402
 
 IDS = (1, 2, 3)
 
@@ -47,7 +47,7 @@ def emulated_port(where: str):
                 servo.table.set(Reg.RETURN_DELAY_TIME, 0)
             yield emulator.port
         return
-    command = [sys.executable, "-m", "hardware.emulator_cli", "--ids", "1,2,3"]
+    command = [sys.executable, "-m", "hardware.emulator", "--ids", "1,2,3"]
     process = subprocess.Popen(
         [*command, "--return-delay-us", "0"], stdout=subprocess.PIPE, text=True
     )

@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hardware.registers import RAD_PER_TICK  # noqa: E402
+from hardware.dynamixel.control_table import RAD_PER_TICK  # noqa: E402
 from hardware.sim.masses import DeltaMasses  # noqa: E402
 from hardware.sim.twin import DeltaTwin, TwinConfig, hold_command  # noqa: E402
 from kinematics import THESIS_DELTA  # noqa: E402

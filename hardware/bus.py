@@ -1,20 +1,30 @@
 """The servo-bus interface the control loop uses, and the values that cross it.
 
 The loop sees radians, rad/s, amperes, volts and degrees Celsius; ticks and register units
-stay below this line (hardware/registers.py, hardware/dynamixel.py). A read that fails
-raises (hardware/errors.py); it never returns a state built from a partial or corrupt reply.
-Implementations: `DynamixelBus` (hardware/dynamixel.py) on a real or emulated bus.
+stay below this line (hardware/dynamixel/). A read that fails raises (hardware/errors.py); it
+never returns a state built from a partial or corrupt reply. Implementations: `DynamixelBus`
+(hardware/dynamixel/driver.py) on a real or emulated bus, and the simulated robot's `SimBus`
+and `ProcessSimBus` (hardware/sim/), which are also `SimulatedBus`es.
+
+Every method raises a `BusError` subclass (hardware/errors.py) and nothing else on a bus
+failure: `NotConnectedError` before connect() or after disconnect(); `CommError` when no
+valid status packet came back within the bounded retries; `ServoStatusError` when a servo
+refused the instruction; `HardwareError` when a servo is latched in a hardware fault; a plain
+`BusError` for what fits none of these (a wrong model number, a simulator process gone).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
-from hardware.registers import OperatingMode
+from hardware.dynamixel.control_table import OperatingMode
+
+if TYPE_CHECKING:  # the annotation only: hardware.sim needs MuJoCo
+    from hardware.sim.base_frame import BaseMotion
 
 
 @dataclass(frozen=True)
@@ -83,35 +93,97 @@ class ServoBus(Protocol):
     """A bus of position-controlled joint servos, addressed in joint order."""
 
     def connect(self) -> None:
-        """Open the port and check every configured servo answers a ping."""
+        """Open the port and check every configured servo answers a ping.
+
+        Raises CommError (port will not open, a servo is missing), BusError (a servo of the
+        wrong model), NotConnectedError (ProcessSimBus: the simulator process did not start);
+        the port is closed again when it raises.
+        """
 
     def disconnect(self) -> None:
-        """Close the port (torque is left as it is; call torque(False) first to relax)."""
+        """Close the port (torque is left as it is; call torque(False) first to relax).
+
+        Never raises: a vanished device is closed all the same.
+        """
 
     def scan(self, ids: Sequence[int] | None = None) -> list[ServoInfo]:
-        """Ping `ids` (default: the configured joints); absent servos are left out."""
+        """Ping `ids` (default: the configured joints); absent servos are left out.
+
+        Raises NotConnectedError; CommError or ServoStatusError if a servo that answered
+        the ping then fails the firmware read.
+        """
 
     def torque(self, enabled: bool) -> None:
-        """Torque Enable on all joints."""
+        """Torque Enable on all joints.
+
+        Raises NotConnectedError, CommError, ServoStatusError; HardwareError when enabling
+        a servo latched in a hardware fault (reboot clears it).
+        """
 
     def set_operating_mode(self, mode: OperatingMode) -> None:
-        """Operating Mode on all joints (an EEPROM item: torque must be off)."""
+        """Operating Mode on all joints (an EEPROM item: torque must be off).
+
+        Raises NotConnectedError, CommError; ServoStatusError (the real servo's Access
+        Error) or BusError (the simulator) if torque is on.
+        """
 
     def write_goal(self, positions_rad: Sequence[float]) -> None:
-        """Goal joint angles [rad] for all joints, one packet; clamped to calibrated limits."""
+        """Goal joint angles [rad] for all joints, one packet; clamped to calibrated limits.
+
+        Raises NotConnectedError, CommError (the write could not be sent).
+        """
 
     def read_state(self) -> JointState:
-        """Present state of all joints in one transaction; raises rather than guess."""
+        """Present state of all joints in one transaction; raises rather than guess.
+
+        Raises NotConnectedError; CommError when any servo's reply is missing or corrupt
+        after the bounded retries. A latched hardware error is reported in
+        `JointState.hardware_errors`, not raised.
+        """
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
-        """Profile Velocity [rad/s] and Acceleration [rad/s^2] on all joints (0 = unlimited)."""
+        """Profile Velocity [rad/s] and Acceleration [rad/s^2] on all joints (0 = unlimited).
+
+        Raises ValueError for a negative value; NotConnectedError, CommError,
+        ServoStatusError.
+        """
 
     def set_gains(self, gains: PositionGains) -> None:
-        """Position PID and feed-forward gains on all joints."""
+        """Position PID and feed-forward gains on all joints.
+
+        Raises NotConnectedError, CommError, ServoStatusError (a gain out of range).
+        """
 
     def reboot(self, ids: Sequence[int] | None = None) -> None:
-        """Reboot servos (default all joints) to clear a latched hardware error."""
+        """Reboot servos (default all joints) to clear a latched hardware error.
+
+        Raises NotConnectedError; CommError if a servo does not answer or does not come back.
+        """
 
     @property
     def stats(self) -> BusStats:
-        """Transaction and retry counters."""
+        """Transaction and retry counters (never raises)."""
+
+
+@runtime_checkable
+class SimulatedBus(Protocol):
+    """What a simulated robot's bus can do beyond a `ServoBus`: the true platform, a moving base.
+
+    `SimBus` and `ProcessSimBus` (hardware/sim/) are both; `DynamixelBus` is not. Check with
+    ``isinstance(bus, SimulatedBus)`` rather than probing for the method names.
+    """
+
+    def measure_platform(self, at_last_read: bool = False) -> np.ndarray:
+        """The external measurement of the platform in the base frame [m], shape (3,): the
+        true centre plus the marker offset plus noise; with ``at_last_read`` at the instant
+        of the last read_state.
+
+        Raises NotConnectedError (ProcessSimBus before connect), BusError (its shared state
+        stayed locked).
+        """
+
+    def set_base_motion(self, motion: BaseMotion) -> None:
+        """The drone's attitude, acceleration and turning, acting on the arm from now on.
+
+        Raises NotConnectedError, BusError (ProcessSimBus: the simulator process is gone).
+        """

@@ -21,8 +21,8 @@ from typing import Any
 
 import tomli_w
 
+from hardware.dynamixel.control_table import RAD_PER_TICK, TICKS_PER_REV
 from hardware.errors import CalibrationError
-from hardware.registers import RAD_PER_TICK, TICKS_PER_REV
 
 SECTION = "hardware"
 

@@ -11,7 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from hardware.calibration import JointCalibration, guided_homing, save
-from hardware.dynamixel import DynamixelBus
+from hardware.dynamixel.driver import DynamixelBus
 
 
 def home_bus(

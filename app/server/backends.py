@@ -11,9 +11,9 @@ from dataclasses import dataclass
 from app.config import Settings
 from hardware.bus import ServoBus
 from hardware.calibration import JointCalibration
-from hardware.dynamixel import DynamixelBus, DynamixelConfig
+from hardware.dynamixel.control_table import Reg
+from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig
 from hardware.emulator import ServoEmulator
-from hardware.registers import Reg
 from kinematics import RotaryDelta
 
 
@@ -72,7 +72,7 @@ def _emulator_process(ids: list[int]) -> Iterator[str]:
     command = [
         sys.executable,
         "-m",
-        "hardware.emulator_cli",
+        "hardware.emulator",
         "--return-delay-us",
         "0",
         "--ids",

@@ -11,6 +11,7 @@ from app.world.drone_sim import DroneSimParams, SimulatedDrone
 from app.world.hold import HoldSource, PoseProvider, SimulatedDroneProvider, TrackerProvider
 from app.world.inputs import MavlinkPoseListener, UdpPoseListener
 from app.world.poses import PoseTracker
+from hardware.bus import SimulatedBus
 from kinematics import Pose
 
 if TYPE_CHECKING:
@@ -71,7 +72,7 @@ class WorldService:
     def _feel_hook(self):
         """On the simulated robot, the drone's motion moves the twin's base (else None)."""
         bus = self.controller.bus
-        if not hasattr(bus, "set_base_motion"):
+        if not isinstance(bus, SimulatedBus):
             return None
         mount = self.mount
 
@@ -83,7 +84,7 @@ class WorldService:
     def level_base(self) -> None:
         """Back to a level, still base (after a simulated-drone hold)."""
         bus = self.controller.bus
-        if hasattr(bus, "set_base_motion"):
+        if isinstance(bus, SimulatedBus):
             from hardware.sim import BaseMotion
 
             bus.set_base_motion(BaseMotion())

@@ -1,20 +1,20 @@
 """The simulated robot: a MuJoCo twin of the Delta driven by physical XM430-W210 models.
 
 - `mjcf.build_mjcf`: the MJCF of any RotaryDelta and `masses.DeltaMasses`.
-- `servo_model.Xm430`: firmware position loop, PWM, DC motor, heat and overload.
+- `xm430.Xm430`: firmware position loop, PWM, DC motor, heat and overload.
 - `twin.DeltaTwin`: mechanism and servos stepped together (no wall clock).
 - `sim_bus.SimBus`: the twin as a `hardware.bus.ServoBus`, stepped by the caller or a thread.
 - `process_bus.ProcessSimBus`: a `SimBus` in its own process (the server's backend).
-- `motion_model.TwinMotionModel`: the twin as the emulator's `MotionModel`.
+- `twin_shaft_motion.TwinMotionModel`: the twin as the emulator's `MotionModel`.
 """
 
 from hardware.sim.base_frame import BaseMotion
 from hardware.sim.masses import THESIS_MASSES, DeltaMasses, gravity_torques
-from hardware.sim.motion_model import TwinMotionModel
 from hardware.sim.process_bus import ProcessSimBus
-from hardware.sim.servo_model import XM430_W210, Xm430, Xm430Params
 from hardware.sim.sim_bus import SimBus, SimBusConfig
 from hardware.sim.twin import DeltaTwin, TwinConfig
+from hardware.sim.twin_shaft_motion import TwinMotionModel
+from hardware.sim.xm430 import XM430_W210, Xm430, Xm430Params
 
 __all__ = [
     "BaseMotion",

@@ -33,8 +33,8 @@ import numpy as np
 
 from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
 from hardware.calibration import goal_ticks
+from hardware.dynamixel.control_table import OperatingMode, hardware_error_names
 from hardware.errors import BusError, NotConnectedError
-from hardware.registers import OperatingMode, hardware_error_names
 from hardware.sim.base_frame import BaseMotion
 from hardware.sim.sim_bus import MAX_CATCH_UP_S, SimBus, SimBusConfig
 

@@ -1,6 +1,6 @@
 """The MuJoCo twin as a ServoBus: the in-process simulated backend of `deltadash serve`.
 
-Same units and behaviour as hardware.dynamixel.DynamixelBus: goals clamped to the
+Same units and behaviour as hardware.dynamixel.driver.DynamixelBus: goals clamped to the
 calibrated limits and rounded to whole ticks; present values quantized as the control
 table holds them (position in ticks, velocity in 0.229 rpm, current in 2.69 mA, voltage in
 0.1 V, temperature in whole degC); latched hardware errors reported by name and refusing
@@ -20,8 +20,7 @@ import numpy as np
 
 from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
 from hardware.calibration import goal_ticks
-from hardware.errors import BusError, HardwareError, NotConnectedError
-from hardware.registers import (
+from hardware.dynamixel.control_table import (
     MODEL_NUMBER_XM430_W210,
     RAD_PER_TICK,
     OperatingMode,
@@ -34,6 +33,7 @@ from hardware.registers import (
     rad_s_to_velocity,
     velocity_to_rad_s,
 )
+from hardware.errors import BusError, HardwareError, NotConnectedError
 from hardware.sim.base_frame import BaseMotion
 from hardware.sim.twin import DeltaTwin, TwinConfig
 

@@ -20,12 +20,12 @@ import mujoco
 import numpy as np
 
 from hardware.calibration import JointCalibration
-from hardware.motion import MotionCommand
-from hardware.registers import RAD_PER_TICK, OperatingMode
+from hardware.dynamixel.control_table import RAD_PER_TICK, OperatingMode
+from hardware.emulator.shaft_motion import MotionCommand
 from hardware.sim.base_frame import BaseMotion, apply_frame_forces
 from hardware.sim.masses import THESIS_MASSES, DeltaMasses
 from hardware.sim.mjcf import MOTOR_JOINTS, PLATFORM_JOINTS, SimOptions, build_mjcf
-from hardware.sim.servo_model import XM430_W210, ServoOutput, Xm430, Xm430Params
+from hardware.sim.xm430 import XM430_W210, ServoOutput, Xm430, Xm430Params
 from kinematics import THESIS_DELTA, RotaryDelta
 
 DEFAULT_JOINTS = tuple(JointCalibration(servo_id=i) for i in (1, 2, 3))

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import functools
 import tempfile
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 
 import pytest
 from fastapi.testclient import TestClient
@@ -13,18 +12,7 @@ from fastapi.testclient import TestClient
 from app.config import load_settings
 from app.server import create_app
 from app.server.backends import open_backend
-
-WAIT_S = 30.0  # generous bound for convergence on a loaded 2-core machine; not a timing test
-
-
-def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = WAIT_S) -> None:
-    """Poll ``condition`` until true; fail naming ``what`` if it never becomes true."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if condition():
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"timed out waiting for {what}")
+from tests.support.wait import wait_for  # noqa: F401 - re-exported for other folders' tests
 
 
 def make_client(runs_folder=None, **overrides) -> TestClient:

@@ -7,7 +7,7 @@ import math
 from app.cli import main
 from app.config import load_settings
 from hardware.emulator import ServoEmulator
-from tests.hardware.conftest import fast
+from tests.support.servo_emulator import fast
 
 
 def test_home_saves_offsets_that_make_the_pose_read_as_its_angles(tmp_path, capsys):

@@ -1,4 +1,6 @@
-"""Fixtures: an emulated XM430-W210 bus on a pty, raw SDK handles on it, and a DynamixelBus.
+"""Fixtures of tests/hardware and its dynamixel/ and emulator/ folders: an emulated
+XM430-W210 bus on a pty, and a DynamixelBus connected to it (helpers in
+tests/support/servo_emulator.py).
 
 Every fixture stops what it started (emulator thread, pty, serial port) in its teardown,
 so a failing test cannot leave a thread answering on a stale pty for the next one.
@@ -6,30 +8,13 @@ so a failing test cannot leave a thread answering on a stale pty for the next on
 
 from __future__ import annotations
 
-import os
-import select
-import time
-import tty
 from collections.abc import Iterator
 
-import dynamixel_sdk as sdk
 import pytest
 
-from hardware.calibration import JointCalibration
-from hardware.dynamixel import DynamixelBus, DynamixelConfig
+from hardware.dynamixel.driver import DynamixelBus
 from hardware.emulator import ServoEmulator
-from hardware.registers import Reg
-
-IDS = (1, 2, 3)
-BAUD = 1_000_000  # a standard rate: pyserial sets it on a pty with plain termios
-
-
-def fast(emulator: ServoEmulator) -> ServoEmulator:
-    """Return Delay Time 0 on every servo (factory 250 = 500 us), as a tuned robot has."""
-    with emulator.lock:
-        for servo in emulator.servos:
-            servo.table.set(Reg.RETURN_DELAY_TIME, 0)
-    return emulator
+from tests.support.servo_emulator import IDS, fast, make_config
 
 
 @pytest.fixture
@@ -43,22 +28,6 @@ def emulator() -> Iterator[ServoEmulator]:
 
 
 @pytest.fixture
-def sdk_port(emulator: ServoEmulator) -> Iterator[tuple[sdk.PortHandler, object]]:
-    port = sdk.PortHandler(emulator.port)
-    assert port.openPort() and port.setBaudRate(BAUD)
-    try:
-        yield port, sdk.PacketHandler(2.0)
-    finally:
-        port.closePort()
-
-
-def make_config(port: str, **overrides: object) -> DynamixelConfig:
-    joints = tuple(JointCalibration(servo_id) for servo_id in IDS)
-    settings = {"joints": joints, "port": port, "baudrate": BAUD, **overrides}
-    return DynamixelConfig(**settings)  # type: ignore[arg-type]
-
-
-@pytest.fixture
 def bus(emulator: ServoEmulator) -> Iterator[DynamixelBus]:
     dxl = DynamixelBus(make_config(emulator.port))
     dxl.connect()
@@ -66,38 +35,3 @@ def bus(emulator: ServoEmulator) -> Iterator[DynamixelBus]:
         yield dxl
     finally:
         dxl.disconnect()
-
-
-class RawPort:
-    """The client end of the pty without any SDK: bytes in, bytes out."""
-
-    def __init__(self, path: str) -> None:
-        self.fd = os.open(path, os.O_RDWR | os.O_NOCTTY)
-        tty.setraw(self.fd)
-
-    def exchange(self, packet: bytes, expect: int, timeout_s: float = 1.0) -> bytes:
-        """Send `packet`, then read until `expect` bytes arrived or `timeout_s` passed."""
-        os.write(self.fd, packet)
-        return self.read(expect, timeout_s)
-
-    def read(self, expect: int, timeout_s: float = 1.0) -> bytes:
-        data = b""
-        deadline = time.monotonic() + timeout_s
-        while len(data) < expect:
-            left = deadline - time.monotonic()
-            if left <= 0 or not select.select([self.fd], [], [], left)[0]:
-                break
-            data += os.read(self.fd, expect - len(data))
-        return data
-
-    def close(self) -> None:
-        os.close(self.fd)
-
-
-@pytest.fixture
-def raw(emulator: ServoEmulator) -> Iterator[RawPort]:
-    port = RawPort(emulator.port)
-    try:
-        yield port
-    finally:
-        port.close()

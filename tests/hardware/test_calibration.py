@@ -17,9 +17,9 @@ from hardware.calibration import (
     load,
     save,
 )
+from hardware.dynamixel.control_table import RAD_PER_TICK
 from hardware.errors import CalibrationError
 from hardware.homing import home_bus
-from hardware.registers import RAD_PER_TICK
 
 calibrations = st.builds(
     JointCalibration,

@@ -1,1 +1,1 @@
-"""Helpers the tests import: hypothesis strategies, the browser driver."""
+"""Helpers shared by tests in more than one folder (never imported from a conftest.py)."""

@@ -1,0 +1,287 @@
+"""ServoBus on ROBOTIS Dynamixel X-series servos (XM430-W210), through dynamixel-sdk.
+
+Per control tick: one GroupSyncWrite of Goal Position (116) for all joints, and one
+GroupSyncRead of the block Moving (122) .. Present Temperature (146): the issue's Present
+Current (126) .. Present Temperature block, widened by four bytes so the Moving flag comes
+in the same packet. The sync read is sent with the SDK's GroupSyncRead and its replies
+taken one per servo with readRx, so each servo's error byte is seen: when its alert bit
+(0x80) is set, Hardware Error Status (70) is read and reported by name. A read in which
+any servo is missing, late, corrupt or answers as another id is retried whole (up to
+`max_tries`) and otherwise raises CommError naming the servos; no state is ever assembled
+from a partial reply. Configuration writes go one servo at a time and wait for each status.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import dynamixel_sdk as sdk
+import numpy as np
+
+from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
+from hardware.calibration import JointCalibration, goal_ticks
+from hardware.dynamixel.control_table import (
+    MODEL_NUMBER_XM430_W210,
+    STATE_BLOCK_SIZE,
+    STATE_BLOCK_START,
+    OperatingMode,
+    Reg,
+    current_to_ampere,
+    decode,
+    rad_s2_to_acceleration,
+    rad_s_to_velocity,
+    velocity_to_rad_s,
+    voltage_to_volt,
+)
+from hardware.dynamixel.link import SdkLink, comm_reason, status_reason
+from hardware.dynamixel.protocol import ALERT_BIT
+from hardware.errors import BusError, CommError, HardwareError
+
+
+@dataclass(frozen=True)
+class DynamixelConfig:
+    """Bus settings: port, baud rate [bit/s], joints in order, retry and timeout policy.
+
+    rx_timeout_s: status timeout [s] of the per-tick sync read (None: the SDK's own, about
+    34 ms plus wire time, sized for a 16 ms USB latency timer); the read's worst case is
+    max_tries * rx_timeout_s. expected_model: refuse other servos at connect (None: any).
+    """
+
+    joints: tuple[JointCalibration, ...]
+    port: str = "/dev/ttyUSB0"
+    baudrate: int = 1_000_000
+    max_tries: int = 3
+    rx_timeout_s: float | None = None
+    expected_model: int | None = MODEL_NUMBER_XM430_W210
+    reboot_timeout_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        ids = [joint.servo_id for joint in self.joints]
+        if not ids or len(set(ids)) != len(ids):
+            raise ValueError(f"joint servo ids {ids} must be distinct and non-empty")
+
+
+class DynamixelBus:
+    """The control loop's bus: SI units in and out, one write and one read per tick."""
+
+    def __init__(self, config: DynamixelConfig) -> None:
+        self.config = config
+        self.ids = tuple(joint.servo_id for joint in config.joints)
+        self.link = SdkLink(config.port, config.baudrate, config.max_tries)
+        self._goal_writer: sdk.GroupSyncWrite | None = None
+        self._state_reader: sdk.GroupSyncRead | None = None
+
+    # -- ServoBus ------------------------------------------------------------------------
+    def connect(self) -> None:
+        self.disconnect()  # reconnecting must not leak the previous port
+        self.link.open()
+        port = self.link.port
+        goal = Reg.GOAL_POSITION
+        self._goal_writer = sdk.GroupSyncWrite(port, self.link.packets, goal.address, goal.size)
+        self._state_reader = sdk.GroupSyncRead(
+            port, self.link.packets, STATE_BLOCK_START, STATE_BLOCK_SIZE
+        )
+        for servo_id in self.ids:
+            self._goal_writer.addParam(servo_id, [0, 0, 0, 0])
+            self._state_reader.addParam(servo_id)
+        try:
+            found = {info.servo_id: info for info in self.scan()}
+            missing = [i for i in self.ids if i not in found]
+            if missing:
+                raise CommError(missing, "ping", "servo not found on the bus")
+            wrong = [i for i in self.ids if self._wrong_model(found[i].model_number)]
+            if wrong:
+                models = ", ".join(str(found[i].model_number) for i in wrong)
+                expected = self.config.expected_model
+                raise BusError(wrong, "ping", f"model {models}, expected {expected}")
+        except BusError:
+            self.disconnect()
+            raise
+
+    def disconnect(self) -> None:
+        self.link.close()
+        self._goal_writer = self._state_reader = None
+
+    def scan(self, ids: Sequence[int] | None = None) -> list[ServoInfo]:
+        found = []
+        for servo_id in self.ids if ids is None else ids:
+            try:
+                model = self.link.ping(servo_id)
+            except CommError:
+                continue  # absent: scanning is how one finds out
+            firmware = self.link.read(servo_id, Reg.FIRMWARE_VERSION)
+            found.append(ServoInfo(servo_id, model, firmware))
+        return found
+
+    def torque(self, enabled: bool) -> None:
+        if enabled:
+            # Hold where the links are: a stale Goal Position would jump the arm on enable.
+            self._sync_write_goal_ticks(list(self.read_ticks().values()))
+        for servo_id in self.ids:
+            error = self.link.write(servo_id, Reg.TORQUE_ENABLE, int(enabled))
+            if enabled and error & ALERT_BIT:
+                flags = {servo_id: self.link.hardware_errors(servo_id)}
+                raise HardwareError([servo_id], "write TORQUE_ENABLE", flags)
+
+    def set_operating_mode(self, mode: OperatingMode) -> None:
+        self._write_all(Reg.OPERATING_MODE, [int(mode)] * len(self.ids))
+
+    def write_goal(self, positions_rad: Sequence[float]) -> None:
+        ticks = goal_ticks(self.config.joints, positions_rad)
+        self._sync_write_goal_ticks(ticks)
+
+    def read_state(self) -> JointState:
+        raw, alerts = self._read_block()
+        return self._state_from(raw, alerts)
+
+    def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
+        if velocity_rad_s < 0 or acceleration_rad_s2 < 0:
+            raise ValueError("profile velocity and acceleration must be >= 0 (0 = unlimited)")
+        n = len(self.ids)
+        self._write_all(Reg.PROFILE_ACCELERATION, [rad_s2_to_acceleration(acceleration_rad_s2)] * n)
+        self._write_all(Reg.PROFILE_VELOCITY, [rad_s_to_velocity(velocity_rad_s)] * n)
+
+    def set_gains(self, gains: PositionGains) -> None:
+        n = len(self.ids)
+        self._write_all(Reg.POSITION_P_GAIN, [gains.p] * n)
+        self._write_all(Reg.POSITION_I_GAIN, [gains.i] * n)
+        self._write_all(Reg.POSITION_D_GAIN, [gains.d] * n)
+        self._write_all(Reg.FEEDFORWARD_1ST_GAIN, [gains.feedforward_1st] * n)
+        self._write_all(Reg.FEEDFORWARD_2ND_GAIN, [gains.feedforward_2nd] * n)
+
+    def reboot(self, ids: Sequence[int] | None = None) -> None:
+        targets = list(self.ids if ids is None else ids)
+        port = self.link.require_port("reboot")
+        for servo_id in targets:
+            self.link.transact(
+                [servo_id], "reboot", lambda i=servo_id: (None, *self.link.packets.reboot(port, i))
+            )
+        deadline = time.monotonic() + self.config.reboot_timeout_s
+        pending = set(targets)
+        while pending:  # the servo is deaf for a few hundred ms while it boots
+            pending = {i for i in pending if not self.scan([i])}
+            if pending and time.monotonic() > deadline:
+                raise CommError(sorted(pending), "reboot", "servo did not come back")
+
+    @property
+    def stats(self) -> BusStats:
+        return self.link.stats
+
+    # -- beyond the ServoBus protocol: setup and homing ---------------------------------
+    def read_ticks(self) -> dict[int, int]:
+        """Raw Present Position [ticks] per servo id (for homing; one sync read)."""
+        raw, _ = self._read_block()
+        offset = Reg.PRESENT_POSITION.address - STATE_BLOCK_START
+        return {i: decode(Reg.PRESENT_POSITION, raw[i], offset) for i in self.ids}
+
+    def read_register(self, servo_id: int, reg: Reg) -> int:
+        """Any control-table item of one servo, raw (signed items decoded as signed)."""
+        return self.link.read(servo_id, reg)
+
+    def write_register(self, servo_id: int, reg: Reg, value: int) -> None:
+        """Any writable item of one servo, raw; EEPROM items need torque off."""
+        self.link.write(servo_id, reg, value)
+
+    def write_position_limits(self) -> None:
+        """Copy each joint's calibrated angle limits into Min/Max Position Limit (EEPROM)."""
+        for cal in self.config.joints:
+            low, high = cal.tick_limits()
+            self.link.write(cal.servo_id, Reg.MIN_POSITION_LIMIT, max(0, low))
+            self.link.write(cal.servo_id, Reg.MAX_POSITION_LIMIT, min(4095, high))
+
+    # -- internals -----------------------------------------------------------------------
+    def _wrong_model(self, model: int) -> bool:
+        return self.config.expected_model is not None and model != self.config.expected_model
+
+    def _write_all(self, reg: Reg, values: Sequence[int]) -> None:
+        for servo_id, value in zip(self.ids, values, strict=True):
+            self.link.write(servo_id, reg, value)
+
+    def _sync_write_goal_ticks(self, ticks: Sequence[int]) -> None:
+        writer = self._goal_writer
+        if writer is None:
+            self.link.require_port("sync write GOAL_POSITION")
+            return
+        with self.link.lock:  # the parameters and the packet they build belong together
+            for servo_id, value in zip(self.ids, ticks, strict=True):
+                writer.changeParam(servo_id, list(int(value).to_bytes(4, "little", signed=True)))
+            self.link.transact(
+                self.ids, "sync write GOAL_POSITION", lambda: (None, writer.txPacket(), 0)
+            )
+
+    def _read_block(self) -> tuple[dict[int, bytes], dict[int, tuple[str, ...]]]:
+        """State-block bytes per servo id, and the hardware errors of servos that alert."""
+        reader = self._state_reader
+        instruction = "sync read MOVING..PRESENT_TEMPERATURE"
+        if reader is None:
+            self.link.require_port(instruction)
+        with self.link.lock:
+            self.link.count_transaction()
+            failed: dict[int, str] = {}
+            for tries in range(1, self.link.max_tries + 1):
+                replies, failed = self._read_block_once(reader)
+                last = tries == self.link.max_tries
+                self.link.count_try(bool(failed), last)
+                if not failed:
+                    alerts = {
+                        i: self.link.hardware_errors(i)
+                        for i, (_, error) in replies.items()
+                        if error & ALERT_BIT
+                    }
+                    return {i: data for i, (data, _) in replies.items()}, alerts
+            self.link.count_failure()
+            reason = "; ".join(f"servo {i}: {why}" for i, why in failed.items())
+            raise CommError(sorted(failed), instruction, reason, self.link.max_tries)
+
+    def _read_block_once(
+        self, reader: sdk.GroupSyncRead
+    ) -> tuple[dict[int, tuple[bytes, int]], dict[int, str]]:
+        port, packets = self.link.port, self.link.packets
+        try:
+            result = reader.txPacket()
+        except (OSError, IndexError, ValueError) as exc:
+            self.link.release_port()
+            return {}, {i: repr(exc) for i in self.ids}
+        if result != sdk.COMM_SUCCESS:
+            return {}, {i: comm_reason(result) for i in self.ids}
+        replies: dict[int, tuple[bytes, int]] = {}
+        failed: dict[int, str] = {}
+        for servo_id in self.ids:
+            if self.config.rx_timeout_s is not None:
+                port.setPacketTimeoutMillis(self.config.rx_timeout_s * 1000.0)
+            try:
+                data, result, error = packets.readRx(port, servo_id, STATE_BLOCK_SIZE)
+            except (OSError, IndexError, ValueError) as exc:
+                self.link.release_port()
+                failed[servo_id] = repr(exc)
+                continue
+            if result != sdk.COMM_SUCCESS:
+                failed[servo_id] = comm_reason(result)
+            elif error & ~ALERT_BIT:
+                failed[servo_id] = status_reason(error)
+            elif len(data) != STATE_BLOCK_SIZE:
+                failed[servo_id] = f"{len(data)} data bytes, expected {STATE_BLOCK_SIZE}"
+            else:
+                replies[servo_id] = (bytes(data), error)
+        return replies, failed
+
+    def _state_from(self, raw: dict[int, bytes], alerts: dict[int, tuple[str, ...]]) -> JointState:
+        def column(reg: Reg) -> np.ndarray:
+            offset = reg.address - STATE_BLOCK_START
+            return np.array([decode(reg, raw[i], offset) for i in self.ids], dtype=float)
+
+        sign = np.array([cal.direction for cal in self.config.joints], dtype=float)
+        ticks = column(Reg.PRESENT_POSITION)
+        position = [cal.to_rad(t) for cal, t in zip(self.config.joints, ticks, strict=True)]
+        return JointState(
+            position_rad=np.array(position),
+            velocity_rad_s=sign * velocity_to_rad_s(column(Reg.PRESENT_VELOCITY)),
+            current_a=sign * current_to_ampere(column(Reg.PRESENT_CURRENT)),
+            voltage_v=voltage_to_volt(column(Reg.PRESENT_INPUT_VOLTAGE)),
+            temperature_c=column(Reg.PRESENT_TEMPERATURE),
+            moving=column(Reg.MOVING).astype(bool),
+            hardware_errors=tuple(alerts.get(i, ()) for i in self.ids),
+            stamp_s=time.monotonic(),
+        )

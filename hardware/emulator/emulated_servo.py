@@ -1,0 +1,182 @@
+"""One emulated XM430-W210: its control table, registered instruction and injected faults.
+
+The servo answers the instructions addressed to it alone (ping, read, write, reg write,
+action, factory reset, reboot, clear) with a status packet's parameters and error number;
+framing, broadcast and group instructions are the bus's (hardware/emulator/emulated_bus.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from hardware.dynamixel.control_table import Reg
+from hardware.dynamixel.protocol import ALERT_BIT, Instruction, StatusError
+from hardware.emulator.memory import ServoMemory
+
+_READ_INSTRUCTIONS = {
+    Instruction.READ,
+    Instruction.SYNC_READ,
+    Instruction.FAST_SYNC_READ,
+    Instruction.BULK_READ,
+    Instruction.FAST_BULK_READ,
+}
+_CLEAR_MULTI_TURN = bytes([0x01, 0x44, 0x58, 0x4C, 0x22])
+
+
+@dataclass
+class Faults:
+    """Faults injected into one servo (mutable; the emulator reads them under its lock).
+
+    drop_replies / corrupt_replies / wrong_id_replies: how many of the next status packets
+    to swallow, send with a broken CRC, or send from another id; delay_s: extra delay [s]
+    before every reply; unplugged: the servo neither hears nor answers anything.
+    """
+
+    drop_replies: int = 0
+    corrupt_replies: int = 0
+    wrong_id_replies: int = 0
+    delay_s: float = 0.0
+    unplugged: bool = False
+
+
+@dataclass(frozen=True)
+class Reply:
+    """A status to send: error number and parameters (the alert bit is added on sending)."""
+
+    error: StatusError
+    params: bytes = b""
+
+
+class EmulatedServo:
+    """Control table plus the per-servo state that lives outside it."""
+
+    def __init__(self, servo_id: int) -> None:
+        self.table = ServoMemory(servo_id)
+        self.faults = Faults()
+        self.registered: tuple[int, bytes] | None = None
+        self.reboots = 0
+        # (command bytes, MotionCommand) of hardware.emulator.stepping, so unchanged tables
+        # are not decoded again on every packet.
+        self.command_cache: tuple[bytes, object] | None = None
+
+    @property
+    def servo_id(self) -> int:
+        return self.table.get(Reg.ID)
+
+    @property
+    def return_delay_s(self) -> float:
+        """Return Delay Time (9) in seconds (2 us per unit)."""
+        return self.table.get(Reg.RETURN_DELAY_TIME) * 2e-6
+
+    def error_byte(self, error: StatusError) -> int:
+        """The status packet's error byte: the error number plus the alert bit if faulted."""
+        alert = ALERT_BIT if self.table.get(Reg.HARDWARE_ERROR_STATUS) else 0
+        return int(error) | alert
+
+    def answers(self, instruction: int) -> bool:
+        """Whether Status Return Level (68) lets this instruction get a status packet."""
+        level = self.table.get(Reg.STATUS_RETURN_LEVEL)
+        if instruction == Instruction.PING:
+            return True
+        if instruction in _READ_INSTRUCTIONS:
+            return level >= 1
+        return level >= 2
+
+    def raise_hardware_error(self, bits: int) -> None:
+        """Latch Hardware Error Status bits and drop torque, as the servo's shutdown does."""
+        status = self.table.get(Reg.HARDWARE_ERROR_STATUS) | bits
+        self.table.set(Reg.HARDWARE_ERROR_STATUS, status)
+        if self.shut_down:
+            self.table.set(Reg.TORQUE_ENABLE, 0)
+
+    @property
+    def shut_down(self) -> bool:
+        """A latched hardware error is one the Shutdown (63) item turns torque off for."""
+        return bool(self.table.get(Reg.HARDWARE_ERROR_STATUS) & self.table.get(Reg.SHUTDOWN))
+
+    def write(self, address: int, data: bytes) -> StatusError:
+        """A checked write; torque stays off while a shutdown hardware error is latched."""
+        error = self.table.write(address, data)
+        if error is StatusError.NONE and self.shut_down:
+            self.table.set(Reg.TORQUE_ENABLE, 0)
+        return error
+
+    def handle(self, instruction: int, params: bytes) -> Reply:
+        """Execute a unicast instruction (after-effects of reboot/reset: see `finish`)."""
+        handler = _HANDLERS.get(instruction)
+        if handler is None:
+            return Reply(StatusError.INSTRUCTION)
+        return handler(self, params)
+
+    def finish(self, instruction: int, params: bytes) -> None:
+        """Effects the servo applies after its status packet has gone out."""
+        if instruction == Instruction.REBOOT:
+            self.table.reset_ram()
+            self.registered = None
+            self.reboots += 1
+        elif instruction == Instruction.FACTORY_RESET and params:
+            self.table.factory_reset(keep_id=params[0] != 0xFF, keep_baud=params[0] == 0x02)
+            self.registered = None
+
+    def _ping(self, params: bytes) -> Reply:
+        model = self.table.get(Reg.MODEL_NUMBER).to_bytes(2, "little")
+        return Reply(StatusError.NONE, model + bytes([self.table.get(Reg.FIRMWARE_VERSION)]))
+
+    def _read(self, params: bytes) -> Reply:
+        if len(params) != 4:
+            return Reply(StatusError.DATA_LENGTH)
+        address = int.from_bytes(params[0:2], "little")
+        length = int.from_bytes(params[2:4], "little")
+        error, data = self.table.read(address, length)
+        return Reply(error, data)
+
+    def _write(self, params: bytes) -> Reply:
+        if len(params) < 3:
+            return Reply(StatusError.DATA_LENGTH)
+        return Reply(self.write(int.from_bytes(params[0:2], "little"), params[2:]))
+
+    def _reg_write(self, params: bytes) -> Reply:
+        if len(params) < 3:
+            return Reply(StatusError.DATA_LENGTH)
+        self.registered = (int.from_bytes(params[0:2], "little"), params[2:])
+        self.table.set(Reg.REGISTERED_INSTRUCTION, 1)
+        return Reply(StatusError.NONE)
+
+    def action(self) -> Reply:
+        """Apply the registered write; an Instruction Error if none is registered."""
+        if self.registered is None:
+            return Reply(StatusError.INSTRUCTION)
+        address, data = self.registered
+        self.registered = None
+        self.table.set(Reg.REGISTERED_INSTRUCTION, 0)
+        return Reply(self.write(address, data))
+
+    def _action(self, params: bytes) -> Reply:
+        return self.action()
+
+    def _factory_reset(self, params: bytes) -> Reply:
+        if len(params) != 1:
+            return Reply(StatusError.DATA_LENGTH)
+        if params[0] not in (0x01, 0x02, 0xFF):
+            return Reply(StatusError.DATA_RANGE)
+        return Reply(StatusError.NONE)
+
+    def _reboot(self, params: bytes) -> Reply:
+        return Reply(StatusError.NONE)
+
+    def _clear(self, params: bytes) -> Reply:
+        # Position mode keeps no turn count, so clearing multi-turn changes nothing here.
+        ok = params == _CLEAR_MULTI_TURN
+        return Reply(StatusError.NONE if ok else StatusError.DATA_RANGE)
+
+
+_HANDLERS = {
+    Instruction.PING: EmulatedServo._ping,
+    Instruction.READ: EmulatedServo._read,
+    Instruction.WRITE: EmulatedServo._write,
+    Instruction.REG_WRITE: EmulatedServo._reg_write,
+    Instruction.ACTION: EmulatedServo._action,
+    Instruction.FACTORY_RESET: EmulatedServo._factory_reset,
+    Instruction.REBOOT: EmulatedServo._reboot,
+    Instruction.CLEAR: EmulatedServo._clear,
+}

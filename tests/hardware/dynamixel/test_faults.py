@@ -1,0 +1,99 @@
+"""Injected faults: every one is survived, counted, and reported with the servo's id.
+
+A failed read raises CommError (a BusError) naming the servos and the number of tries;
+it never returns a state assembled from a partial or corrupt reply, and the bus keeps
+working once the fault is gone.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from hardware.bus import PositionGains
+from hardware.dynamixel.control_table import HardwareErrorFlag, Reg
+from hardware.dynamixel.driver import DynamixelBus
+from hardware.emulator import ServoEmulator
+from hardware.errors import BusError, CommError
+from tests.support.servo_emulator import make_config
+
+
+@pytest.mark.parametrize("fault", ["drop_replies", "corrupt_replies", "wrong_id_replies"])
+def test_one_bad_reply_is_retried_and_counted(bus: DynamixelBus, emulator, fault: str) -> None:
+    emulator.place({1: 1000, 2: 2000, 3: 3000})
+    emulator.inject(2, **{fault: 1})
+    assert bus.read_ticks() == {1: 1000, 2: 2000, 3: 3000}
+    stats = bus.stats
+    assert (stats.failed_tries, stats.retries, stats.failures) == (1, 1, 0)
+
+
+@pytest.mark.parametrize(
+    ("fault", "reason"),
+    [
+        ("drop_replies", "There is no status packet"),
+        ("corrupt_replies", "Incorrect status packet"),
+        ("wrong_id_replies", "There is no status packet"),
+    ],
+)
+def test_persistent_bad_replies_raise_naming_the_servo(bus, emulator, fault, reason) -> None:
+    emulator.inject(2, **{fault: 3})
+    with pytest.raises(CommError) as info:
+        bus.read_state()
+    error = info.value
+    assert 2 in error.ids and 1 not in error.ids
+    assert error.tries == 3 and reason in str(error)
+    assert error.instruction == "sync read MOVING..PRESENT_TEMPERATURE"
+    assert bus.stats.failures == 1 and bus.stats.failed_tries == 3
+    assert bus.read_state().position_rad.shape == (3,)  # fault spent: the bus works again
+
+
+def test_unplugged_servo_fails_reads_and_writes_then_recovers(bus, emulator) -> None:
+    emulator.inject(3, unplugged=True)
+    with pytest.raises(CommError, match="on servo 3 failed after 3 tries: servo 3: There is no"):
+        bus.read_state()
+    with pytest.raises(CommError, match="write POSITION_P_GAIN on servo 3"):
+        bus.set_gains(PositionGains())
+    assert [info.servo_id for info in bus.scan()] == [1, 2]
+    emulator.inject(3, unplugged=False)
+    assert not bus.read_state().faulted
+
+
+def test_late_replies_time_out_then_the_bus_resynchronises(emulator: ServoEmulator) -> None:
+    bus = DynamixelBus(make_config(emulator.port, rx_timeout_s=0.02, max_tries=2))
+    bus.connect()
+    try:
+        emulator.place({1: 11, 2: 22, 3: 33})
+        emulator.inject(2, delay_s=0.1)
+        with pytest.raises(CommError) as info:
+            bus.read_state()
+        assert 2 in info.value.ids and info.value.tries == 2
+        emulator.clear_faults()
+        time.sleep(0.3)  # let the late replies land; the next request flushes them
+        assert bus.read_ticks() == {1: 11, 2: 22, 3: 33}
+    finally:
+        bus.disconnect()
+
+
+def test_a_short_delay_is_within_the_timeout(bus: DynamixelBus, emulator) -> None:
+    emulator.inject(1, delay_s=0.002)
+    bus.read_state()
+    assert bus.stats.failed_tries == 0
+
+
+def test_hardware_error_bit_is_reported_not_raised(bus, emulator) -> None:
+    bus.torque(True)
+    emulator.raise_hardware_error(1, HardwareErrorFlag.INPUT_VOLTAGE)
+    state = bus.read_state()
+    assert state.hardware_errors == (("input_voltage",), (), ())
+    # Input voltage is not in the factory Shutdown mask (52): torque stays on.
+    assert emulator.servo(1).table.get(Reg.TORQUE_ENABLE) == 1
+    emulator.raise_hardware_error(3, HardwareErrorFlag.ELECTRICAL_SHOCK)
+    assert bus.read_state().hardware_errors[2] == ("electrical_shock",)
+    assert emulator.servo(3).table.get(Reg.TORQUE_ENABLE) == 0  # shut down
+
+
+def test_faults_are_bus_errors_and_unknown_faults_are_refused(bus, emulator) -> None:
+    assert issubclass(CommError, BusError)
+    with pytest.raises(AttributeError, match="no fault named 'gremlins'"):
+        emulator.inject(1, gremlins=True)

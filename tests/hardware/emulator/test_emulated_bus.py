@@ -1,0 +1,70 @@
+"""The emulated bus alone: hand-built request bytes in, reply packets out; no pty, no thread."""
+
+from __future__ import annotations
+
+from hardware.dynamixel.control_table import Reg
+from hardware.dynamixel.protocol import BROADCAST_ID, Instruction, instruction_packet
+from hardware.emulator import EmulatedBus
+from tests.support.emanual import EMANUAL
+
+FACTORY_RETURN_DELAY_S = 250 * 2e-6  # Return Delay Time 250, 2 us per unit
+
+
+def packet(name: str) -> bytes:
+    return bytes.fromhex(EMANUAL[name])
+
+
+def still_bus(ids: tuple[int, ...] = (1, 2)) -> EmulatedBus:
+    """A bus whose clock never moves, so no shaft moves between packets."""
+    return EmulatedBus(ids, clock=lambda: 0.0)
+
+
+def test_ping_gets_the_emanual_status_after_the_return_delay() -> None:
+    bus = still_bus()
+    bus.servo(1).table.set(Reg.FIRMWARE_VERSION, 0x26)
+    (reply,) = bus.feed(packet("ping"))
+    assert reply.packet == packet("ping status (XM430-W210 1030, fw 38)")
+    assert reply.delay_s == FACTORY_RETURN_DELAY_S
+    assert bus.packets_received == 1
+
+
+def test_sync_read_gets_one_status_per_servo_in_the_order_listed() -> None:
+    bus = still_bus()
+    bus.place({1: 166, 2: 2079})
+    replies = bus.feed(packet("sync read ids 1, 2"))
+    assert [r.packet for r in replies] == [
+        packet("read status (166)"),
+        packet("sync read status id 2 (2079)"),
+    ]
+
+
+def test_a_request_split_across_reads_is_answered_once_complete() -> None:
+    bus = still_bus()
+    request = packet("read present position")
+    assert bus.feed(request[:5]) == []
+    (reply,) = bus.feed(request[5:])
+    assert reply.packet[4] == 1  # from servo 1
+
+
+def test_broadcast_ping_answers_in_id_order_and_writes_are_silent() -> None:
+    bus = still_bus((3, 1, 2))
+    replies = bus.feed(instruction_packet(BROADCAST_ID, Instruction.PING))
+    assert [r.packet[4] for r in replies] == [1, 2, 3]
+    assert bus.feed(packet("sync write 150, 170")) == []
+    assert bus.servo(1).table.get(Reg.GOAL_POSITION) == 150
+    assert bus.servo(2).table.get(Reg.GOAL_POSITION) == 170
+
+
+def test_injected_faults_shape_the_replies() -> None:
+    bus = still_bus()
+    (clean,) = bus.feed(packet("ping"))
+    bus.inject(1, drop_replies=1)
+    assert bus.feed(packet("ping")) == []
+    bus.inject(1, corrupt_replies=1, delay_s=0.01)
+    (reply,) = bus.feed(packet("ping"))
+    assert reply.packet == clean.packet[:-1] + bytes([clean.packet[-1] ^ 0xFF])
+    assert reply.delay_s == FACTORY_RETURN_DELAY_S + 0.01
+    (again,) = bus.feed(packet("ping"))  # the corruption was for one packet
+    assert again.packet == clean.packet
+    bus.inject(1, unplugged=True)
+    assert bus.feed(packet("ping")) == []

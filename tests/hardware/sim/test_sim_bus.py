@@ -1,0 +1,123 @@
+"""SimBus: the twin behind the ServoBus interface, with the Dynamixel driver's units."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from hardware.bus import PositionGains, ServoBus
+from hardware.dynamixel.control_table import (
+    AMPERE_PER_CURRENT_UNIT,
+    RAD_PER_TICK,
+    HardwareErrorFlag,
+    OperatingMode,
+)
+from hardware.errors import BusError, HardwareError, NotConnectedError
+from hardware.sim.sim_bus import SimBus, SimBusConfig
+
+
+@pytest.fixture
+def bus() -> Iterator[SimBus]:
+    sim = SimBus(SimBusConfig(realtime=False, torque_on_at_start=True))
+    sim.connect()
+    yield sim
+    sim.disconnect()
+
+
+def test_it_is_a_servo_bus_and_refuses_work_before_connect() -> None:
+    sim = SimBus(SimBusConfig(realtime=False))
+    assert isinstance(sim, ServoBus)
+    with pytest.raises(NotConnectedError):
+        sim.read_state()
+
+
+def test_a_goal_is_reached_and_reads_back_in_whole_ticks(bus: SimBus) -> None:
+    bus.write_goal([0.3, 0.4, 0.5])
+    bus.advance(1.0)
+    state = bus.read_state()
+    # P only: a few ticks of droop under gravity (about 0.02 N m per tick at P = 800)
+    assert state.position_rad == pytest.approx([0.3, 0.4, 0.5], abs=8 * RAD_PER_TICK)
+    ticks = state.position_rad / RAD_PER_TICK  # zero offset 2048, direction +1
+    assert ticks == pytest.approx(np.round(ticks), abs=1e-9)
+    units = state.current_a / AMPERE_PER_CURRENT_UNIT
+    assert units == pytest.approx(np.round(units), abs=1e-6)
+    assert np.all(state.current_a < 0)  # holding the arm up takes negative torque
+    assert list(state.voltage_v) == [12.0] * 3 and not state.faulted
+
+
+def test_goals_are_clamped_to_the_calibrated_limits(bus: SimBus) -> None:
+    bus.write_goal([3.0, 0.4, 0.4])
+    limit = bus.joints[0].max_angle_rad
+    expected = bus.joints[0].to_ticks(limit) * RAD_PER_TICK
+    assert bus.commands[0].goal_position_rad == pytest.approx(expected)
+    with pytest.raises(ValueError):
+        bus.write_goal([float("nan"), 0.0, 0.0])
+
+
+def test_gains_and_profile_reach_the_servo_models(bus: SimBus) -> None:
+    bus.set_gains(PositionGains(p=1600, i=100, d=50))
+    bus.set_profile(2.0, 20.0)
+    cmd = bus.commands[2]
+    assert (cmd.position_p, cmd.position_i, cmd.position_d) == (1600, 100, 50)
+    assert cmd.profile_velocity_rad_s == pytest.approx(2.0, abs=0.024)  # 0.229 rpm units
+    assert bus.twin.commands[2] is cmd
+
+
+def test_operating_mode_is_refused_while_torque_is_on(bus: SimBus) -> None:
+    with pytest.raises(BusError):
+        bus.set_operating_mode(OperatingMode.VELOCITY)
+    bus.torque(False)
+    bus.set_operating_mode(OperatingMode.VELOCITY)
+    assert bus.commands[0].mode == OperatingMode.VELOCITY
+
+
+def test_a_latched_hardware_error_is_named_refuses_torque_and_reboot_clears_it(bus: SimBus) -> None:
+    bus.twin.servos[1].hardware_error = int(HardwareErrorFlag.OVERLOAD)
+    bus.advance(0.01)
+    state = bus.read_state()
+    assert state.hardware_errors == ((), ("overload",), ())
+    with pytest.raises(HardwareError) as err:
+        bus.torque(True)
+    assert err.value.ids == (2,)
+    bus.reboot([2])
+    assert not bus.read_state().faulted
+    assert not bus.commands[1].torque_enabled  # back from a reboot with torque off
+    bus.torque(True)
+
+
+def test_torque_off_at_power_up_lets_the_arm_fall() -> None:
+    sim = SimBus(SimBusConfig(realtime=False))
+    sim.connect()
+    start = sim.read_state().position_rad
+    sim.advance(0.3)
+    assert np.all(sim.read_state().position_rad > start + 0.1)  # + is down
+    sim.disconnect()
+
+
+def test_external_measurement_has_the_marker_offset_and_the_noise_asked_for() -> None:
+    offset = (0.01, -0.02, 0.005)
+    sim = SimBus(SimBusConfig(realtime=False, torque_on_at_start=True, marker_offset_m=offset))
+    sim.connect()
+    assert sim.measure_platform() == pytest.approx(sim.twin.platform_m + offset, abs=1e-15)
+    noisy = SimBus(SimBusConfig(realtime=False, torque_on_at_start=True, noise_std_m=1e-3))
+    noisy.connect()
+    samples = np.array([noisy.measure_platform() for _ in range(4000)]) - noisy.twin.platform_m
+    assert np.abs(samples.mean(axis=0)).max() < 1e-4
+    assert samples.std(axis=0) == pytest.approx([1e-3] * 3, rel=0.1)
+
+
+def test_realtime_bus_moves_simulated_time_by_itself() -> None:
+    sim = SimBus(SimBusConfig(realtime=True, torque_on_at_start=True))
+    sim.connect()
+    try:
+        deadline = time.monotonic() + 10.0
+        while sim.twin.time_s < 0.05 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert sim.twin.time_s >= 0.05
+        with pytest.raises(RuntimeError):
+            sim.advance(0.1)  # the thread owns the clock
+    finally:
+        sim.disconnect()
