@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 from starlette.websockets import WebSocketDisconnect
 
+from app.cli.serve import check_exposure
 from app.config import ConfigError, load_settings
-from app.serve import check_exposure
 
 from .conftest import make_client
 

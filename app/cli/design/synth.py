@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from app.cli.design.arguments import common, emit
 from app.design import report
-from app.design.common import common, emit
 from kinematics.analysis import section
 from kinematics.synthesis import (
     THESIS_PLATFORM_RADIUS_M,

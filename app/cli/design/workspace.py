@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from app.design.common import common, emit, robot_from
+from app.cli.design.arguments import common, emit, robot_from
 from kinematics import RotaryDelta
 from kinematics.analysis import largest_region, section, workspace_volume
 

@@ -7,7 +7,7 @@ import json
 import math
 import sys
 
-from app import design_cli, home_cli, run_cli, serve
+from app.cli import design, home, run, serve
 from hardware import emulator_cli
 from kinematics import THESIS_DELTA, DeltaError
 
@@ -55,9 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="deltadash", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
     serve.add_parser(commands)
-    run_cli.add_parser(commands)
-    design_cli.add_parser(commands)
-    home_cli.add_parser(commands)
+    run.add_parser(commands)
+    design.add_parser(commands)
+    home.add_parser(commands)
     emulator_cli.add_parser(commands)
     ik = commands.add_parser("ik", help="inverse kinematics of the thesis robot (metres)")
     ik.add_argument("x", type=float)
@@ -81,6 +81,3 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())
