@@ -15,7 +15,7 @@ import viser
 
 from app.scene.geometry import robot_lines
 from app.scene.goal_view import INSIDE_COLOUR, PROJECTED_COLOUR
-from app.scene.test_panel import TestPanel as SinusoidPanel
+from app.scene.run_panel import RunPanel
 from tests.scene.conftest import measured, wait_for
 
 
@@ -131,11 +131,11 @@ def test_sinusoid_preview_start_and_abort(scene):
     assert run_id in scene.tests.gui_result.content
 
 
-def test_test_panel_without_runs_says_so(monkeypatch):
+def test_run_panel_without_runs_says_so(monkeypatch):
     monkeypatch.setitem(sys.modules, "app.runs.trajectories", None)  # import fails
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
-        panel = SinusoidPanel(server, lambda: None, lambda path: None)
+        panel = RunPanel(server, lambda: None, lambda path: None)
         assert "not available" in panel.gui_unavailable.content
         panel.start()
         assert "not available" in panel.message
