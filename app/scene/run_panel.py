@@ -32,7 +32,7 @@ def _load_runs_api() -> tuple[Any, Any] | str:
 
 
 def stats_markdown(run: Any) -> str:
-    """Summary of one run (``app.runs.manager.Run``): state and per-axis RMSE / max [mm]."""
+    """Summary of one run (``app.runs.run.Run``): state and per-axis RMSE / max [mm]."""
     lines = [f"**{run.run_id}** · {run.state}" + (f" ({run.reason})" if run.reason else "")]
     tracking = (run.stats or {}).get("tracking") or {}
     for axis in ("x", "y", "z"):
