@@ -7,6 +7,7 @@ from starlette.websockets import WebSocketDisconnect
 
 from app.cli.serve import check_exposure
 from app.config import ConfigError, load_settings
+from tests.waiting import ok_json
 
 from .conftest import make_client
 
@@ -50,7 +51,7 @@ def test_one_client_holds_control_until_taken_over(client):
     assert client.post("/api/estop", headers=bob).status_code == 200  # anyone may stop
     assert client.post("/api/lease", json={"client": "bob"}).status_code == 409
     assert client.post("/api/lease", json={"client": "bob", "take_over": True}).status_code == 200
-    assert client.get("/api/lease").json()["holder"] == "bob"
+    assert ok_json(client.get("/api/lease"))["holder"] == "bob"
     assert client.post("/api/reset", headers=bob).status_code == 200
     client.post("/api/lease", json={"client": "anonymous", "take_over": True})
 

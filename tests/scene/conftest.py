@@ -12,7 +12,7 @@ from fastapi.testclient import TestClient
 from app.backends import open_backend
 from app.config import load_settings
 from app.main import create_app
-from tests.app.conftest import wait_for  # noqa: F401 - shared with the scene's tests
+from tests.waiting import ok_json, wait_for
 
 
 @pytest.fixture(scope="module")
@@ -38,4 +38,17 @@ def scene(app_client):
 
 
 def measured(client: TestClient) -> np.ndarray:
-    return np.array(client.get("/api/status").json()["ee"]["position_m"], dtype=float)
+    return np.array(ok_json(client.get("/api/status"))["ee"]["position_m"], dtype=float)
+
+
+def wait_at(client: TestClient, point_m, what: str, within_m: float = 2e-3) -> None:
+    """Wait until /api/status measures the platform within ``within_m`` of ``point_m``;
+    a timeout says where it was, the mode and any warning or fault."""
+
+    def seen() -> dict:
+        status = ok_json(client.get("/api/status"))
+        keys = ("mode", "torque", "warning", "faults")
+        return {"measured_m": status["ee"]["position_m"], **{k: status[k] for k in keys}}
+
+    wait_for(lambda: np.linalg.norm(measured(client) - point_m) < within_m,
+             f"{what} ({within_m * 1e3:g} mm of {list(point_m)} m)", seen=seen)  # fmt: skip

@@ -16,7 +16,8 @@ import viser
 from app.scene.geometry import robot_lines
 from app.scene.goal_view import INSIDE_COLOUR, PROJECTED_COLOUR
 from app.scene.run_panel import RunPanel
-from tests.scene.conftest import measured, wait_for
+from tests.scene.conftest import wait_at
+from tests.waiting import wait_for
 
 
 def _goal(scene) -> np.ndarray:
@@ -29,8 +30,7 @@ def test_drag_inside_sends_every_update_as_the_goal(scene, app_client):
         np.testing.assert_allclose(sent, point)
         wait_for(lambda p=point: np.allclose(_goal(scene), p), f"goal {point}")
     assert tuple(scene.goals.marker.color) == INSIDE_COLOUR
-    wait_for(lambda: np.linalg.norm(measured(app_client) - [0.03, -0.01, -0.26]) < 2e-3,
-             "the robot at the dragged goal")  # fmt: skip
+    wait_at(app_client, [0.03, -0.01, -0.26], "the robot at the dragged goal")
 
 
 def test_drag_outside_is_projected_and_the_gizmo_snaps_back(scene):
@@ -57,8 +57,7 @@ def test_drag_with_torque_off_says_why(scene):
 
 def test_frame_draws_the_measured_pose(scene, app_client):
     scene.goals.drag_to(np.array([0.04, 0.02, -0.22]), final=True)
-    wait_for(lambda: np.linalg.norm(measured(app_client) - [0.04, 0.02, -0.22]) < 2e-3,
-             "the robot at the goal")  # fmt: skip
+    wait_at(app_client, [0.04, 0.02, -0.22], "the robot at the goal")
     scene.update(time.monotonic())
     drawn_joints = scene.robot._joints
     expected = robot_lines(scene.controller.robot, drawn_joints)
@@ -95,8 +94,7 @@ def test_goal_points_save_go_to_delete(scene, app_client):
     assert scene.panel.gui_points.value == "pick"
     scene.goals.drag_to(np.array([0.03, 0.0, -0.22]), final=True)
     scene.panel.go_to("pick")
-    wait_for(lambda: np.linalg.norm(measured(app_client) - [-0.03, 0.02, -0.27]) < 2e-3,
-             "the robot at the saved point")  # fmt: skip
+    wait_at(app_client, [-0.03, 0.02, -0.27], "the robot at the saved point")
     scene.panel.delete_point("pick")
     assert "pick" not in scene.goals.saved
     assert scene.panel.gui_points.options == ("—",)

@@ -11,7 +11,7 @@ import viser
 from app.scene.world_view import WorldView
 from kinematics import Pose
 from kinematics.pose import quaternion_to_matrix
-from tests.scene.conftest import wait_for
+from tests.waiting import wait_for
 
 
 class _Provider:

@@ -14,7 +14,7 @@ from hardware.errors import BusError, CommError, HardwareError, NotConnectedErro
 from hardware.registers import RAD_PER_TICK, OperatingMode
 from hardware.sim import BaseMotion, ProcessSimBus, SimBusConfig
 from kinematics import THESIS_DELTA
-from tests.app.conftest import wait_for
+from tests.waiting import wait_for
 
 
 @pytest.fixture(scope="module")
