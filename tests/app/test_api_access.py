@@ -47,7 +47,8 @@ def test_one_client_holds_control_until_taken_over(client):
     alice, bob = {"X-Client": "alice"}, {"X-Client": "bob"}
     assert client.post("/api/reset", headers=alice).status_code == 200
     refused = client.post("/api/reset", headers=bob)
-    assert refused.status_code == 409 and "alice" in refused.json()["detail"]
+    assert refused.status_code == 409, refused.text
+    assert "alice" in refused.json()["detail"]
     assert client.post("/api/estop", headers=bob).status_code == 200  # anyone may stop
     assert client.post("/api/lease", json={"client": "bob"}).status_code == 409
     assert client.post("/api/lease", json={"client": "bob", "take_over": True}).status_code == 200

@@ -70,7 +70,8 @@ def test_other_bad_bodies_are_422(fresh, path, body):
 
 def test_motion_with_torque_off_is_409(fresh):
     response = fresh.post("/api/goal", json={"position_m": [0.0, 0.0, -0.22]})
-    assert response.status_code == 409 and "torque" in response.json()["detail"]
+    assert response.status_code == 409, response.text
+    assert "torque" in response.json()["detail"]
     response = fresh.post("/api/jog", json={"delta_m": [0.01, 0.0, 0.0]})
     assert response.status_code == 409
 

@@ -65,7 +65,8 @@ def test_move_cartesian_and_joint_space(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     goal = [-0.02, 0.02, -0.25]
     response = fresh.post("/api/move", json={"position_m": goal, "duration_s": 0.5})
-    assert response.status_code == 200 and response.json()["result"]["duration_s"] >= 0.5
+    assert response.status_code == 200, response.text
+    assert response.json()["result"]["duration_s"] >= 0.5
     wait_for(lambda: _near(fresh, goal), "the Cartesian move", seen=lambda: robot_seen(fresh))
     wait_for(
         lambda: _status(fresh)["mode"] == "idle",
@@ -95,7 +96,8 @@ def test_estop_stops_and_nothing_moves_until_reset(fresh):
         ("/api/torque", {"enabled": True}),
     ):
         response = fresh.post(path, json=body)
-        assert response.status_code == 409 and "reset" in response.json()["detail"]
+        assert response.status_code == 409, response.text
+        assert "reset" in response.json()["detail"]
     held = _status(fresh)["joints"]["commanded_rad"]
     assert fresh.post("/api/reset").status_code == 200
     assert _status(fresh)["mode"] == "idle"

@@ -46,7 +46,8 @@ def test_sinusoid_run_end_to_end(fresh):
     rows = list(csv.DictReader(io.StringIO(fresh.get(f"/api/runs/{run_id}/log.csv").text)))
     assert len(rows) == run["samples"] and {r["phase"] for r in rows} >= {"approach", "timed"}
     png = fresh.get(f"/api/runs/{run_id}/report.png")
-    assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png.status_code == 200, png.text
+    assert png.content[:8] == b"\x89PNG\r\n\x1a\n"
     assert run_id in [r["run_id"] for r in ok_json(fresh.get("/api/runs"))]
 
 
@@ -134,7 +135,8 @@ def test_waypoints_run_and_windowed_stats(fresh):
 def test_chirp_too_fast_for_the_joints_is_refused(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     response = fresh.post("/api/tests/chirp", json={"amplitude_m": 0.08, "f1_hz": 8.0})
-    assert response.status_code == 422 and "infeasible" in response.json()["detail"]
+    assert response.status_code == 422, response.text
+    assert "infeasible" in response.json()["detail"]
 
 
 def test_step_response_run(fresh):
@@ -153,4 +155,5 @@ def test_step_response_run(fresh):
     measured_z = [float(r["measured_z_m"]) for r in rows if r["phase"] == "timed"]
     assert max(measured_z) - min(measured_z) > 0.003  # and the robot followed it
     big = fresh.post("/api/tests/step", json={"size_m": 0.05})
-    assert big.status_code == 422 and "joint speed" in big.json()["detail"]
+    assert big.status_code == 422, big.text
+    assert "joint speed" in big.json()["detail"]

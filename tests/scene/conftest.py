@@ -12,7 +12,7 @@ from fastapi.testclient import TestClient
 from app.backends import open_backend
 from app.config import load_settings
 from app.main import create_app
-from tests.waiting import ok_json, wait_for
+from tests.waiting import WAIT_S, ok_json, wait_for
 
 
 @pytest.fixture(scope="module")
@@ -30,8 +30,8 @@ def scene(app_client):
     """The running Scene, with e-stop and faults cleared and torque on."""
     app = app_client.app
     controller = app.state.controller
-    controller.reset().result(timeout=5)
-    controller.set_torque(True).result(timeout=5)
+    controller.reset().result(timeout=WAIT_S)
+    controller.set_torque(True).result(timeout=WAIT_S)
     scene = app.state.scene
     scene.panel.message = scene.goals.message = ""
     return scene

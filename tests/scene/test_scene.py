@@ -17,7 +17,7 @@ from app.scene.geometry import robot_lines
 from app.scene.goal_view import INSIDE_COLOUR, PROJECTED_COLOUR
 from app.scene.run_panel import RunPanel
 from tests.scene.conftest import wait_at
-from tests.waiting import wait_for
+from tests.waiting import WAIT_S, wait_for
 
 
 def _goal(scene) -> np.ndarray:
@@ -48,7 +48,7 @@ def test_drag_outside_is_projected_and_the_gizmo_snaps_back(scene):
 
 
 def test_drag_with_torque_off_says_why(scene):
-    scene.controller.set_torque(False).result(timeout=5)
+    scene.controller.set_torque(False).result(timeout=WAIT_S)
     scene.goals.drag_to(np.array([0.0, 0.0, -0.25]), final=True)
     wait_for(lambda: "torque is off" in scene.goals.message, "the refusal message")
     scene.panel.update(scene.controller.snapshot())
