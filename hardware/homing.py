@@ -1,6 +1,6 @@
 """The guided homing procedure on a live bus: relax, hold the pose, read, save.
 
-This is the step-by-step helper behind ``deltadash home`` (app/home_cli.py); the
+This is the step-by-step helper behind ``deltadash home`` (app/cli/home.py); the
 arithmetic is hardware.calibration.home, a pure function.
 """
 

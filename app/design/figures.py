@@ -15,7 +15,8 @@ matplotlib.use("Agg")  # files only; must precede pyplot
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from kinematics.analysis import Section  # noqa: E402
+from kinematics import RotaryDelta  # noqa: E402
+from kinematics.analysis import Section, section  # noqa: E402
 
 _AXES = {
     "xy": ("x [mm]", "y [mm]", "z"),
@@ -73,3 +74,16 @@ def _save(fig: plt.Figure, path: Path) -> Path:
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+def workspace_maps(delta: RotaryDelta, out: Path, sections_z_m: list[float]) -> list[Path]:
+    """Dexterity on the x-z plane, then dexterity and power of point on each x-y section."""
+    paths = [section_map(section(delta, "xz", 0.0), out / "dexterity_xz.png")]
+    for z in sections_z_m:
+        cut = section(delta, "xy", z)
+        name = f"z{abs(z) * 1e3:.0f}mm"
+        paths.append(section_map(cut, out / f"dexterity_xy_{name}.png"))
+        paths.append(
+            section_map(cut, out / f"power_of_point_xy_{name}.png", quantity="power_of_point")
+        )
+    return paths

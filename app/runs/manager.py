@@ -7,7 +7,7 @@ import math
 import threading
 import time
 import uuid
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -17,6 +17,7 @@ from app.control.errors import GoalRejected, MotionRefused
 from app.runs.feasibility import check_path
 from app.runs.logs import RunLog
 from app.runs.recorder import Recorder
+from app.runs.run import Run
 from app.runs.source import TrajectorySource
 from app.runs.trajectories import SinusoidParams, TimedPath, plan_sinusoid
 
@@ -24,46 +25,6 @@ if TYPE_CHECKING:
     from app.control.controller import Controller
 
 START_TIMEOUT_S = 2.0
-
-
-@dataclass
-class Run:
-    """One execution of a test trajectory; saved as run.json beside its logs."""
-
-    run_id: str
-    kind: str
-    params: dict[str, Any]
-    conditions: dict[str, Any]
-    folder: Path
-    state: str = "running"  # running | done | aborted
-    reason: str | None = None
-    started_at: float = field(default_factory=time.time)
-    ended_at: float | None = None
-    samples: int = 0
-    stats: dict[str, Any] = field(default_factory=dict)
-    has_report: bool = False
-    abort_reason: str | None = None
-    done: threading.Event = field(default_factory=threading.Event, repr=False)
-
-    @property
-    def title(self) -> str:
-        if self.kind == "hold":
-            on = self.params.get("latency_compensation")
-            return f"run {self.run_id}: hold in world (latency compensation {on}), world frame"
-        return f"run {self.run_id}: {self.kind}, feed-forward {self.params.get('feedforward')}"
-
-    def finish(self, stats: dict[str, Any], abort_reason: str | None, samples: int) -> None:
-        self.stats = stats
-        self.state, self.reason = ("aborted", abort_reason) if abort_reason else ("done", None)
-        self.samples, self.ended_at = samples, time.time()
-
-    def as_dict(self) -> dict[str, Any]:
-        hidden = {"folder", "done", "abort_reason"}
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in hidden}
-
-    def save(self) -> None:
-        (self.folder / "run.json").write_text(json.dumps(self.as_dict(), indent=1))
-        self.done.set()
 
 
 class RunManager:

@@ -18,11 +18,11 @@ import numpy as np
 from app.control.state import Snapshot
 from app.runs.logs import RunLog
 from app.runs.report import write_report
+from app.runs.run import Run
 from app.runs.stats import error_stats, window_mask
 
 if TYPE_CHECKING:
     from app.control.controller import Controller
-    from app.runs.manager import Run
     from app.runs.source import TrajectorySource
 
 _END = object()

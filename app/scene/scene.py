@@ -23,7 +23,7 @@ from app.scene.goal_store import FILE_NAME as POINTS_FILE
 from app.scene.goal_view import GoalView
 from app.scene.panel import ControlPanel
 from app.scene.robot_view import RobotView
-from app.scene.test_panel import TestPanel
+from app.scene.run_panel import RunPanel
 from app.scene.workspace_view import WorkspaceView
 from app.scene.world_view import WorldView
 from kinematics import Pose
@@ -82,7 +82,7 @@ class Scene:
         store = runs_settings.folder_path / POINTS_FILE if runs_settings is not None else None
         self.goals = GoalView(server, self.controller, store=store)
         self.panel = ControlPanel(server, self.controller, self.goals)
-        self.tests = TestPanel(server, self.runs, self.goals.show_path)
+        self.tests = RunPanel(server, self.runs, self.goals.show_path)
         self.world = WorldView(server, _mount(settings))
         self._add_view_toggles(server)
         self._stop.clear()

@@ -5,8 +5,9 @@ from __future__ import annotations
 import pytest
 from starlette.websockets import WebSocketDisconnect
 
+from app.cli.serve import check_exposure
 from app.config import ConfigError, load_settings
-from app.serve import check_exposure
+from tests.support.wait import ok_json
 
 from .conftest import make_client
 
@@ -46,11 +47,12 @@ def test_one_client_holds_control_until_taken_over(client):
     alice, bob = {"X-Client": "alice"}, {"X-Client": "bob"}
     assert client.post("/api/reset", headers=alice).status_code == 200
     refused = client.post("/api/reset", headers=bob)
-    assert refused.status_code == 409 and "alice" in refused.json()["detail"]
+    assert refused.status_code == 409, refused.text
+    assert "alice" in refused.json()["detail"]
     assert client.post("/api/estop", headers=bob).status_code == 200  # anyone may stop
     assert client.post("/api/lease", json={"client": "bob"}).status_code == 409
     assert client.post("/api/lease", json={"client": "bob", "take_over": True}).status_code == 200
-    assert client.get("/api/lease").json()["holder"] == "bob"
+    assert ok_json(client.get("/api/lease"))["holder"] == "bob"
     assert client.post("/api/reset", headers=bob).status_code == 200
     client.post("/api/lease", json={"client": "anonymous", "take_over": True})
 

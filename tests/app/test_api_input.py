@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from .conftest import ticks, wait_for
+from tests.support.wait import wait_for
+
+from .conftest import ticks
 
 BAD_GOAL_BODIES = [
     ('{"position_m": [NaN, 0, -0.2]}', "finite"),
@@ -38,8 +40,8 @@ def test_unreachable_goal_names_a_reachable_nearest_point(fresh):
     from kinematics import THESIS_DELTA
 
     response = fresh.post("/api/goal", json={"position_m": [0.4, 0.0, -0.2]})
-    nearest = response.json()["nearest_m"]
-    assert response.status_code == 422 and THESIS_DELTA.reachable(nearest)
+    assert response.status_code == 422, response.text
+    assert THESIS_DELTA.reachable(response.json()["nearest_m"])
 
 
 @pytest.mark.parametrize(
@@ -68,7 +70,8 @@ def test_other_bad_bodies_are_422(fresh, path, body):
 
 def test_motion_with_torque_off_is_409(fresh):
     response = fresh.post("/api/goal", json={"position_m": [0.0, 0.0, -0.22]})
-    assert response.status_code == 409 and "torque" in response.json()["detail"]
+    assert response.status_code == 409, response.text
+    assert "torque" in response.json()["detail"]
     response = fresh.post("/api/jog", json={"delta_m": [0.01, 0.0, 0.0]})
     assert response.status_code == 409
 

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .conftest import wait_for
+from tests.support.wait import ok_json, wait_for
+
+from .conftest import robot_seen
 
 
 def _status(client):
-    return client.get("/api/status").json()
+    return ok_json(client.get("/api/status"))
 
 
 def _near(client, target, tol_m=1e-3) -> bool:
@@ -31,7 +33,11 @@ def test_goal_is_reached_and_the_loop_keeps_counting(fresh):
     assert fresh.post("/api/torque", json={"enabled": True}).status_code == 200
     goal = [0.03, -0.02, -0.23]
     assert fresh.post("/api/goal", json={"position_m": goal}).status_code == 200
-    wait_for(lambda: _near(fresh, goal), "the platform to reach the goal")
+    wait_for(
+        lambda: _near(fresh, goal),
+        "the platform to reach the goal",
+        seen=lambda: robot_seen(fresh),
+    )
     status = _status(fresh)
     assert status["mode"] == "jog" and status["faults"] == []
     assert status["goal"]["position_m"] == goal
@@ -46,7 +52,7 @@ def test_jog_steps_add_up_and_clamp_at_the_boundary(fresh):
     for _ in range(3):
         assert fresh.post("/api/jog", json={"delta_m": [0.01, 0.0, 0.0]}).status_code == 200
     target = start + [0.03, 0.0, 0.0]
-    wait_for(lambda: _near(fresh, target), "three jog steps")
+    wait_for(lambda: _near(fresh, target), "three jog steps", seen=lambda: robot_seen(fresh))
     response = fresh.post("/api/jog", json={"delta_m": [1.0, 0.0, 0.0]})
     assert response.status_code == 200  # clamped, not refused
     clamped = response.json()["result"]
@@ -59,9 +65,14 @@ def test_move_cartesian_and_joint_space(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     goal = [-0.02, 0.02, -0.25]
     response = fresh.post("/api/move", json={"position_m": goal, "duration_s": 0.5})
-    assert response.status_code == 200 and response.json()["result"]["duration_s"] >= 0.5
-    wait_for(lambda: _near(fresh, goal), "the Cartesian move")
-    wait_for(lambda: _status(fresh)["mode"] == "idle", "the move to finish")
+    assert response.status_code == 200, response.text
+    assert response.json()["result"]["duration_s"] >= 0.5
+    wait_for(lambda: _near(fresh, goal), "the Cartesian move", seen=lambda: robot_seen(fresh))
+    wait_for(
+        lambda: _status(fresh)["mode"] == "idle",
+        "the move to finish",
+        seen=lambda: robot_seen(fresh),
+    )
     joints = [0.4, 0.5, 0.6]
     assert fresh.post("/api/move", json={"joints_rad": joints}).status_code == 200
 
@@ -69,7 +80,7 @@ def test_move_cartesian_and_joint_space(fresh):
         measured = _status(fresh)["joints"]["position_rad"]
         return np.allclose(measured, joints, atol=0.01)
 
-    wait_for(at_joints, "the joint-space move")
+    wait_for(at_joints, "the joint-space move", seen=lambda: robot_seen(fresh))
 
 
 def test_estop_stops_and_nothing_moves_until_reset(fresh):
@@ -85,7 +96,8 @@ def test_estop_stops_and_nothing_moves_until_reset(fresh):
         ("/api/torque", {"enabled": True}),
     ):
         response = fresh.post(path, json=body)
-        assert response.status_code == 409 and "reset" in response.json()["detail"]
+        assert response.status_code == 409, response.text
+        assert "reset" in response.json()["detail"]
     held = _status(fresh)["joints"]["commanded_rad"]
     assert fresh.post("/api/reset").status_code == 200
     assert _status(fresh)["mode"] == "idle"
@@ -100,7 +112,7 @@ def test_hardware_error_faults_with_servo_and_reason_and_reset_reboots(client, f
     fault = _status(fresh)["faults"][0]
     assert fault["servo_id"] == 2 and "overheat" in fault["reason"].lower()
     assert fresh.post("/api/goal", json={"position_m": [0, 0, -0.22]}).status_code == 409
-    result = fresh.post("/api/reset").json()["result"]
+    result = ok_json(fresh.post("/api/reset"))["result"]
     assert result["rebooted"] == [2]
     wait_for(lambda: _status(fresh)["faults"] == [], "the fault to clear")
     assert _status(fresh)["mode"] == "idle" and not _status(fresh)["torque"]

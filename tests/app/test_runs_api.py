@@ -10,14 +10,17 @@ import pytest
 from mcap.reader import make_reader
 
 from app.runs.logs import read_messages
-
-from .conftest import wait_for
+from tests.support.wait import ok_json, wait_for
 
 SHORT = {"duration_s": 1.5}
 
 
+def _run(client, run_id):
+    return ok_json(client.get(f"/api/runs/{run_id}"))
+
+
 def _state(client, run_id):
-    return client.get(f"/api/runs/{run_id}").json()["state"]
+    return _run(client, run_id)["state"]
 
 
 def test_sinusoid_run_end_to_end(fresh):
@@ -25,8 +28,12 @@ def test_sinusoid_run_end_to_end(fresh):
     response = fresh.post("/api/tests/sinusoid", json=SHORT)
     assert response.status_code == 200, response.text
     run_id = response.json()["run_id"]
-    wait_for(lambda: _state(fresh, run_id) != "running", "the run to end")
-    run = fresh.get(f"/api/runs/{run_id}").json()
+    wait_for(
+        lambda: _state(fresh, run_id) != "running",
+        "the run to end",
+        seen=lambda: _run(fresh, run_id),
+    )
+    run = ok_json(fresh.get(f"/api/runs/{run_id}"))
     assert run["state"] == "done" and run["params"]["duration_s"] == 1.5
     for axis in "xyz":
         stats = run["stats"]["tracking"][axis]
@@ -39,17 +46,18 @@ def test_sinusoid_run_end_to_end(fresh):
     rows = list(csv.DictReader(io.StringIO(fresh.get(f"/api/runs/{run_id}/log.csv").text)))
     assert len(rows) == run["samples"] and {r["phase"] for r in rows} >= {"approach", "timed"}
     png = fresh.get(f"/api/runs/{run_id}/report.png")
-    assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
-    assert run_id in [r["run_id"] for r in fresh.get("/api/runs").json()]
+    assert png.status_code == 200, png.text
+    assert png.content[:8] == b"\x89PNG\r\n\x1a\n"
+    assert run_id in [r["run_id"] for r in ok_json(fresh.get("/api/runs"))]
 
 
 def test_infeasible_sinusoid_is_refused_before_any_motion(fresh):
     fresh.post("/api/torque", json={"enabled": True})
-    before = fresh.get("/api/status").json()["joints"]["commanded_rad"]
+    before = ok_json(fresh.get("/api/status"))["joints"]["commanded_rad"]
     response = fresh.post("/api/tests/sinusoid", json={"amplitude_m": [0.3, 0.0, 0.0]})
     assert response.status_code == 422
     assert "infeasible" in response.json()["detail"] and "t = " in response.json()["detail"]
-    status = fresh.get("/api/status").json()
+    status = ok_json(fresh.get("/api/status"))
     assert status["mode"] == "idle" and status["joints"]["commanded_rad"] == before
 
 
@@ -73,25 +81,33 @@ def test_bad_sinusoid_bodies_are_422(fresh):
 
 def test_aborted_run_leaves_a_readable_log(client, fresh):
     fresh.post("/api/torque", json={"enabled": True})
-    run_id = fresh.post("/api/tests/sinusoid", json={"duration_s": 20}).json()["run_id"]
-    wait_for(lambda: fresh.get("/api/status").json()["mode"] == "test", "the run to start")
+    run_id = ok_json(fresh.post("/api/tests/sinusoid", json={"duration_s": 20}))["run_id"]
+    wait_for(lambda: ok_json(fresh.get("/api/status"))["mode"] == "test", "the run to start")
     wait_for(lambda: fresh.get(f"/api/runs/{run_id}/log.csv").text.count("\n") > 50, "samples")
     assert fresh.post(f"/api/runs/{run_id}/abort").status_code == 200
-    wait_for(lambda: _state(fresh, run_id) == "aborted", "the run to be marked aborted")
-    run = fresh.get(f"/api/runs/{run_id}").json()
+    wait_for(
+        lambda: _state(fresh, run_id) == "aborted",
+        "the run to be marked aborted",
+        seen=lambda: _run(fresh, run_id),
+    )
+    run = ok_json(fresh.get(f"/api/runs/{run_id}"))
     assert "operator" in run["reason"] and run["samples"] > 50
     folder = client.app.state.runs.get(run_id).folder
     assert len(read_messages(folder / "log.mcap")) == run["samples"]
-    assert fresh.get("/api/status").json()["mode"] == "idle"
+    assert ok_json(fresh.get("/api/status"))["mode"] == "idle"
 
 
 def test_estop_during_a_run_aborts_it(fresh):
     fresh.post("/api/torque", json={"enabled": True})
-    run_id = fresh.post("/api/tests/sinusoid", json={"duration_s": 20}).json()["run_id"]
-    wait_for(lambda: fresh.get("/api/status").json()["mode"] == "test", "the run to start")
+    run_id = ok_json(fresh.post("/api/tests/sinusoid", json={"duration_s": 20}))["run_id"]
+    wait_for(lambda: ok_json(fresh.get("/api/status"))["mode"] == "test", "the run to start")
     fresh.post("/api/estop")
-    wait_for(lambda: _state(fresh, run_id) == "aborted", "the run to be marked aborted")
-    assert fresh.get(f"/api/runs/{run_id}").json()["reason"] == "e-stop"
+    wait_for(
+        lambda: _state(fresh, run_id) == "aborted",
+        "the run to be marked aborted",
+        seen=lambda: _run(fresh, run_id),
+    )
+    assert ok_json(fresh.get(f"/api/runs/{run_id}"))["reason"] == "e-stop"
     assert fresh.get("/api/runs/nope").status_code == 404
     assert fresh.get(f"/api/runs/{run_id}/secrets.txt").status_code == 404
 
@@ -102,11 +118,15 @@ def test_waypoints_run_and_windowed_stats(fresh):
         "points_m": [[0, 0, -0.22], [0.03, 0, -0.22], [0.03, 0.03, -0.24]],
         "times_s": [0, 0.5, 1.0],
     }
-    run_id = fresh.post("/api/tests/waypoints", json=body).json()["run_id"]
-    wait_for(lambda: _state(fresh, run_id) != "running", "the waypoint run to end")
-    assert fresh.get(f"/api/runs/{run_id}").json()["kind"] == "waypoints"
-    whole = fresh.get(f"/api/runs/{run_id}/stats").json()["tracking"]
-    late = fresh.get(f"/api/runs/{run_id}/stats?start_s=0.5").json()["tracking"]
+    run_id = ok_json(fresh.post("/api/tests/waypoints", json=body))["run_id"]
+    wait_for(
+        lambda: _state(fresh, run_id) != "running",
+        "the waypoint run to end",
+        seen=lambda: _run(fresh, run_id),
+    )
+    assert ok_json(fresh.get(f"/api/runs/{run_id}"))["kind"] == "waypoints"
+    whole = ok_json(fresh.get(f"/api/runs/{run_id}/stats"))["tracking"]
+    late = ok_json(fresh.get(f"/api/runs/{run_id}/stats?start_s=0.5"))["tracking"]
     assert 0 < late["samples"] < whole["samples"]
     bad = {"points_m": [[0, 0, -0.22], [0.03, 0, -0.22]], "times_s": [0, 0]}
     assert fresh.post("/api/tests/waypoints", json=bad).status_code == 422
@@ -115,7 +135,8 @@ def test_waypoints_run_and_windowed_stats(fresh):
 def test_chirp_too_fast_for_the_joints_is_refused(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     response = fresh.post("/api/tests/chirp", json={"amplitude_m": 0.08, "f1_hz": 8.0})
-    assert response.status_code == 422 and "infeasible" in response.json()["detail"]
+    assert response.status_code == 422, response.text
+    assert "infeasible" in response.json()["detail"]
 
 
 def test_step_response_run(fresh):
@@ -123,11 +144,16 @@ def test_step_response_run(fresh):
     response = fresh.post("/api/tests/step", json={"size_m": 0.004, "duration_s": 1.0})
     assert response.status_code == 200, response.text
     run_id = response.json()["run_id"]
-    wait_for(lambda: _state(fresh, run_id) != "running", "the step run to end")
+    wait_for(
+        lambda: _state(fresh, run_id) != "running",
+        "the step run to end",
+        seen=lambda: _run(fresh, run_id),
+    )
     rows = list(csv.DictReader(io.StringIO(fresh.get(f"/api/runs/{run_id}/log.csv").text)))
     goal_z = [float(r["goal_z_m"]) for r in rows if r["phase"] == "timed"]
     assert max(goal_z) - min(goal_z) == pytest.approx(0.004, abs=1e-9)  # a true step
     measured_z = [float(r["measured_z_m"]) for r in rows if r["phase"] == "timed"]
     assert max(measured_z) - min(measured_z) > 0.003  # and the robot followed it
     big = fresh.post("/api/tests/step", json={"size_m": 0.05})
-    assert big.status_code == 422 and "joint speed" in big.json()["detail"]
+    assert big.status_code == 422, big.text
+    assert "joint speed" in big.json()["detail"]

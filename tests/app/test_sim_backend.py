@@ -9,18 +9,19 @@ from fastapi.testclient import TestClient
 
 from app.config import load_settings
 from app.server import create_app
+from tests.support.wait import ok_json, wait_for
 
-from .conftest import wait_for
+from .conftest import settle_at
 
 
 def test_default_backend_is_the_twin_and_reaches_a_goal():
     settings = load_settings(runs={"folder": tempfile.mkdtemp(prefix="deltadash-runs-")})
     assert settings.hardware.backend == "sim"
     with TestClient(create_app(settings)) as client:
-        status = client.get("/api/status").json()
+        status = ok_json(client.get("/api/status"))
         assert status["backend"] == "sim" and status["mode"] == "idle"
         # torque off: the arm falls and hangs under gravity
-        wait_for(lambda: client.get("/api/status").json()["ee"]["position_m"][2] < -0.3,
+        wait_for(lambda: ok_json(client.get("/api/status"))["ee"]["position_m"][2] < -0.3,
                  "the relaxed arm to hang")
         assert client.post("/api/torque", json={"enabled": True}).status_code == 200
         goal = [0.02, -0.01, -0.23]
@@ -28,7 +29,7 @@ def test_default_backend_is_the_twin_and_reaches_a_goal():
         assert response.status_code == 200, response.text
 
         def near_goal() -> bool:
-            measured = client.get("/api/status").json()["ee"]["position_m"]
+            measured = ok_json(client.get("/api/status"))["ee"]["position_m"]
             # P-only factory gains leave a small sag under gravity: within 3 mm
             return np.linalg.norm(np.subtract(measured, goal)) < 0.003
 
@@ -38,7 +39,7 @@ def test_default_backend_is_the_twin_and_reaches_a_goal():
             # theta is positive downwards, so holding the arm up against gravity takes a
             # negative current on every joint once the approach has settled (in transit
             # a joint may brake with either sign, or read zero)
-            return all(c < 0.0 for c in client.get("/api/status").json()["joints"]["current_a"])
+            return all(c < 0.0 for c in ok_json(client.get("/api/status"))["joints"]["current_a"])
 
         wait_for(lifting, "every servo to hold the arm against gravity")
 
@@ -48,12 +49,20 @@ def test_sinusoid_on_the_twin_has_tracking_and_validation_stats():
     Table 6.2): FK of the encoders agrees with it to encoder resolution."""
     settings = load_settings(runs={"folder": tempfile.mkdtemp(prefix="deltadash-runs-")})
     with TestClient(create_app(settings)) as client:
-        client.post("/api/torque", json={"enabled": True})
-        external = client.get("/api/status").json()["ee"]["external_m"]
+        # a defined pose first: after torque on the twin's arm may still be falling
+        settle_at(client, [0.0, 0.0, -0.24])
+        external = ok_json(client.get("/api/status"))["ee"]["external_m"]
         assert None not in external
-        run_id = client.post("/api/tests/sinusoid", json={"duration_s": 1.5}).json()["run_id"]
-        wait_for(lambda: client.get(f"/api/runs/{run_id}").json()["state"] != "running", "run")
-        stats = client.get(f"/api/runs/{run_id}").json()["stats"]
+        run_id = ok_json(client.post("/api/tests/sinusoid", json={"duration_s": 1.5}))["run_id"]
+        run = wait_for(lambda: _ended(client, run_id), f"run {run_id} to end")
+        assert run["state"] == "done", run
+        stats = run["stats"]
     for axis in "xyz":
         assert stats["validation"][axis]["max_abs_m"] < 0.001
         assert stats["tracking"][axis]["rmse_m"] > stats["validation"][axis]["rmse_m"]
+
+
+def _ended(client: TestClient, run_id: str) -> dict | None:
+    """The run's record once it is no longer running, else None."""
+    run = ok_json(client.get(f"/api/runs/{run_id}"))
+    return run if run["state"] != "running" else None

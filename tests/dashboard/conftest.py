@@ -18,6 +18,8 @@ from typing import Any
 
 import pytest
 
+from tests import waiting
+
 START_S = 60.0  # generous: the simulator and viser start slowly on a loaded 2-core machine
 WAIT_S = 30.0  # bound on waiting for an effect; not a timing assertion
 
@@ -29,14 +31,8 @@ def free_port() -> int:
 
 
 def wait_for(condition: Callable[[], Any], what: str, timeout_s: float = WAIT_S) -> Any:
-    """Poll ``condition`` until it returns something truthy; fail naming ``what``."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        value = condition()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
+    """tests.support.wait.wait_for, polling a subprocess server at a gentler 10 Hz."""
+    return waiting.wait_for(condition, what, timeout_s, poll_s=0.1)
 
 
 @dataclass

@@ -15,7 +15,7 @@ from app.config import load_settings
 from app.runs.trajectories import SinusoidParams
 from app.server import create_app
 from app.server.api.dashboard import peak_joint_speed
-from tests.app.conftest import wait_for
+from tests.support.wait import ok_json, wait_for
 
 
 def make_client(**overrides) -> TestClient:
@@ -31,7 +31,7 @@ def hold_at_centre(client: TestClient) -> None:
     client.post("/api/reset")
     client.post("/api/torque", json={"enabled": True})
     client.post("/api/goal", json={"position_m": [0.0, 0.0, -0.24]})
-    wait_for(lambda: abs(client.get("/api/status").json()["ee"]["position_m"][2] + 0.24) < 0.003,
+    wait_for(lambda: abs(ok_json(client.get("/api/status"))["ee"]["position_m"][2] + 0.24) < 0.003,
              "arrival at the sinusoid's centre")  # fmt: skip
 
 
@@ -43,7 +43,7 @@ def client() -> Iterator[TestClient]:
 
 
 def test_info_names_the_viser_port_and_no_token(client: TestClient) -> None:
-    info = client.get("/api/info").json()
+    info = ok_json(client.get("/api/info"))
     settings = client.app.state.settings
     scene = client.app.state.scene
     assert info["viser_port"] == (None if scene is None else scene.server.get_port())
@@ -54,7 +54,7 @@ def test_info_names_the_viser_port_and_no_token(client: TestClient) -> None:
 
 
 def test_check_of_thesis_sinusoid_is_feasible_and_reports_joint_speed(client: TestClient) -> None:
-    body = client.post("/api/tests/sinusoid/check", json={"duration_s": 2}).json()
+    body = ok_json(client.post("/api/tests/sinusoid/check", json={"duration_s": 2}))
     assert body["feasible"] is True, body["detail"]
     assert 0 < body["peak_joint_speed_rad_s"] <= body["joint_speed_limit_rad_s"]
     # thesis Z axis: 8 cm at 2 Hz -> 2 pi 2 0.08 ~ 1.005 m/s is the fastest axis
@@ -62,14 +62,14 @@ def test_check_of_thesis_sinusoid_is_feasible_and_reports_joint_speed(client: Te
 
 
 def test_check_names_the_infeasible_time_and_starts_nothing(client: TestClient) -> None:
-    runs_before = len(client.get("/api/runs").json())
+    runs_before = len(ok_json(client.get("/api/runs")))
     body = client.post(
         "/api/tests/sinusoid/check", json={"amplitude_m": [0.3, 0, 0], "duration_s": 2}
     ).json()
     assert body["feasible"] is False
     assert "infeasible" in body["detail"] and "t = " in body["detail"]
-    assert len(client.get("/api/runs").json()) == runs_before
-    assert client.get("/api/status").json()["mode"] != "test"
+    assert len(ok_json(client.get("/api/runs"))) == runs_before
+    assert ok_json(client.get("/api/status"))["mode"] != "test"
 
 
 def test_peak_joint_speed_does_not_depend_on_where_the_arm_hangs() -> None:
@@ -90,7 +90,8 @@ def test_peak_joint_speed_does_not_depend_on_where_the_arm_hangs() -> None:
 def test_faster_sinusoid_previews_a_higher_joint_speed(client: TestClient) -> None:
     def peak(frequency_hz: float) -> float:
         body = {"frequency_hz": [frequency_hz, 0, 0], "amplitude_m": [0.02, 0, 0], "duration_s": 2}
-        return client.post("/api/tests/sinusoid/check", json=body).json()["peak_joint_speed_rad_s"]
+        checked = ok_json(client.post("/api/tests/sinusoid/check", json=body))
+        return checked["peak_joint_speed_rad_s"]
 
     assert peak(1.0) > peak(0.5) > 0
 
@@ -111,7 +112,7 @@ def test_plotly_is_served_from_the_installed_package(client: TestClient) -> None
 def test_with_a_token_info_says_so_and_the_check_needs_it() -> None:
     token = "a-long-secret-1"
     with make_client(server={"token": token}) as client:
-        assert client.get("/api/info").json()["token_required"] is True
+        assert ok_json(client.get("/api/info"))["token_required"] is True
         url = "/api/tests/sinusoid/check"
         assert client.post(url, json={"duration_s": 1}).status_code == 401
         headers = {"Authorization": f"Bearer {token}"}

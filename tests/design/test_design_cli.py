@@ -1,4 +1,4 @@
-"""``deltadash design`` through its own add_parser (app/cli.py wires it in)."""
+"""``deltadash design`` through its own add_parser (app/cli/__init__.py wires it in)."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from app import design_cli
+from app.cli import design
 from app.config import RobotSettings
 
 
 def _run(argv: list[str], capsys) -> tuple[int, str]:
     parser = argparse.ArgumentParser(prog="deltadash")
-    design_cli.add_parser(parser.add_subparsers(dest="command", required=True))
+    design.add_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
     code = args.handler(args)
     return code, capsys.readouterr().out

@@ -12,7 +12,7 @@ from fastapi.testclient import TestClient
 from app.config import load_settings
 from app.server import create_app
 from app.server.backends import open_backend
-from tests.app.conftest import wait_for  # noqa: F401 - shared with the scene's tests
+from tests.support.wait import WAIT_S, ok_json, wait_for
 
 
 @pytest.fixture(scope="module")
@@ -30,12 +30,25 @@ def scene(app_client):
     """The running Scene, with e-stop and faults cleared and torque on."""
     app = app_client.app
     controller = app.state.controller
-    controller.reset().result(timeout=5)
-    controller.set_torque(True).result(timeout=5)
+    controller.reset().result(timeout=WAIT_S)
+    controller.set_torque(True).result(timeout=WAIT_S)
     scene = app.state.scene
     scene.panel.message = scene.goals.message = ""
     return scene
 
 
 def measured(client: TestClient) -> np.ndarray:
-    return np.array(client.get("/api/status").json()["ee"]["position_m"], dtype=float)
+    return np.array(ok_json(client.get("/api/status"))["ee"]["position_m"], dtype=float)
+
+
+def wait_at(client: TestClient, point_m, what: str, within_m: float = 2e-3) -> None:
+    """Wait until /api/status measures the platform within ``within_m`` of ``point_m``;
+    a timeout says where it was, the mode and any warning or fault."""
+
+    def seen() -> dict:
+        status = ok_json(client.get("/api/status"))
+        keys = ("mode", "torque", "warning", "faults")
+        return {"measured_m": status["ee"]["position_m"], **{k: status[k] for k in keys}}
+
+    wait_for(lambda: np.linalg.norm(measured(client) - point_m) < within_m,
+             f"{what} ({within_m * 1e3:g} mm of {list(point_m)} m)", seen=seen)  # fmt: skip

@@ -4,17 +4,23 @@ scene renders, a goal moved through the drag's server-side path moves the robot.
 from __future__ import annotations
 
 import io
-import time
 
 import numpy as np
 from PIL import Image
 
-from tests.scene.conftest import measured, wait_for
-from tests.support.browser import chromium_page, require_browser, save_artifact
+from tests.scene.conftest import measured, wait_at
+from tests.support.browser import (
+    PAGE_WAIT_S,
+    box_of,
+    chromium_page,
+    page_condition,
+    require_browser,
+    save_artifact,
+)
+from tests.support.wait import ok_json, wait_for
 
 LEG_3_BLUE = np.array([60, 112, 214])  # leg 3 sits left of the panel in this view
 VIEWPORT = (880, 540)  # small: software WebGL renders every pixel on the CPU
-PAGE_WAIT_MS = 45_000  # software WebGL on a loaded 2-core machine; not a timing assertion
 RENDER_WAIT_S = 150.0  # a noisy 2-core VM took 30 s to show the robot; a bound, not a claim
 
 
@@ -27,7 +33,7 @@ def _viewport_pixels(png: bytes, right_px: int) -> np.ndarray:
 
 def _panel_left(page) -> int:
     """x [px] of the control panel's left edge, less a margin."""
-    box = page.get_by_role("button", name="E-STOP", exact=True).bounding_box()
+    box = box_of(page.get_by_role("button", name="E-STOP", exact=True), "the E-STOP button")
     return int(box["x"]) - 40
 
 
@@ -35,14 +41,22 @@ def _near(pixels: np.ndarray, colour: np.ndarray, tolerance: int = 40) -> int:
     return int((np.abs(pixels - colour).max(axis=-1) <= tolerance).sum())
 
 
-def _rendered(page) -> bytes:
+def _rendered(page, right_px: int) -> bytes:
     """A screenshot once the robot shows (the scene fades in; software WebGL is slow)."""
-    right, end = _panel_left(page), time.monotonic() + RENDER_WAIT_S
-    png = page.screenshot()
-    while _near(_viewport_pixels(png, right), LEG_3_BLUE) <= 30 and time.monotonic() < end:
-        page.wait_for_timeout(1000)
-        png = page.screenshot()
-    return png
+    shots = [page.screenshot()]  # the latest only
+
+    def blue_pixels() -> int:
+        return _near(_viewport_pixels(shots[0], right_px), LEG_3_BLUE)
+
+    def robot_drawn() -> bool:
+        if blue_pixels() > 30:
+            return True
+        shots[0] = page.screenshot()
+        return False
+
+    wait_for(robot_drawn, "leg 3's blue upper link drawn (over 30 pixels)", RENDER_WAIT_S,
+             poll_s=1.0, seen=lambda: f"{blue_pixels()} blue pixels")  # fmt: skip
+    return shots[0]
 
 
 def test_scene_renders_and_a_dragged_goal_moves_the_robot(app_client):
@@ -63,31 +77,45 @@ def test_scene_renders_and_a_dragged_goal_moves_the_robot(app_client):
 
 def _drag_and_watch(app_client, scene) -> None:
     with chromium_page(*VIEWPORT) as page:
+        # every Playwright step (navigation, screenshot) may wait this long for a page that
+        # renders WebGL in software; the conditions below are what the test waits for
+        page.set_default_timeout(PAGE_WAIT_S * 1e3)
         page.goto(scene.url, wait_until="domcontentloaded")
-        page.wait_for_selector("canvas", timeout=PAGE_WAIT_MS)
-        page.wait_for_function("() => document.body.innerText.includes('E-STOP')",
-                               timeout=PAGE_WAIT_MS)  # fmt: skip
+        page_condition(page, "() => document.querySelector('canvas') !== null", "the canvas")
+        page_condition(page, "() => document.body.innerText.includes('E-STOP')",
+                       "the control panel's E-STOP text")  # fmt: skip
         wait_for(lambda: len(scene.server.get_clients()) == 1, "the browser as a viser client")
-        before = _rendered(page)
-        save_artifact("scene-before.png", before)
         right = _panel_left(page)
+        before = _rendered(page, right)
+        save_artifact("scene-before.png", before)
         pixels = _viewport_pixels(before, right)
         assert pixels.std() > 10, "the 3D view is blank"
         assert _near(pixels, LEG_3_BLUE) > 30, "leg 3's blue upper link is not drawn"
 
-        assert app_client.post("/api/torque", json={"enabled": True}).status_code == 200
+        ok_json(app_client.post("/api/torque", json={"enabled": True}))
         start = measured(app_client)
         target = np.array([0.06, -0.04, -0.28])
         scene.goals.drag_to(target, final=True)  # the gizmo's on_update path
-        wait_for(lambda: np.linalg.norm(measured(app_client) - target) < 2e-3,
-                 "/api/status: the robot at the dragged goal")  # fmt: skip
+        wait_at(app_client, target, "/api/status: the robot at the dragged goal")
         assert np.linalg.norm(start - target) > 0.04
         # display frames reach a software-rendered page at their own pace: poll, bounded
-        changed_pixels, end = 0, time.monotonic() + RENDER_WAIT_S
-        while changed_pixels <= 200 and time.monotonic() < end:
-            page.wait_for_timeout(500)
-            after = page.screenshot()
-            changed = np.abs(_viewport_pixels(after, right) - pixels).max(axis=-1) > 30
-            changed_pixels = int(changed.sum())
-        save_artifact("scene-after.png", after)
-        assert changed_pixels > 200, "the robot did not move on the page"
+        shots = [before]  # the latest only
+
+        def changed_pixels() -> int:
+            changed = np.abs(_viewport_pixels(shots[0], right) - pixels).max(axis=-1) > 30
+            return int(changed.sum())
+
+        def robot_moved() -> bool:
+            shots[0] = page.screenshot()
+            return changed_pixels() > 200
+
+        try:
+            wait_for(
+                robot_moved,
+                "the robot to move on the page (over 200 pixels changed)",
+                RENDER_WAIT_S,
+                poll_s=0.5,
+                seen=lambda: f"{changed_pixels()} pixels changed",
+            )
+        finally:
+            save_artifact("scene-after.png", shots[0])

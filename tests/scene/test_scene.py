@@ -15,8 +15,9 @@ import viser
 
 from app.scene.geometry import robot_lines
 from app.scene.goal_view import INSIDE_COLOUR, PROJECTED_COLOUR
-from app.scene.test_panel import TestPanel as SinusoidPanel
-from tests.scene.conftest import measured, wait_for
+from app.scene.run_panel import RunPanel
+from tests.scene.conftest import wait_at
+from tests.support.wait import WAIT_S, wait_for
 
 
 def _goal(scene) -> np.ndarray:
@@ -29,8 +30,7 @@ def test_drag_inside_sends_every_update_as_the_goal(scene, app_client):
         np.testing.assert_allclose(sent, point)
         wait_for(lambda p=point: np.allclose(_goal(scene), p), f"goal {point}")
     assert tuple(scene.goals.marker.color) == INSIDE_COLOUR
-    wait_for(lambda: np.linalg.norm(measured(app_client) - [0.03, -0.01, -0.26]) < 2e-3,
-             "the robot at the dragged goal")  # fmt: skip
+    wait_at(app_client, [0.03, -0.01, -0.26], "the robot at the dragged goal")
 
 
 def test_drag_outside_is_projected_and_the_gizmo_snaps_back(scene):
@@ -48,7 +48,7 @@ def test_drag_outside_is_projected_and_the_gizmo_snaps_back(scene):
 
 
 def test_drag_with_torque_off_says_why(scene):
-    scene.controller.set_torque(False).result(timeout=5)
+    scene.controller.set_torque(False).result(timeout=WAIT_S)
     scene.goals.drag_to(np.array([0.0, 0.0, -0.25]), final=True)
     wait_for(lambda: "torque is off" in scene.goals.message, "the refusal message")
     scene.panel.update(scene.controller.snapshot())
@@ -57,8 +57,7 @@ def test_drag_with_torque_off_says_why(scene):
 
 def test_frame_draws_the_measured_pose(scene, app_client):
     scene.goals.drag_to(np.array([0.04, 0.02, -0.22]), final=True)
-    wait_for(lambda: np.linalg.norm(measured(app_client) - [0.04, 0.02, -0.22]) < 2e-3,
-             "the robot at the goal")  # fmt: skip
+    wait_at(app_client, [0.04, 0.02, -0.22], "the robot at the goal")
     scene.update(time.monotonic())
     drawn_joints = scene.robot._joints
     expected = robot_lines(scene.controller.robot, drawn_joints)
@@ -95,8 +94,7 @@ def test_goal_points_save_go_to_delete(scene, app_client):
     assert scene.panel.gui_points.value == "pick"
     scene.goals.drag_to(np.array([0.03, 0.0, -0.22]), final=True)
     scene.panel.go_to("pick")
-    wait_for(lambda: np.linalg.norm(measured(app_client) - [-0.03, 0.02, -0.27]) < 2e-3,
-             "the robot at the saved point")  # fmt: skip
+    wait_at(app_client, [-0.03, 0.02, -0.27], "the robot at the saved point")
     scene.panel.delete_point("pick")
     assert "pick" not in scene.goals.saved
     assert scene.panel.gui_points.options == ("—",)
@@ -131,11 +129,11 @@ def test_sinusoid_preview_start_and_abort(scene):
     assert run_id in scene.tests.gui_result.content
 
 
-def test_test_panel_without_runs_says_so(monkeypatch):
+def test_run_panel_without_runs_says_so(monkeypatch):
     monkeypatch.setitem(sys.modules, "app.runs.trajectories", None)  # import fails
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
-        panel = SinusoidPanel(server, lambda: None, lambda path: None)
+        panel = RunPanel(server, lambda: None, lambda path: None)
         assert "not available" in panel.gui_unavailable.content
         panel.start()
         assert "not available" in panel.message

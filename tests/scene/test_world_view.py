@@ -11,7 +11,7 @@ import viser
 from app.scene.world_view import WorldView
 from kinematics import Pose
 from kinematics.pose import quaternion_to_matrix
-from tests.scene.conftest import wait_for
+from tests.support.wait import WAIT_S, wait_for
 
 
 class _Provider:
@@ -59,6 +59,6 @@ def test_hold_mode_shows_the_frames(scene, app_client):
         scene.update(time.monotonic())
         assert scene.world.world.visible and scene.world.drone.visible
     finally:
-        scene.controller.reset().result(timeout=5)
+        scene.controller.reset().result(timeout=WAIT_S)
     scene.update(time.monotonic())
     assert not scene.world.world.visible

@@ -16,6 +16,8 @@ from typing import Any
 
 import pytest
 
+from tests.support.wait import wait_for
+
 CHROMIUM = os.environ.get("DELTADASH_CHROMIUM", "/usr/bin/chromium")
 ARTIFACTS = Path(__file__).resolve().parents[2] / "artifacts"
 CHROMIUM_ARGS = [
@@ -24,6 +26,10 @@ CHROMIUM_ARGS = [
     # WebGL without a GPU: chromium's software rasteriser (SwiftShader) must be allowed.
     "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
 ]  # fmt: skip
+# Software WebGL on a loaded 2-core machine can hold a page's main thread for tens of seconds
+# at a time: a generous bound on waiting for the page, not a timing assertion.
+PAGE_WAIT_S = 150.0
+_TRY_MS = 5_000  # one try of a Playwright wait inside a longer, condition-based wait
 
 
 def browser_skip_reason() -> str | None:
@@ -62,6 +68,41 @@ def chromium_page(width: int = 1280, height: int = 800) -> Iterator[Any]:
             yield context.pages[0] if context.pages else context.new_page()
         finally:
             context.close()
+
+
+def box_of(locator: Any, what: str, timeout_s: float = PAGE_WAIT_S) -> dict[str, float]:
+    """The bounding box of ``locator`` once it is laid out with a size; fail naming ``what``.
+
+    Playwright's own ``bounding_box()`` gives up after one 30 s timeout, which a page
+    rendering WebGL in software can spend busy: retry in short tries up to the deadline.
+    """
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+    last = "nothing yet"
+
+    def laid_out() -> dict[str, float] | None:
+        nonlocal last
+        try:
+            box = locator.bounding_box(timeout=_TRY_MS)
+        except PlaywrightTimeout:
+            last = f"not on the page within a {_TRY_MS / 1e3:g} s try"
+            return None
+        last = f"bounding box {box}"
+        return box if box is not None and box["width"] > 0 and box["height"] > 0 else None
+
+    return wait_for(laid_out, f"{what} laid out on the page", timeout_s, poll_s=0.5,
+                    seen=lambda: last)  # fmt: skip
+
+
+def page_condition(page: Any, script: str, what: str, timeout_s: float = PAGE_WAIT_S) -> None:
+    """Wait until the JavaScript ``script`` (a function expression) returns true in ``page``;
+    fail naming ``what`` instead of Playwright's bare "Timeout exceeded"."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+    try:
+        page.wait_for_function(script, timeout=timeout_s * 1e3)
+    except PlaywrightTimeout:
+        raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}") from None
 
 
 def save_artifact(name: str, data: bytes) -> Path:

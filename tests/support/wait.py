@@ -1,18 +1,54 @@
-"""Condition-based waiting for tests: poll, and fail saying what was waited for."""
+"""Waiting in end-to-end tests: on a condition, bounded by a deadline, failing with what it
+waited for (and what it last saw); and reading a response body only after its status.
+
+A loaded 2-core machine can make anything slow, so no test sleeps a fixed time and hopes:
+it polls for the effect it needs, and the deadline is generous because it is a bound, not
+a timing assertion.
+"""
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Any
 
 WAIT_S = 30.0  # generous bound for convergence on a loaded 2-core machine; not a timing test
 
 
-def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = WAIT_S) -> None:
-    """Poll ``condition`` until true; fail naming ``what`` if it never becomes true."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if condition():
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"timed out waiting for {what}")
+def wait_for(
+    condition: Callable[[], Any],
+    what: str,
+    timeout_s: float = WAIT_S,
+    *,
+    poll_s: float = 0.02,
+    seen: Callable[[], Any] | None = None,
+) -> Any:
+    """Poll ``condition`` until it returns something truthy, and return that.
+
+    Fails after ``timeout_s`` naming ``what`` it waited for and, when ``seen`` is given,
+    what ``seen()`` returned last (e.g. the measured position), so a timeout says how far
+    from done it was.
+    """
+    start = time.monotonic()
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() - start > timeout_s:
+            last = f"; last seen: {seen()!r}" if seen is not None else ""
+            raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}{last}")
+        time.sleep(poll_s)
+
+
+def ok_json(response: Any, status: int = 200) -> Any:
+    """The JSON body of ``response`` after checking its status code (an httpx response).
+
+    A refused request then fails as "POST /api/... -> 409: {detail}" instead of a bare
+    KeyError on the field the test wanted.
+    """
+    request = response.request
+    assert response.status_code == status, (
+        f"{request.method} {request.url.path} -> {response.status_code} (wanted {status}): "
+        f"{response.text}"
+    )
+    return response.json()

@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from tests.app.conftest import make_client, wait_for
+from tests.app.conftest import make_client
+from tests.support.wait import ok_json, wait_for
 
 
 @pytest.fixture(scope="module")
@@ -22,15 +23,15 @@ def _pose(t: float, z: float = 1.5) -> dict:
 
 def test_pose_post_vets_samples(client):
     client.post("/api/reset")
-    assert client.post("/api/mav/pose", json=_pose(1.0)).json()["accepted"] is True
-    assert client.post("/api/mav/pose", json=_pose(0.5)).json()["accepted"] is False
+    assert ok_json(client.post("/api/mav/pose", json=_pose(1.0)))["accepted"] is True
+    assert ok_json(client.post("/api/mav/pose", json=_pose(0.5)))["accepted"] is False
     for bad in (
         {**_pose(2.0), "quaternion": [0, 0, 0, 0]},
         {**_pose(2.0), "t": None},
         {"position": [0, 0, 1]},
     ):
         assert client.post("/api/mav/pose", json=bad).status_code == 422
-    status = client.get("/api/mav/pose").json()
+    status = ok_json(client.get("/api/mav/pose"))
     assert status["accepted"] >= 1 and status["dropped"] >= 1
 
 
@@ -39,7 +40,7 @@ def test_pose_websocket_stream(client):
         ws.send_text(json.dumps(_pose(10.0)))
         ws.send_text(json.dumps({**_pose(10.01), "quaternion": [3, 0, 0, 0]}))
         assert "unit" in ws.receive_json()["error"]
-    assert client.get("/api/mav/pose").json()["accepted"] >= 2
+    assert ok_json(client.get("/api/mav/pose"))["accepted"] >= 2
 
 
 def test_hold_faults_when_the_pose_stream_is_lost(client):
@@ -48,8 +49,8 @@ def test_hold_faults_when_the_pose_stream_is_lost(client):
     client.post("/api/mav/pose", json=_pose(100.0))
     response = client.post("/api/hold", json={"position_m": [0.0, 0.0, 1.5 - 0.08 - 0.24]})
     assert response.status_code == 200, response.text
-    wait_for(lambda: client.get("/api/status").json()["mode"] == "fault", "the lost-pose fault")
-    reason = client.get("/api/status").json()["faults"][0]["reason"]
+    wait_for(lambda: ok_json(client.get("/api/status"))["mode"] == "fault", "the lost-pose fault")
+    reason = ok_json(client.get("/api/status"))["faults"][0]["reason"]
     assert "pose" in reason and "lost" in reason
     client.post("/api/reset")
 
@@ -61,8 +62,8 @@ def _hold_run(client, body: dict) -> dict:
     response = client.post("/api/tests/hold", json=body)
     assert response.status_code == 200, response.text
     run_id = response.json()["run_id"]
-    wait_for(lambda: client.get(f"/api/runs/{run_id}").json()["state"] != "running", "the run")
-    run = client.get(f"/api/runs/{run_id}").json()
+    wait_for(lambda: ok_json(client.get(f"/api/runs/{run_id}"))["state"] != "running", "the run")
+    run = ok_json(client.get(f"/api/runs/{run_id}"))
     assert run["state"] == "done" and run["kind"] == "hold"
     return run["stats"]["world"]
 
@@ -89,7 +90,7 @@ def test_telemetry_carries_the_world_frame_during_a_hold(client):
     client.post("/api/reset")
     client.post("/api/torque", json={"enabled": True})
     body = {"duration_s": 3.0, "seed": 1}
-    run_id = client.post("/api/tests/hold", json=body).json()["run_id"]
+    run_id = ok_json(client.post("/api/tests/hold", json=body))["run_id"]
     with client.websocket_connect("/api/telemetry?hz=50") as ws:
         for _ in range(200):
             message = ws.receive_json()
@@ -99,4 +100,4 @@ def test_telemetry_carries_the_world_frame_during_a_hold(client):
     assert world is not None
     np.testing.assert_allclose(world["error_m"],
                                np.subtract(world["goal_m"], world["measured_m"]), atol=1e-12)
-    wait_for(lambda: client.get(f"/api/runs/{run_id}").json()["state"] != "running", "run")
+    wait_for(lambda: ok_json(client.get(f"/api/runs/{run_id}"))["state"] != "running", "run")

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import socket
-import time
 
 import numpy as np
 import pytest
@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from app.world.inputs import MavlinkPoseListener, UdpPoseListener
 from app.world.poses import PoseTracker
-from tests.app.conftest import wait_for
+from tests.support.wait import wait_for
 
 
 def _free_port() -> int:
@@ -77,12 +77,13 @@ def test_mavlink_odometry_is_converted_from_ned(tracker):
                 )
                 sender.sendto(msg.pack(encoder), ("127.0.0.1", port))
 
-            end = time.monotonic() + 10
-            k = 0
-            while tracker.accepted == 0 and time.monotonic() < end:
-                send(k)
-                k += 1
-                time.sleep(0.05)
+            sent = itertools.count()
+
+            def accepted() -> bool:
+                send(next(sent))
+                return tracker.accepted > 0
+
+            wait_for(accepted, "an ODOMETRY message accepted by the tracker", 10, poll_s=0.05)
     finally:
         listener.stop()
     sample, velocity = tracker.latest()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Sequence
 
 import numpy as np
@@ -24,6 +23,7 @@ from hardware.emulator import ServoEmulator
 from hardware.emulator.shaft_motion import MotionCommand, MotionState
 from hardware.errors import BusError, CommError, NotConnectedError, ServoStatusError
 from tests.support.servo_emulator import IDS, fast, make_config
+from tests.support.wait import wait_for
 
 
 class FixedModel:
@@ -113,12 +113,13 @@ def test_torque_on_holds_the_present_pose_and_moves_to_goals(bus, emulator) -> N
     assert [emulator.servo(i).table.get(Reg.TORQUE_ENABLE) for i in IDS] == [1, 1, 1]
     assert emulator.servo(1).table.get(Reg.GOAL_POSITION) == 2100
     goal = [0.2, -0.1, 0.0]
-    for _ in range(200):  # the simple model settles in ~0.1 s; poll, don't time
+
+    def arrived():  # the simple model settles in ~0.1 s; poll, don't time
         state = bus.read_state()
         bus.write_goal(goal)
-        if np.allclose(state.position_rad, goal, atol=2 * RAD_PER_TICK):
-            break
-        time.sleep(0.01)
+        return state if np.allclose(state.position_rad, goal, atol=2 * RAD_PER_TICK) else None
+
+    state = wait_for(arrived, f"the joints at {goal} rad", 10.0, poll_s=0.01)
     np.testing.assert_allclose(state.position_rad, goal, atol=2 * RAD_PER_TICK)
     bus.torque(False)
     assert [emulator.servo(i).table.get(Reg.TORQUE_ENABLE) for i in IDS] == [0, 0, 0]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -17,6 +16,7 @@ from hardware.dynamixel.control_table import (
 )
 from hardware.errors import BusError, HardwareError, NotConnectedError
 from hardware.sim.sim_bus import SimBus, SimBusConfig
+from tests.support.wait import wait_for
 
 
 @pytest.fixture
@@ -113,10 +113,8 @@ def test_realtime_bus_moves_simulated_time_by_itself() -> None:
     sim = SimBus(SimBusConfig(realtime=True, torque_on_at_start=True))
     sim.connect()
     try:
-        deadline = time.monotonic() + 10.0
-        while sim.twin.time_s < 0.05 and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert sim.twin.time_s >= 0.05
+        wait_for(lambda: sim.twin.time_s >= 0.05, "simulated time to reach 0.05 s by itself",
+                 10.0, poll_s=0.01, seen=lambda: f"{sim.twin.time_s} s")  # fmt: skip
         with pytest.raises(RuntimeError):
             sim.advance(0.1)  # the thread owns the clock
     finally:

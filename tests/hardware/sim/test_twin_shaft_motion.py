@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import pytest
 
 from hardware.bus import PositionGains
@@ -13,6 +11,7 @@ from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig
 from hardware.emulator import ServoEmulator
 from hardware.sim.twin_shaft_motion import TwinMotionModel
 from tests.support.servo_emulator import fast
+from tests.support.wait import wait_for
 
 
 def test_reset_places_the_arm_at_the_shaft_angles() -> None:
@@ -34,10 +33,12 @@ def test_goals_and_gains_written_over_the_sdk_drive_the_twin() -> None:
             bus.set_gains(PositionGains(p=1200))
             bus.torque(True)
             bus.write_goal([0.45, 0.45, 0.45])
-            deadline = time.monotonic() + 10.0
-            while model.twin.time_s < 0.6 and time.monotonic() < deadline:
-                state = bus.read_state()
-                time.sleep(0.01)
+
+            def later() -> bool:
+                bus.read_state()  # the bus's requests are what step the twin
+                return model.twin.time_s >= 0.6
+
+            wait_for(later, "0.6 s of simulated time", 10.0, poll_s=0.01)
             state = bus.read_state()
         finally:
             bus.disconnect()
@@ -63,12 +64,14 @@ def test_the_twins_heat_and_errors_reach_the_control_table_and_reboot_clears_bot
         bus.connect()
         try:
             model.twin.servos[1].hardware_error = 0x20  # overload, latched in servo 2's model
-            deadline = time.monotonic() + 10.0
-            state = bus.read_state()
-            while not state.hardware_errors[1] and time.monotonic() < deadline:
-                time.sleep(0.01)
+
+            def latched():
                 state = bus.read_state()
-            assert state.hardware_errors[1] and not state.hardware_errors[0]
+                return state if state.hardware_errors[1] else None
+
+            overload = "servo 2's overload in Hardware Error Status"
+            state = wait_for(latched, overload, 10.0, poll_s=0.01)
+            assert not state.hardware_errors[0]
             expected = [round(out.temperature_c) for out in model.outputs]
             assert list(state.temperature_c) == pytest.approx(expected, abs=1)
             bus.reboot([2])

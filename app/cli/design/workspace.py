@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from app.design.common import common, emit, robot_from
+from app.cli.design.arguments import common, emit, robot_from
 from kinematics import RotaryDelta
-from kinematics.analysis import largest_region, section, workspace_volume
+from kinematics.analysis import largest_region, workspace_volume
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -51,7 +51,7 @@ def _workspace(args: argparse.Namespace) -> int:
     volume = workspace_volume(delta, cells_per_axis=args.cells)
     fits = {shape: largest_region(delta, tuple(args.proportions), args.z, args.anchor, shape)
             for shape in ("box", "cylinder")}  # fmt: skip
-    figures = _workspace_figures(delta, args) if args.out else []
+    figures = _figures(delta, args.out, args.sections) if args.out else []
     payload = {
         "volume_m3": volume.volume_m3, "volume_error_m3": volume.boundary_m3,
         "box_m": list(fits["box"].size_m), "box_lower_m": list(fits["box"].lower),
@@ -75,17 +75,8 @@ def _workspace(args: argparse.Namespace) -> int:
     return 0
 
 
-def _workspace_figures(delta: RotaryDelta, args: argparse.Namespace) -> list[Path]:
-    from app.design import figures  # matplotlib only when figures are asked for
 
-    paths = [figures.section_map(section(delta, "xz", 0.0), args.out / "dexterity_xz.png")]
-    for z in args.sections:
-        cut = section(delta, "xy", z)
-        name = f"z{abs(z) * 1e3:.0f}mm"
-        paths.append(figures.section_map(cut, args.out / f"dexterity_xy_{name}.png"))
-        paths.append(
-            figures.section_map(
-                cut, args.out / f"power_of_point_xy_{name}.png", quantity="power_of_point"
-            )
-        )
-    return paths
+def _figures(delta: RotaryDelta, out: Path, sections: list[float]) -> list[Path]:
+    from app.design.figures import workspace_maps  # matplotlib only when figures are asked for
+
+    return workspace_maps(delta, out, sections)

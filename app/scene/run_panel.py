@@ -1,4 +1,4 @@
-"""The scene's test panel: the thesis's sinusoid (ch. 6.1), preview, start/abort, live
+"""The scene's run panel: the thesis's sinusoid (ch. 6.1), preview, start/abort, live
 tracking error (uPlot) and the last run's statistics.
 
 Runs belong to ``app.runs`` (the RunManager in ``app.state.runs``); it is imported lazily so
@@ -32,7 +32,7 @@ def _load_runs_api() -> tuple[Any, Any] | str:
 
 
 def stats_markdown(run: Any) -> str:
-    """Summary of one run (``app.runs.manager.Run``): state and per-axis RMSE / max [mm]."""
+    """Summary of one run (``app.runs.run.Run``): state and per-axis RMSE / max [mm]."""
     lines = [f"**{run.run_id}** · {run.state}" + (f" ({run.reason})" if run.reason else "")]
     tracking = (run.stats or {}).get("tracking") or {}
     for axis in ("x", "y", "z"):
@@ -43,7 +43,7 @@ def stats_markdown(run: Any) -> str:
     return "  \n".join(lines)
 
 
-class TestPanel:
+class RunPanel:
     """Sinusoid parameters, preview, start/abort, tracking-error plot, last run stats.
 
     runs: returns the RunManager (or None before the app has one); show_path: draws a

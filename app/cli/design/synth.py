@@ -3,16 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
-from typing import Any
 
-import numpy as np
-
+from app.cli.design.arguments import common, emit
 from app.design import report
-from app.design.common import common, emit
-from kinematics.analysis import section
+from app.design.synthesis_report import write_synthesis_report
 from kinematics.synthesis import (
     THESIS_PLATFORM_RADIUS_M,
     Bounds,
@@ -92,38 +88,8 @@ def _synth(args: argparse.Namespace) -> int:
         seconds = time.perf_counter() - start
     payload = report.synth_payload(result, problem, seconds, args.r)
     if args.out:
-        payload["files"] = [str(p) for p in _synth_files(args, result, problem, payload)]
+        files = write_synthesis_report(args.out, result, problem, payload, args.r)
+        payload["files"] = [str(p) for p in files]
     emit(args, payload, report.synth_table(payload))
     return 0 if result.contains else 1
 
-
-def _synth_files(args: argparse.Namespace, result: Any, problem: Problem, payload: dict) -> list:
-    from app.design import figures
-
-    args.out.mkdir(parents=True, exist_ok=True)
-    toml_path = args.out / "design.toml"
-    toml_path.write_text(report.design_toml(result.design, args.r))
-    json_path = args.out / "report.json"
-    json_path.write_text(json.dumps(payload, indent=2))
-    text_path = args.out / "report.md"
-    text_path.write_text(f"# Synthesis report\n\n```\n{report.synth_table(payload)}\n```\n\n"
-                         "See docs/design.md for the problem and the certification.\n")  # fmt: skip
-    paths = [toml_path, json_path, text_path]
-    for name, design in (("ours", result.design), ("thesis", report.THESIS_DESIGN)):
-        lower, upper = problem.volume.box(design.H)
-        robot = design.robot(args.r)
-        extent = (-0.35, 0.35, -0.5, 0.0)
-        cut = section(robot, "xz", float(upper[1]), extent=extent)  # the box's far face
-        witness = payload["thesis"]["witness_mm"] if name == "thesis" else None
-        witness = None if witness is None else np.array(witness) / 1e3
-        title = (
-            f"{name}: L {design.L * 1e3:.1f}, l {design.l * 1e3:.1f}, Rbar "
-            f"{design.Rbar * 1e3:.1f}, H {design.H * 1e3:.1f} mm; section y = "
-            f"{upper[1] * 1e3:.0f} mm"
-        )
-        paths.append(
-            figures.box_over_section(
-                cut, lower, upper, args.out / f"synth_{name}.png", title, witness
-            )
-        )
-    return paths

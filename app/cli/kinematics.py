@@ -1,15 +1,27 @@
-"""The ``deltadash`` command line."""
+"""``deltadash ik`` and ``deltadash fk``: the thesis robot's kinematics from the command line."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import math
-import sys
 
-from app import design_cli, home_cli, run_cli, serve
-from hardware import emulator_cli
-from kinematics import THESIS_DELTA, DeltaError
+from kinematics import THESIS_DELTA
+
+
+def add_parsers(commands: argparse._SubParsersAction) -> None:
+    """Register ``ik`` and ``fk`` on the app's sub-command parsers."""
+    ik = commands.add_parser("ik", help="inverse kinematics of the thesis robot (metres)")
+    ik.add_argument("x", type=float)
+    ik.add_argument("y", type=float)
+    ik.add_argument("z", type=float)
+    ik.add_argument("--json", action="store_true", help="machine-readable output")
+    ik.set_defaults(handler=_ik)
+    fk = commands.add_parser("fk", help="forward kinematics of the thesis robot (radians)")
+    fk.add_argument("joints", type=float, nargs=3)
+    fk.add_argument("--deg", action="store_true", help="joint angles given in degrees")
+    fk.add_argument("--json", action="store_true", help="machine-readable output")
+    fk.set_defaults(handler=_fk)
 
 
 def _ik(args: argparse.Namespace) -> int:
@@ -49,38 +61,3 @@ def _fk(args: argparse.Namespace) -> int:
     else:
         print("no platform position: the three spheres do not meet")
     return 0 if result.ok else 1
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="deltadash", description=__doc__)
-    commands = parser.add_subparsers(dest="command", required=True)
-    serve.add_parser(commands)
-    run_cli.add_parser(commands)
-    design_cli.add_parser(commands)
-    home_cli.add_parser(commands)
-    emulator_cli.add_parser(commands)
-    ik = commands.add_parser("ik", help="inverse kinematics of the thesis robot (metres)")
-    ik.add_argument("x", type=float)
-    ik.add_argument("y", type=float)
-    ik.add_argument("z", type=float)
-    ik.add_argument("--json", action="store_true", help="machine-readable output")
-    ik.set_defaults(handler=_ik)
-    fk = commands.add_parser("fk", help="forward kinematics of the thesis robot (radians)")
-    fk.add_argument("joints", type=float, nargs=3)
-    fk.add_argument("--deg", action="store_true", help="joint angles given in degrees")
-    fk.add_argument("--json", action="store_true", help="machine-readable output")
-    fk.set_defaults(handler=_fk)
-    return parser
-
-
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        return args.handler(args)
-    except DeltaError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -13,8 +13,9 @@ import math
 
 import numpy as np
 
-from app.design import report, synth_cmd, workspace_cmd
-from app.design.common import common, emit, mass_args, mass_from, robot_from
+from app.cli.design import synth, workspace
+from app.cli.design.arguments import common, emit, mass_args, mass_from, robot_from
+from app.design import report
 from kinematics.dynamics import MassModel, inverse_dynamics
 from kinematics.sizing import (
     XM430_W210_11V1,
@@ -40,8 +41,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     commands = parser.add_subparsers(dest="design_command", required=True)
     _dynamics_parser(commands)
     _size_parser(commands)
-    workspace_cmd.add_parser(commands)
-    synth_cmd.add_parser(commands)
+    workspace.add_parser(commands)
+    synth.add_parser(commands)
     return parser
 
 
