@@ -1,7 +1,7 @@
 """The ``deltadash`` command line: one module per sub-command in this package.
 
 ``serve`` (serve.py), ``run`` (run.py), ``design`` (design/), ``home`` (home.py), ``ik`` and
-``fk`` (kinematics.py); ``emulate`` is hardware/emulator_cli.py.
+``fk`` (kinematics.py); ``emulate`` (emulate.py).
 """
 
 from __future__ import annotations
@@ -9,8 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from app.cli import design, home, kinematics, run, serve
-from hardware import emulator_cli
+from app.cli import design, emulate, home, kinematics, run, serve
 from kinematics import DeltaError
 
 
@@ -22,7 +21,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_parser(commands)
     design.add_parser(commands)
     home.add_parser(commands)
-    emulator_cli.add_parser(commands)
+    emulate.add_parser(commands)
     kinematics.add_parsers(commands)
     return parser
 

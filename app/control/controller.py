@@ -28,7 +28,7 @@ from app.control.safety import servo_faults
 from app.control.sources import GoalSource, Setpoint
 from app.control.state import Fault, Snapshot
 from app.control.timing import TickClock, TimingRecorder
-from hardware.bus import ServoBus
+from hardware.bus import ServoBus, SimulatedBus
 from hardware.errors import BusError
 
 log = logging.getLogger(__name__)
@@ -58,7 +58,8 @@ class Controller:
         self._listeners: list[Listener] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._external = getattr(bus, "measure_platform", None)
+        # the simulator's "motion capture" of the platform; real buses have none
+        self._external = bus.measure_platform if isinstance(bus, SimulatedBus) else None
         self._t0 = time.monotonic()
         self._snapshot = Snapshot()
         self.pose_status: Callable[[], dict] | None = None  # set by the world service

@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from tests import waiting
+from tests.support import wait as waiting
 
 START_S = 60.0  # generous: the simulator and viser start slowly on a loaded 2-core machine
 WAIT_S = 30.0  # bound on waiting for an effect; not a timing assertion

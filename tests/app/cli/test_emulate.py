@@ -11,7 +11,7 @@ import threading
 import dynamixel_sdk as sdk
 import pytest
 
-from hardware import emulator_cli
+from app.cli import emulate as emulator_cli
 from tests.support.servo_emulator import BAUD
 
 
