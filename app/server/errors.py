@@ -18,7 +18,6 @@ from pydantic import BaseModel, ConfigDict, Field
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.control.errors import GoalRejected, MotionRefused
-from app.server.api.serialize import floats
 from hardware.errors import BusError
 from kinematics import PoseError
 
@@ -71,7 +70,7 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(GoalRejected)
     async def goal_rejected(_: Request, exc: GoalRejected) -> JSONResponse:
-        nearest = None if exc.nearest is None else floats(exc.nearest)
+        nearest = None if exc.nearest is None else [float(v) for v in exc.nearest]
         return _error(422, str(exc), nearest_m=nearest)
 
     @app.exception_handler(PoseError)
