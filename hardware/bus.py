@@ -15,16 +15,27 @@ refused the instruction; `HardwareError` when a servo is latched in a hardware f
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
-from hardware.dynamixel.control_table import OperatingMode
-
 if TYPE_CHECKING:  # the annotation only: hardware.sim needs MuJoCo
     from hardware.sim.base_frame import BaseMotion
+
+
+class OperatingMode(enum.IntEnum):
+    """What the servos control: the X series' Operating Mode (11) values, which the control
+    table (hardware/dynamixel/control_table.py) stores as they are."""
+
+    CURRENT = 0
+    VELOCITY = 1
+    POSITION = 3
+    EXTENDED_POSITION = 4
+    CURRENT_BASED_POSITION = 5
+    PWM = 16
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,6 @@
 link and the `DynamixelBus` driver.
 
 Import the modules themselves (`hardware.dynamixel.driver`, `.control_table`, `.protocol`,
-`.link`): this package imports nothing, so `hardware.bus` and `hardware.calibration` can
-read the control table without loading dynamixel-sdk or the driver that imports them.
+`.link`): this package imports nothing, so the emulator and the simulator can read the
+control table without loading dynamixel-sdk or the driver that imports them.
 """

@@ -14,6 +14,9 @@ import functools
 import math
 from dataclasses import dataclass
 
+# Operating Mode (11) takes these values; the enum is the ServoBus interface's vocabulary.
+from hardware.bus import OperatingMode as OperatingMode
+
 MODEL_NUMBER_XM430_W210 = 1030
 TICKS_PER_REV = 4096
 RAD_PER_TICK = 2.0 * math.pi / TICKS_PER_REV
@@ -140,17 +143,6 @@ CONTROL_TABLE_SIZE = 147  # one past Present Temperature; the emulator rejects r
 # bytes before Present Current (126) so the Moving flag comes in the same read.
 STATE_BLOCK_START = Reg.MOVING.address
 STATE_BLOCK_SIZE = Reg.PRESENT_TEMPERATURE.address + 1 - STATE_BLOCK_START
-
-
-class OperatingMode(enum.IntEnum):
-    """Operating Mode (11) values of the X series."""
-
-    CURRENT = 0
-    VELOCITY = 1
-    POSITION = 3
-    EXTENDED_POSITION = 4
-    CURRENT_BASED_POSITION = 5
-    PWM = 16
 
 
 class HardwareErrorFlag(enum.IntFlag):
