@@ -18,12 +18,11 @@ from __future__ import annotations
 import enum
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-if TYPE_CHECKING:  # the annotation only: hardware.sim needs MuJoCo
-    from hardware.sim.base_frame import BaseMotion
+from hardware.base_motion import BaseMotion
 
 
 class OperatingMode(enum.IntEnum):

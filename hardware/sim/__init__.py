@@ -8,7 +8,7 @@
 - `twin_shaft_motion.TwinMotionModel`: the twin as the emulator's `MotionModel`.
 """
 
-from hardware.sim.base_frame import BaseMotion
+from hardware.base_motion import BaseMotion
 from hardware.sim.masses import THESIS_MASSES, DeltaMasses, gravity_torques
 from hardware.sim.process_bus import ProcessSimBus
 from hardware.sim.sim_bus import SimBus, SimBusConfig

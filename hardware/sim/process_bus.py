@@ -31,11 +31,11 @@ from typing import Any
 
 import numpy as np
 
+from hardware.base_motion import BaseMotion
 from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
 from hardware.calibration import goal_ticks
 from hardware.dynamixel.control_table import OperatingMode, hardware_error_names
 from hardware.errors import BusError, NotConnectedError
-from hardware.sim.base_frame import BaseMotion
 from hardware.sim.sim_bus import MAX_CATCH_UP_S, SimBus, SimBusConfig
 
 STEP_S = 2e-3  # physics chunk = the most the published state lags (1 ms: 28 % of a core, not 22)

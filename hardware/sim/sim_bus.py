@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from hardware.base_motion import BaseMotion
 from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
 from hardware.calibration import goal_ticks
 from hardware.dynamixel.control_table import (
@@ -34,7 +35,6 @@ from hardware.dynamixel.control_table import (
     velocity_to_rad_s,
 )
 from hardware.errors import BusError, HardwareError, NotConnectedError
-from hardware.sim.base_frame import BaseMotion
 from hardware.sim.twin import DeltaTwin, TwinConfig
 
 FIRMWARE_VERSION = 46
