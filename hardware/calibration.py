@@ -21,7 +21,7 @@ from typing import Any
 
 import tomli_w
 
-from hardware.dynamixel.control_table import RAD_PER_TICK, TICKS_PER_REV
+from hardware.encoder import RAD_PER_TICK, TICKS_PER_REV
 from hardware.errors import CalibrationError
 
 SECTION = "hardware"

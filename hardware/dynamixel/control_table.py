@@ -14,12 +14,13 @@ import functools
 import math
 from dataclasses import dataclass
 
-# Operating Mode (11) takes these values; the enum is the ServoBus interface's vocabulary.
+# Re-exported for the table's readers: Operating Mode (11) takes the ServoBus interface's
+# OperatingMode values, and position registers count the encoder's ticks.
 from hardware.bus import OperatingMode as OperatingMode
+from hardware.encoder import RAD_PER_TICK as RAD_PER_TICK
+from hardware.encoder import TICKS_PER_REV as TICKS_PER_REV
 
 MODEL_NUMBER_XM430_W210 = 1030
-TICKS_PER_REV = 4096
-RAD_PER_TICK = 2.0 * math.pi / TICKS_PER_REV
 VELOCITY_UNIT_RPM = 0.229
 RAD_S_PER_VELOCITY_UNIT = VELOCITY_UNIT_RPM * 2.0 * math.pi / 60.0
 AMPERE_PER_CURRENT_UNIT = 2.69e-3
