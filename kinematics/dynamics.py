@@ -85,7 +85,7 @@ class MassModel:
 # rod, m L^2 / 3 = 2.35e-4 kg m^2 at L = 0.1558 m. The rotor dominates: the XM430-W210's
 # 212.6:1 gearbox reflects a ~1.0e-7 kg m^2 coreless rotor (typical of its 17 mm motor;
 # Robotis publishes no figure) as 212.6^2 * 1e-7 = 4.52e-3 kg m^2. Total 4.75e-3, the
-# same order as hardware.emulator.shaft_motion's 5e-3 plant. A system-identified armature (MuJoCo
+# same order as hardware.shaft_motion's 5e-3 plant. A system-identified armature (MuJoCo
 # Menagerie OP3, XM430-W350: 0.045 kg m^2, i.e. 0.016 at the W210's ratio) is larger:
 # treat the rotor term as uncertain by x3 when sizing for acceleration.
 _UPPER_LINK_KG = 0.029

@@ -5,9 +5,9 @@
   `group_instructions`: its sync and bulk reads and writes.
 - `emulated_servo.EmulatedServo`: one servo's instructions and injected faults;
   `memory.ServoMemory`: its control-table bytes with the e-manual's access rules.
-- `shaft_motion`: what the shafts do between packets (`MotionModel`, `SimpleServoModel`;
-  the MuJoCo twin's is hardware.sim.twin_shaft_motion); `stepping`: control tables to
-  motion commands and present values back.
+- `stepping`: control tables to motion commands and present values back; what the shafts
+  do between packets is a hardware.shaft_motion `MotionModel` (`SimpleServoModel` by
+  default; the MuJoCo twin's is hardware.sim.twin_shaft_motion).
 - `serve`: run one standalone until stopped (``python -m hardware.emulator``,
   ``deltadash emulate``).
 """

@@ -4,7 +4,7 @@ No pty and no thread: `EmulatedBus.handle` takes one decoded instruction packet 
 the status packets, in wire order, each with the delay its servo waits before sending
 (Return Delay Time plus any injected delay). `feed` does the same from raw bytes. The pty
 transport (hardware/emulator/pty_transport.py) puts these on the wire; a test can call them
-directly. Servo motion comes from a pluggable hardware.emulator.shaft_motion.MotionModel,
+directly. Servo motion comes from a pluggable hardware.shaft_motion.MotionModel,
 stepped by the clock's time between packets.
 """
 
@@ -28,8 +28,8 @@ from hardware.dynamixel.protocol import (
 )
 from hardware.emulator.emulated_servo import EmulatedServo, Faults, Reply
 from hardware.emulator.group_instructions import handle_group
-from hardware.emulator.shaft_motion import MotionModel, SimpleServoModel
 from hardware.emulator.stepping import advance_servos
+from hardware.shaft_motion import MotionModel, SimpleServoModel
 
 _log = logging.getLogger(__name__)
 

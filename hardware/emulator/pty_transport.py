@@ -22,7 +22,7 @@ from collections.abc import Iterable
 from hardware.dynamixel.protocol import Packet
 from hardware.emulator.emulated_bus import EmulatedBus, Outgoing
 from hardware.emulator.emulated_servo import EmulatedServo
-from hardware.emulator.shaft_motion import MotionModel
+from hardware.shaft_motion import MotionModel
 
 
 class ServoEmulator:

@@ -16,7 +16,7 @@ from typing import TextIO
 
 from hardware.dynamixel.control_table import Reg
 from hardware.emulator.pty_transport import ServoEmulator
-from hardware.emulator.shaft_motion import MotionModel
+from hardware.shaft_motion import MotionModel
 
 DESCRIPTION = __doc__
 

@@ -21,7 +21,7 @@ from hardware.dynamixel.control_table import (
     velocity_to_rad_s,
 )
 from hardware.emulator.emulated_servo import EmulatedServo
-from hardware.emulator.shaft_motion import MotionCommand, MotionModel, MotionState
+from hardware.shaft_motion import MotionCommand, MotionModel, MotionState
 
 INPUT_VOLTAGE_UNITS = 120  # 12.0 V supply
 TEMPERATURE_C = 30

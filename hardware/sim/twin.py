@@ -22,7 +22,7 @@ import numpy as np
 from hardware.base_motion import BaseMotion
 from hardware.calibration import JointCalibration
 from hardware.dynamixel.control_table import RAD_PER_TICK, OperatingMode
-from hardware.emulator.shaft_motion import MotionCommand
+from hardware.shaft_motion import MotionCommand
 from hardware.sim.base_frame import apply_frame_forces
 from hardware.sim.masses import THESIS_MASSES, DeltaMasses
 from hardware.sim.mjcf import MOTOR_JOINTS, PLATFORM_JOINTS, SimOptions, build_mjcf

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from hardware.emulator.shaft_motion import MAX_CATCH_UP_S, MotionCommand, MotionState
+from hardware.shaft_motion import MAX_CATCH_UP_S, MotionCommand, MotionState
 from hardware.sim.twin import DeltaTwin, TwinConfig
 from hardware.sim.xm430 import ServoOutput
 

@@ -35,7 +35,7 @@ from hardware.dynamixel.control_table import (
     HardwareErrorFlag,
     OperatingMode,
 )
-from hardware.emulator.shaft_motion import MotionCommand
+from hardware.shaft_motion import MotionCommand
 from hardware.sim.xm430_profile import ProfileState, step_profile
 
 RPM = 2.0 * math.pi / 60.0

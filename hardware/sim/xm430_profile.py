@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from hardware.emulator.shaft_motion import MotionCommand
+from hardware.shaft_motion import MotionCommand
 
 
 class ProfileState(NamedTuple):

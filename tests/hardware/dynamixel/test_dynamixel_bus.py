@@ -20,8 +20,8 @@ from hardware.dynamixel.control_table import (
 )
 from hardware.dynamixel.driver import DynamixelBus
 from hardware.emulator import ServoEmulator
-from hardware.emulator.shaft_motion import MotionCommand, MotionState
 from hardware.errors import BusError, CommError, NotConnectedError, ServoStatusError
+from hardware.shaft_motion import MotionCommand, MotionState
 from tests.support.servo_emulator import IDS, fast, make_config
 from tests.support.wait import wait_for
 

@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hardware.dynamixel.control_table import OperatingMode
-from hardware.emulator.shaft_motion import MotionCommand, SimpleServoModel
+from hardware.shaft_motion import MotionCommand, SimpleServoModel
 
 
 def run(model: SimpleServoModel, command: MotionCommand, seconds: float, dt: float = 0.005):

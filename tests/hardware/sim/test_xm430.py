@@ -8,7 +8,7 @@ from dataclasses import replace
 import pytest
 
 from hardware.dynamixel.control_table import RAD_PER_TICK, HardwareErrorFlag, OperatingMode
-from hardware.emulator.shaft_motion import MotionCommand
+from hardware.shaft_motion import MotionCommand
 from hardware.sim.xm430 import RPM, XM430_W210, Xm430, Xm430Params
 from hardware.sim.xm430_profile import ProfileState, step_profile
 

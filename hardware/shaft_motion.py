@@ -1,9 +1,11 @@
-"""Shaft motion for the emulator: what the emulated servos' shafts do between packets.
+"""Shaft motion: the interface between a servo's controller and a model of its shaft.
 
-The emulated bus (hardware/emulator/emulated_bus.py, through stepping.py) turns each
-servo's control table into a `MotionCommand`, steps the `MotionModel` by the wall time
-elapsed since the last packet, and writes the returned `MotionState` back as Present
-Position (quantized to ticks), Velocity and Current. A model sees all servos at once, in the
+Both rooms below hardware/ use it, so it lives beside them: the emulator (hardware/emulator/)
+steps a `MotionModel` between packets, and the simulator (hardware/sim/) provides one. The
+emulated bus (hardware/emulator/emulated_bus.py, through stepping.py) turns each servo's
+control table into a `MotionCommand`, steps the `MotionModel` by the wall time elapsed since
+the last packet, and writes the returned `MotionState` back as Present Position (quantized
+to ticks), Velocity and Current. A model sees all servos at once, in the
 emulator's servo order, so a model of the coupled mechanism (the MuJoCo twin,
 hardware/sim/twin_shaft_motion.py) fits the same interface as the independent
 `SimpleServoModel` below. `MotionCommand` is also what the simulator's XM430 model
@@ -21,7 +23,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
-from hardware.dynamixel.control_table import OperatingMode
+from hardware.bus import OperatingMode
 
 MAX_CATCH_UP_S = 0.25
 
