@@ -13,6 +13,9 @@ import enum
 import functools
 import math
 from dataclasses import dataclass
+from typing import TypeVar
+
+import numpy as np
 
 # Re-exported for the table's readers: Operating Mode (11) takes the ServoBus interface's
 # OperatingMode values, and position registers count the encoder's ticks.
@@ -28,6 +31,10 @@ VOLT_PER_VOLTAGE_UNIT = 0.1
 # Profile Acceleration unit of the X series in velocity-based profile: 214.577 rev/min^2.
 RAD_S2_PER_ACCELERATION_UNIT = 214.577 * 2.0 * math.pi / 3600.0
 SECONDS_PER_RETURN_DELAY_UNIT = 2e-6
+
+
+# A register value or a column of them (one per servo): the SI conversions take either.
+_Units = TypeVar("_Units", float, np.ndarray)
 
 
 class Access(enum.Enum):
@@ -159,7 +166,8 @@ class HardwareErrorFlag(enum.IntFlag):
 @functools.lru_cache(maxsize=256)  # read for every servo on every tick: one byte, 256 answers
 def hardware_error_names(bits: int) -> tuple[str, ...]:
     """Names of the Hardware Error Status bits set in `bits` (unknown bits as 'bit N')."""
-    names = [flag.name.lower() for flag in HardwareErrorFlag if bits & flag.value]
+    flags = HardwareErrorFlag.__members__.items()  # named pairs: a flag's .name is str | None
+    names = [name.lower() for name, flag in flags if bits & flag.value]
     known = sum(flag.value for flag in HardwareErrorFlag)
     names += [f"bit {i}" for i in range(8) if bits & ~known & (1 << i)]
     return tuple(names)
@@ -188,7 +196,7 @@ def encode(reg: Reg, value: int) -> bytes:
     return to_unsigned(int(value), reg.size).to_bytes(reg.size, "little")
 
 
-def velocity_to_rad_s(units: int | float) -> float:
+def velocity_to_rad_s(units: _Units) -> _Units:
     """Velocity register units (0.229 rpm) -> rad/s."""
     return units * RAD_S_PER_VELOCITY_UNIT
 
@@ -198,7 +206,7 @@ def rad_s_to_velocity(rad_s: float) -> int:
     return round(rad_s / RAD_S_PER_VELOCITY_UNIT)
 
 
-def current_to_ampere(units: int | float) -> float:
+def current_to_ampere(units: _Units) -> _Units:
     """Current register units (2.69 mA) -> A."""
     return units * AMPERE_PER_CURRENT_UNIT
 
@@ -208,12 +216,12 @@ def ampere_to_current(ampere: float) -> int:
     return round(ampere / AMPERE_PER_CURRENT_UNIT)
 
 
-def voltage_to_volt(units: int | float) -> float:
+def voltage_to_volt(units: _Units) -> _Units:
     """Input voltage register units (0.1 V) -> V."""
     return units * VOLT_PER_VOLTAGE_UNIT
 
 
-def acceleration_to_rad_s2(units: int | float) -> float:
+def acceleration_to_rad_s2(units: _Units) -> _Units:
     """Profile Acceleration units (214.577 rev/min^2) -> rad/s^2."""
     return units * RAD_S2_PER_ACCELERATION_UNIT
 

@@ -155,15 +155,19 @@ class DynamixelBus:
         targets = list(self.ids if ids is None else ids)
         port = self.link.require_port("reboot")
         for servo_id in targets:
-            self.link.transact(
-                [servo_id], "reboot", lambda i=servo_id: (None, *self.link.packets.reboot(port, i))
-            )
+            self._send_reboot(port, servo_id)
         deadline = time.monotonic() + self.config.reboot_timeout_s
         pending = set(targets)
         while pending:  # the servo is deaf for a few hundred ms while it boots
             pending = {i for i in pending if not self.scan([i])}
             if pending and time.monotonic() > deadline:
                 raise CommError(sorted(pending), "reboot", "servo did not come back")
+
+    def _send_reboot(self, port: sdk.PortHandler, servo_id: int) -> None:
+        """One Reboot instruction with the link's bounded retries (reboot() waits for it)."""
+        self.link.transact(
+            [servo_id], "reboot", lambda: (None, *self.link.packets.reboot(port, servo_id))
+        )
 
     @property
     def stats(self) -> BusStats:
@@ -215,13 +219,12 @@ class DynamixelBus:
         """State-block bytes per servo id, and the hardware errors of servos that alert."""
         reader = self._state_reader
         instruction = "sync read MOVING..PRESENT_TEMPERATURE"
-        if reader is None:
-            self.link.require_port(instruction)
+        port = self.link.require_port(instruction)
         with self.link.lock:
             self.link.count_transaction()
             failed: dict[int, str] = {}
             for tries in range(1, self.link.max_tries + 1):
-                replies, failed = self._read_block_once(reader)
+                replies, failed = self._read_block_once(reader, port)
                 last = tries == self.link.max_tries
                 self.link.count_try(bool(failed), last)
                 if not failed:
@@ -236,9 +239,9 @@ class DynamixelBus:
             raise CommError(sorted(failed), instruction, reason, self.link.max_tries)
 
     def _read_block_once(
-        self, reader: sdk.GroupSyncRead
+        self, reader: sdk.GroupSyncRead, port: sdk.PortHandler
     ) -> tuple[dict[int, tuple[bytes, int]], dict[int, str]]:
-        port, packets = self.link.port, self.link.packets
+        packets = self.link.packets
         try:
             result = reader.txPacket()
         except (OSError, IndexError, ValueError) as exc:

@@ -7,6 +7,7 @@ framing, broadcast and group instructions are the bus's (hardware/emulator/emula
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from hardware.dynamixel.control_table import Reg
@@ -170,7 +171,8 @@ class EmulatedServo:
         return Reply(StatusError.NONE if ok else StatusError.DATA_RANGE)
 
 
-_HANDLERS = {
+# Keyed by the wire's instruction byte: Instruction members hash and compare as their ints.
+_HANDLERS: dict[int, Callable[[EmulatedServo, bytes], Reply]] = {
     Instruction.PING: EmulatedServo._ping,
     Instruction.READ: EmulatedServo._read,
     Instruction.WRITE: EmulatedServo._write,

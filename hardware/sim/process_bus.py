@@ -264,7 +264,7 @@ def _serve(bus: SimBus, conn: Connection, frame: np.ndarray, lock: Any) -> None:
             seq, goal = frame[_GOAL_SEQ], frame[_GOAL].copy()
         if seq != goal_seq:
             goal_seq = seq
-            bus.write_goal(goal)
+            bus.write_goal(goal.tolist())
         now = time.monotonic()
         due = min(now - last, MAX_CATCH_UP_S)  # after a stall, simulated time runs slow
         steps = int(due / dt)

@@ -126,7 +126,7 @@ class DeltaTwin:
         return self._sign * (np.asarray(shaft_rad, dtype=float) - self._zero)
 
     # -- control -----------------------------------------------------------------------
-    def reset(self, joints_rad: Sequence[float] | None = None) -> None:
+    def reset(self, joints_rad: Sequence[float] | np.ndarray | None = None) -> None:
         """Place the arm at rest at `joints_rad` [rad] (default: the assembled home), every
         servo holding it with factory settings; temperatures and latched errors are kept."""
         mujoco.mj_resetData(self.model, self.data)
