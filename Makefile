@@ -17,7 +17,8 @@ run: $(BIN)/.installed
 
 test: $(BIN)/.installed browser
 	$(BIN)/ruff check .
-	$(BIN)/mypy kinematics
+	$(BIN)/lint-imports
+	$(BIN)/mypy kinematics hardware
 	$(BIN)/pytest -q
 
 # The scene's browser test drives Debian's chromium (no browser download); if it cannot be
