@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from tests.app.conftest import make_client
+from tests.app.server.conftest import make_client
 from tests.support.wait import ok_json, wait_for
 
 

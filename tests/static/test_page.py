@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from tests.dashboard.conftest import Server, wait_for
+from tests.static.conftest import Server, wait_for
 from tests.support.browser import browser_skip_reason, chromium_page, save_artifact
 
 SKIP = browser_skip_reason()

@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from tests.dashboard.conftest import Server, serve, wait_for
+from tests.static.conftest import Server, serve, wait_for
 from tests.support.browser import browser_skip_reason, chromium_page
 
 SKIP = browser_skip_reason()
