@@ -8,7 +8,7 @@ import io
 import numpy as np
 from PIL import Image
 
-from tests.scene.conftest import measured, wait_at
+from tests.support.app_client import measured, wait_at
 from tests.support.browser import (
     PAGE_WAIT_S,
     box_of,

@@ -14,8 +14,8 @@ from typing import Any
 
 import pytest
 
-from tests.static.conftest import Server, wait_for
 from tests.support.browser import browser_skip_reason, chromium_page, save_artifact
+from tests.support.server import Server, wait_for
 
 SKIP = browser_skip_reason()
 pytestmark = pytest.mark.skipif(SKIP is not None, reason=str(SKIP))

@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from tests.app.server.conftest import make_client
+from tests.support.app_client import make_client
 from tests.support.wait import ok_json, wait_for
 
 
 @pytest.fixture(scope="module")
-def client():
-    with make_client() as test_client:
+def client(tmp_path_factory):
+    with make_client(tmp_path_factory.mktemp("runs")) as test_client:
         yield test_client
 
 

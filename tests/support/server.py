@@ -1,0 +1,93 @@
+"""`deltadash serve` on the simulator as a subprocess on free ports, spoken to over HTTP.
+
+The 3D scene is off unless asked for (``serve(folder, scene=True)``): only a test that
+looks at it should pay for viser starting beside the server.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.support import wait as waiting
+
+START_S = 60.0  # generous: the simulator and viser start slowly on a loaded 2-core machine
+WAIT_S = 30.0  # bound on waiting for an effect; not a timing assertion
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def wait_for(condition: Callable[[], Any], what: str, timeout_s: float = WAIT_S) -> Any:
+    """tests.support.wait.wait_for, polling a subprocess server at a gentler 10 Hz."""
+    return waiting.wait_for(condition, what, timeout_s, poll_s=0.1)
+
+
+@dataclass
+class Server:
+    url: str
+    process: subprocess.Popen
+    log: Path
+
+    def get(self, path: str) -> Any:
+        with urllib.request.urlopen(self.url + path, timeout=10) as response:
+            return json.load(response)
+
+    def post(self, path: str, body: dict | None = None) -> Any:
+        data = json.dumps(body or {}).encode()
+        request = urllib.request.Request(self.url + path, data=data, method="POST",
+                                         headers={"Content-Type": "application/json"})  # fmt: skip
+        with urllib.request.urlopen(request, timeout=10) as response:
+            return json.load(response)
+
+    def up(self) -> bool:
+        try:
+            self.get("/api/status")
+            return True
+        except (urllib.error.URLError, OSError):
+            return False
+
+
+@contextmanager
+def serve(folder: Path, scene: bool = False, **env: str) -> Iterator[Server]:
+    """`deltadash serve` on free ports with runs under ``folder``, the 3D scene on if
+    ``scene``; extra DELTADASH_* ``env``."""
+    port = free_port()
+    env = {**os.environ, "DELTADASH_SERVER__HTTP_PORT": str(port),
+           "DELTADASH_SERVER__VISER_PORT": str(free_port()),
+           "DELTADASH_SERVER__SCENE": "true" if scene else "false",
+           "DELTADASH_RUNS__FOLDER": str(folder / "runs"), **env}  # fmt: skip
+    log = folder / "serve.log"
+    command = [sys.executable, "-c", "import sys; from app.cli import main; sys.exit(main())"]
+    with log.open("wb") as out:
+        process = subprocess.Popen([*command, "serve"], env=env, stdout=out, stderr=out)
+    served = Server(f"http://127.0.0.1:{port}", process, log)
+    try:
+        end = time.monotonic() + START_S
+        while not served.up():
+            if process.poll() is not None or time.monotonic() > end:
+                pytest.fail(f"deltadash serve did not start:\n{log.read_text()[-3000:]}")
+            time.sleep(0.2)
+        yield served
+    finally:
+        process.terminate()
+        try:
+            process.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            process.kill()
