@@ -18,7 +18,7 @@ from tests.support.browser import browser_skip_reason, chromium_page, save_artif
 from tests.support.server import Server, wait_for
 
 SKIP = browser_skip_reason()
-pytestmark = pytest.mark.skipif(SKIP is not None, reason=str(SKIP))
+pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
 STEP_M = 0.005  # the page's default jog step (5 mm)
 SCENE_STUB = "<p style='font: 14px sans-serif'>3D scene (viser): stubbed in this test</p>"
 

@@ -11,7 +11,7 @@ from tests.support.browser import browser_skip_reason, chromium_page
 from tests.support.server import Server, serve, wait_for
 
 SKIP = browser_skip_reason()
-pytestmark = pytest.mark.skipif(SKIP is not None, reason=str(SKIP))
+pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
 TOKEN = "dashboard-test-token"
 
 

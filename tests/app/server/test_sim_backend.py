@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 
 from app.config import load_settings
@@ -39,6 +40,7 @@ def test_default_backend_is_the_twin_and_reaches_a_goal(tmp_path):
         wait_for(lifting, "every servo to hold the arm against gravity")
 
 
+@pytest.mark.slow  # an end-to-end run of seconds on the twin
 def test_sinusoid_on_the_twin_has_tracking_and_validation_stats(tmp_path):
     """On the simulator the twin's true platform is the external measurement (thesis
     Table 6.2): FK of the encoders agrees with it to encoder resolution."""
