@@ -101,7 +101,7 @@ def test_plotly_is_served_from_the_installed_package(client: TestClient) -> None
 
 def test_with_a_token_info_says_so_and_the_check_needs_it(tmp_path) -> None:
     token = "a-long-secret-1"
-    with make_client(tmp_path, backend="sim", server={"token": token}) as client:
+    with make_client(tmp_path, server={"token": token}) as client:  # emulated: starts faster
         assert ok_json(client.get("/api/info"))["token_required"] is True
         url = "/api/tests/sinusoid/check"
         assert client.post(url, json={"duration_s": 1}).status_code == 401
