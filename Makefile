@@ -1,10 +1,11 @@
-# Two entry points for a fresh machine: `make run` and `make test`.
+# Two entry points for a fresh machine: `make run` and `make test`; `make test-fast` is the
+# inner loop while developing (docs/development.md).
 # Each creates .venv on first use and reinstalls only when pyproject.toml changes.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test lint bench clean browser
+.PHONY: run test test-fast lint bench clean browser
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,6 +21,11 @@ test: $(BIN)/.installed browser
 	$(BIN)/lint-imports
 	$(BIN)/mypy kinematics hardware
 	$(BIN)/pytest -q
+
+# Lint and every test but the slow (> ~3 s: end-to-end runs, the wheel build) and browser ones.
+test-fast: $(BIN)/.installed
+	$(BIN)/ruff check .
+	$(BIN)/pytest -q -m "not slow and not browser"
 
 # The scene's browser test drives Debian's chromium (no browser download); if it cannot be
 # installed here (not root, no apt) the test skips and says so.

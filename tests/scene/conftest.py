@@ -2,26 +2,18 @@
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterator
 
-import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.config import load_settings
-from app.server import create_app
-from app.server.backends import open_backend
-from tests.support.wait import WAIT_S, ok_json, wait_for
+from tests.support.app_client import make_client
+from tests.support.wait import WAIT_S
 
 
 @pytest.fixture(scope="module")
 def app_client(tmp_path_factory) -> Iterator[TestClient]:
-    folder = tmp_path_factory.mktemp("runs")
-    settings = load_settings(hardware={"backend": "emulated"}, runs={"folder": str(folder)},
-                             server={"viser_port": 0})  # fmt: skip
-    opener = functools.partial(open_backend, emulator_in_process=True)
-    with TestClient(create_app(settings, backend_opener=opener)) as client:
+    with make_client(tmp_path_factory.mktemp("runs"), server={"scene": True}) as client:
         yield client
 
 
@@ -35,20 +27,3 @@ def scene(app_client):
     scene = app.state.scene
     scene.panel.message = scene.goals.message = ""
     return scene
-
-
-def measured(client: TestClient) -> np.ndarray:
-    return np.array(ok_json(client.get("/api/status"))["ee"]["position_m"], dtype=float)
-
-
-def wait_at(client: TestClient, point_m, what: str, within_m: float = 2e-3) -> None:
-    """Wait until /api/status measures the platform within ``within_m`` of ``point_m``;
-    a timeout says where it was, the mode and any warning or fault."""
-
-    def seen() -> dict:
-        status = ok_json(client.get("/api/status"))
-        keys = ("mode", "torque", "warning", "faults")
-        return {"measured_m": status["ee"]["position_m"], **{k: status[k] for k in keys}}
-
-    wait_for(lambda: np.linalg.norm(measured(client) - point_m) < within_m,
-             f"{what} ({within_m * 1e3:g} mm of {list(point_m)} m)", seen=seen)  # fmt: skip

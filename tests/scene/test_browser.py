@@ -6,9 +6,10 @@ from __future__ import annotations
 import io
 
 import numpy as np
+import pytest
 from PIL import Image
 
-from tests.scene.conftest import measured, wait_at
+from tests.support.app_client import measured, wait_at
 from tests.support.browser import (
     PAGE_WAIT_S,
     box_of,
@@ -19,6 +20,7 @@ from tests.support.browser import (
 )
 from tests.support.wait import ok_json, wait_for
 
+pytestmark = pytest.mark.browser
 LEG_3_BLUE = np.array([60, 112, 214])  # leg 3 sits left of the panel in this view
 VIEWPORT = (880, 540)  # small: software WebGL renders every pixel on the CPU
 RENDER_WAIT_S = 150.0  # a noisy 2-core VM took 30 s to show the robot; a bound, not a claim

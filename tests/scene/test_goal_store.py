@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-import functools
 import json
 import logging
 
 import numpy as np
 from fastapi.testclient import TestClient
 
-from app.config import load_settings
 from app.scene.goal_store import FILE_NAME, load_points, save_points
-from app.server import create_app
-from app.server.backends import open_backend
+from tests.support.app_client import make_client
 
 
 def test_points_round_trip_exactly_and_leave_no_temporary_file(tmp_path):
@@ -45,10 +42,7 @@ def test_a_damaged_file_is_skipped_with_a_warning_not_a_crash(tmp_path, caplog):
 
 
 def _scene_app(folder) -> TestClient:
-    settings = load_settings(hardware={"backend": "emulated"}, runs={"folder": str(folder)},
-                             server={"viser_port": 0})  # fmt: skip
-    opener = functools.partial(open_backend, emulator_in_process=True)
-    return TestClient(create_app(settings, backend_opener=opener))
+    return make_client(folder, server={"scene": True})
 
 
 def test_points_saved_in_the_scene_are_there_after_a_restart(tmp_path):

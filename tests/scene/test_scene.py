@@ -16,12 +16,17 @@ import viser
 from app.scene.geometry import robot_lines
 from app.scene.goal_view import INSIDE_COLOUR, PROJECTED_COLOUR
 from app.scene.run_panel import RunPanel
-from tests.scene.conftest import wait_at
-from tests.support.wait import WAIT_S, wait_for
+from tests.support.app_client import wait_at
+from tests.support.wait import WAIT_S, ok_json, wait_for
 
 
 def _goal(scene) -> np.ndarray:
     return scene.controller.snapshot().goal_m
+
+
+def test_info_names_the_port_the_scene_is_bound_to(scene, app_client):
+    """The config asks for port 0 (a free one): /api/info names the one viser got."""
+    assert ok_json(app_client.get("/api/info"))["viser_port"] == scene.server.get_port() > 0
 
 
 def test_drag_inside_sends_every_update_as_the_goal(scene, app_client):

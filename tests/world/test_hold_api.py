@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from tests.app.conftest import make_client
+from tests.support.app_client import make_client
 from tests.support.wait import ok_json, wait_for
 
 
 @pytest.fixture(scope="module")
-def client():
-    with make_client() as test_client:
+def client(tmp_path_factory):
+    with make_client(tmp_path_factory.mktemp("runs")) as test_client:
         yield test_client
 
 
@@ -68,6 +68,7 @@ def _hold_run(client, body: dict) -> dict:
     return run["stats"]["world"]
 
 
+@pytest.mark.slow  # an end-to-end run of seconds
 def test_a_still_drone_gives_no_world_error(client):
     """No drift: the world goal maps to a fixed base point; what is left is quantization."""
     still = {"drift_m": 0, "tilt_deg": 0, "yaw_deg": 0, "gust_m": 0, "duration_s": 1.5}
@@ -77,6 +78,7 @@ def test_a_still_drone_gives_no_world_error(client):
     assert world["outside_s"] == 0.0
 
 
+@pytest.mark.slow  # an end-to-end run of seconds
 def test_hold_test_run_under_drift_reports_world_stats(client):
     world = _hold_run(client, {"duration_s": 2.0, "latency_compensation": True, "seed": 3})
     for axis in "xyz":  # a sanity bound: the figure itself is measured by benchmarks/runs.py
@@ -85,6 +87,7 @@ def test_hold_test_run_under_drift_reports_world_stats(client):
     assert client.post("/api/tests/hold", json={"duration_s": -1}).status_code == 422
 
 
+@pytest.mark.slow  # an end-to-end run of seconds
 def test_telemetry_carries_the_world_frame_during_a_hold(client):
     """The dashboard plots the world frame from telemetry while a hold run is on."""
     client.post("/api/reset")

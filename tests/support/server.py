@@ -1,4 +1,8 @@
-"""`deltadash serve` on the simulator as a subprocess on free ports, one per module."""
+"""`deltadash serve` on the simulator as a subprocess on free ports, spoken to over HTTP.
+
+The 3D scene is off unless asked for (``serve(folder, scene=True)``): only a test that
+looks at it should pay for viser starting beside the server.
+"""
 
 from __future__ import annotations
 
@@ -61,11 +65,13 @@ class Server:
 
 
 @contextmanager
-def serve(folder: Path, **env: str) -> Iterator[Server]:
-    """`deltadash serve` on free ports with runs under ``folder``; extra DELTADASH_* ``env``."""
+def serve(folder: Path, scene: bool = False, **env: str) -> Iterator[Server]:
+    """`deltadash serve` on free ports with runs under ``folder``, the 3D scene on if
+    ``scene``; extra DELTADASH_* ``env``."""
     port = free_port()
     env = {**os.environ, "DELTADASH_SERVER__HTTP_PORT": str(port),
            "DELTADASH_SERVER__VISER_PORT": str(free_port()),
+           "DELTADASH_SERVER__SCENE": "true" if scene else "false",
            "DELTADASH_RUNS__FOLDER": str(folder / "runs"), **env}  # fmt: skip
     log = folder / "serve.log"
     command = [sys.executable, "-c", "import sys; from app.cli import main; sys.exit(main())"]
@@ -85,9 +91,3 @@ def serve(folder: Path, **env: str) -> Iterator[Server]:
             process.wait(timeout=15)
         except subprocess.TimeoutExpired:
             process.kill()
-
-
-@pytest.fixture(scope="module")
-def server(tmp_path_factory) -> Iterator[Server]:
-    with serve(tmp_path_factory.mktemp("dashboard")) as served:
-        yield served

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tests.support.app_client import robot_seen
 from tests.support.wait import ok_json, wait_for
-
-from .conftest import robot_seen
 
 
 def _status(client):

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from tests.support.app_client import ticks
 from tests.support.wait import wait_for
-
-from .conftest import ticks
 
 BAD_GOAL_BODIES = [
     ('{"position_m": [NaN, 0, -0.2]}', "finite"),

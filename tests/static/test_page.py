@@ -14,11 +14,11 @@ from typing import Any
 
 import pytest
 
-from tests.dashboard.conftest import Server, wait_for
 from tests.support.browser import browser_skip_reason, chromium_page, save_artifact
+from tests.support.server import Server, wait_for
 
 SKIP = browser_skip_reason()
-pytestmark = pytest.mark.skipif(SKIP is not None, reason=str(SKIP))
+pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
 STEP_M = 0.005  # the page's default jog step (5 mm)
 SCENE_STUB = "<p style='font: 14px sans-serif'>3D scene (viser): stubbed in this test</p>"
 

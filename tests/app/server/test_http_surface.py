@@ -20,7 +20,7 @@ from app.server.api.deps import get_runs
 from app.server.api.responses import StatusOut, TelemetryMessage
 from app.server.errors import INTERNAL_ERROR
 
-SERVER = Path(__file__).resolve().parents[2] / "app" / "server"
+SERVER = Path(__file__).resolve().parents[3] / "app" / "server"
 
 
 @pytest.fixture(scope="module")

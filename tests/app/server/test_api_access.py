@@ -7,16 +7,16 @@ from starlette.websockets import WebSocketDisconnect
 
 from app.cli.serve import check_exposure
 from app.config import ConfigError, load_settings
+from tests.support.app_client import make_client
 from tests.support.wait import ok_json
-
-from .conftest import make_client
 
 TOKEN = "s3cret-token"
 
 
 @pytest.fixture(scope="module")
-def guarded():
-    with make_client(server={"host": "0.0.0.0", "token": TOKEN}) as client:
+def guarded(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("runs")
+    with make_client(folder, server={"host": "0.0.0.0", "token": TOKEN}) as client:
         yield client
 
 

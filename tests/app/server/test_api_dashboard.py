@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import tempfile
 from collections.abc import Iterator
 from types import SimpleNamespace
 from typing import Any
@@ -13,17 +12,9 @@ from fastapi.testclient import TestClient
 
 from app.config import load_settings
 from app.runs.trajectories import SinusoidParams
-from app.server import create_app
 from app.server.api.dashboard import peak_joint_speed
+from tests.support.app_client import make_client
 from tests.support.wait import ok_json, wait_for
-
-
-def make_client(**overrides) -> TestClient:
-    """An app on the default backend (the simulator: no pty, no emulator process)."""
-    folder = tempfile.mkdtemp(prefix="deltadash-runs-")
-    server = {"viser_port": 0, **overrides.pop("server", {})}
-    settings = load_settings(runs={"folder": folder}, server=server, **overrides)
-    return TestClient(create_app(settings))
 
 
 def hold_at_centre(client: TestClient) -> None:
@@ -36,19 +27,18 @@ def hold_at_centre(client: TestClient) -> None:
 
 
 @pytest.fixture(scope="module")
-def client() -> Iterator[TestClient]:
-    with make_client() as test_client:
+def client(tmp_path_factory) -> Iterator[TestClient]:
+    # the default backend, the simulator: no pty, no emulator process
+    with make_client(tmp_path_factory.mktemp("runs"), backend="sim") as test_client:
         hold_at_centre(test_client)
         yield test_client
 
 
-def test_info_names_the_viser_port_and_no_token(client: TestClient) -> None:
+def test_info_says_no_scene_and_no_token(client: TestClient) -> None:
+    """This app has no 3D scene (tests/scene/ checks the port /api/info names when on)."""
     info = ok_json(client.get("/api/info"))
     settings = client.app.state.settings
-    scene = client.app.state.scene
-    assert info["viser_port"] == (None if scene is None else scene.server.get_port())
-    if scene is not None and settings.server.viser_port != 0:
-        assert info["viser_port"] == settings.server.viser_port
+    assert client.app.state.scene is None and info["viser_port"] is None
     assert info["token_required"] is False
     assert info["jog_step_m"] == settings.jog.step_m
 
@@ -109,9 +99,9 @@ def test_plotly_is_served_from_the_installed_package(client: TestClient) -> None
     assert b"plotly.js" in response.content[:200]
 
 
-def test_with_a_token_info_says_so_and_the_check_needs_it() -> None:
+def test_with_a_token_info_says_so_and_the_check_needs_it(tmp_path) -> None:
     token = "a-long-secret-1"
-    with make_client(server={"token": token}) as client:
+    with make_client(tmp_path, server={"token": token}) as client:  # emulated: starts faster
         assert ok_json(client.get("/api/info"))["token_required"] is True
         url = "/api/tests/sinusoid/check"
         assert client.post(url, json={"duration_s": 1}).status_code == 401

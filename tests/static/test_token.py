@@ -7,18 +7,18 @@ from typing import Any
 
 import pytest
 
-from tests.dashboard.conftest import Server, serve, wait_for
 from tests.support.browser import browser_skip_reason, chromium_page
+from tests.support.server import Server, serve, wait_for
 
 SKIP = browser_skip_reason()
-pytestmark = pytest.mark.skipif(SKIP is not None, reason=str(SKIP))
+pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
 TOKEN = "dashboard-test-token"
 
 
 @pytest.fixture(scope="module")
 def token_server(tmp_path_factory) -> Iterator[Server]:
     folder = tmp_path_factory.mktemp("dashboard-token")
-    with serve(folder, DELTADASH_SERVER__TOKEN=TOKEN, DELTADASH_SERVER__SCENE="false") as server:
+    with serve(folder, DELTADASH_SERVER__TOKEN=TOKEN) as server:  # no scene: the page says so
         yield server
 
 

@@ -23,6 +23,7 @@ def _state(client, run_id):
     return _run(client, run_id)["state"]
 
 
+@pytest.mark.slow  # an end-to-end run of seconds
 def test_sinusoid_run_end_to_end(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     response = fresh.post("/api/tests/sinusoid", json=SHORT)
@@ -79,6 +80,7 @@ def test_bad_sinusoid_bodies_are_422(fresh):
         assert response.status_code == 422, body
 
 
+@pytest.mark.slow  # an end-to-end run of seconds
 def test_aborted_run_leaves_a_readable_log(client, fresh):
     fresh.post("/api/torque", json={"enabled": True})
     run_id = ok_json(fresh.post("/api/tests/sinusoid", json={"duration_s": 20}))["run_id"]
@@ -97,6 +99,7 @@ def test_aborted_run_leaves_a_readable_log(client, fresh):
     assert ok_json(fresh.get("/api/status"))["mode"] == "idle"
 
 
+@pytest.mark.slow  # an end-to-end run of seconds
 def test_estop_during_a_run_aborts_it(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     run_id = ok_json(fresh.post("/api/tests/sinusoid", json={"duration_s": 20}))["run_id"]
@@ -112,6 +115,7 @@ def test_estop_during_a_run_aborts_it(fresh):
     assert fresh.get(f"/api/runs/{run_id}/secrets.txt").status_code == 404
 
 
+@pytest.mark.slow  # an end-to-end run of seconds
 def test_waypoints_run_and_windowed_stats(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     body = {
@@ -139,6 +143,7 @@ def test_chirp_too_fast_for_the_joints_is_refused(fresh):
     assert "infeasible" in response.json()["detail"]
 
 
+@pytest.mark.slow  # an end-to-end run of seconds
 def test_step_response_run(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     response = fresh.post("/api/tests/step", json={"size_m": 0.004, "duration_s": 1.0})

@@ -2,22 +2,18 @@
 
 from __future__ import annotations
 
-import tempfile
-
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 
 from app.config import load_settings
-from app.server import create_app
+from tests.support.app_client import make_client, settle_at
 from tests.support.wait import ok_json, wait_for
 
-from .conftest import settle_at
 
-
-def test_default_backend_is_the_twin_and_reaches_a_goal():
-    settings = load_settings(runs={"folder": tempfile.mkdtemp(prefix="deltadash-runs-")})
-    assert settings.hardware.backend == "sim"
-    with TestClient(create_app(settings)) as client:
+def test_default_backend_is_the_twin_and_reaches_a_goal(tmp_path):
+    assert load_settings().hardware.backend == "sim"
+    with make_client(tmp_path, backend="sim") as client:
         status = ok_json(client.get("/api/status"))
         assert status["backend"] == "sim" and status["mode"] == "idle"
         # torque off: the arm falls and hangs under gravity
@@ -44,11 +40,11 @@ def test_default_backend_is_the_twin_and_reaches_a_goal():
         wait_for(lifting, "every servo to hold the arm against gravity")
 
 
-def test_sinusoid_on_the_twin_has_tracking_and_validation_stats():
+@pytest.mark.slow  # an end-to-end run of seconds on the twin
+def test_sinusoid_on_the_twin_has_tracking_and_validation_stats(tmp_path):
     """On the simulator the twin's true platform is the external measurement (thesis
     Table 6.2): FK of the encoders agrees with it to encoder resolution."""
-    settings = load_settings(runs={"folder": tempfile.mkdtemp(prefix="deltadash-runs-")})
-    with TestClient(create_app(settings)) as client:
+    with make_client(tmp_path, backend="sim") as client:
         # a defined pose first: after torque on the twin's arm may still be falling
         settle_at(client, [0.0, 0.0, -0.24])
         external = ok_json(client.get("/api/status"))["ee"]["external_m"]

@@ -34,7 +34,7 @@ import pytest
 
 from tests.support.browser import chromium_page
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]
 STATIC = REPO / "static"
 SHIPPED = ("app", "hardware", "kinematics")
 STATIC_PACKAGE = "deltadash_static"

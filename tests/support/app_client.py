@@ -1,0 +1,105 @@
+"""The app in-process under FastAPI's TestClient, and waits on what /api/status says.
+
+The 3D scene (viser) is off unless a test turns it on (``server={"scene": True}``): only
+tests/scene/ and the browser tests look at it, and it costs every other app a web server
+and a display-rate thread. When on, it takes a free port, never the default 8080.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from fastapi.testclient import TestClient
+
+from app.config import load_settings
+from app.server import create_app
+from app.server.backends import open_backend
+from tests.support.wait import ok_json, wait_for
+
+
+def make_client(
+    runs_folder: Path, backend: Literal["emulated", "sim"] = "emulated", **overrides
+) -> TestClient:
+    """A client of an app with its runs under ``runs_folder`` (a tmp_path); ``with`` starts it.
+
+    ``backend`` "emulated" runs the servo emulator in-process (for fault injection), "sim"
+    the MuJoCo twin. ``overrides`` are settings sections, merged over these defaults.
+    """
+    hardware = {"backend": backend, **overrides.pop("hardware", {})}
+    server = {"scene": False, "viser_port": 0, **overrides.pop("server", {})}
+    runs = {"folder": str(runs_folder), **overrides.pop("runs", {})}
+    settings = load_settings(hardware=hardware, server=server, runs=runs, **overrides)
+    opener = open_backend
+    if backend == "emulated":
+        opener = functools.partial(open_backend, emulator_in_process=True)
+    return TestClient(create_app(settings, backend_opener=opener))
+
+
+def cleared(client: TestClient) -> TestClient:
+    """``client`` with e-stop and faults cleared and torque off (a module's shared app)."""
+    client.post("/api/reset")
+    client.post("/api/torque", json={"enabled": False})
+    return client
+
+
+def ticks(client: TestClient) -> int:
+    return ok_json(client.get("/api/status"))["loop"]["ticks"]
+
+
+def measured(client: TestClient) -> np.ndarray:
+    """The platform's measured position [m], shape (3,)."""
+    return np.array(ok_json(client.get("/api/status"))["ee"]["position_m"], dtype=float)
+
+
+def robot_seen(client: TestClient) -> dict:
+    """What a failed wait on the robot reports: where it is, its mode, faults and warning."""
+    status = ok_json(client.get("/api/status"))
+    keys = ("mode", "torque", "estopped", "faults", "warning")
+    ee, joints = status["ee"], status["joints"]
+    return {"measured_m": ee["position_m"], "commanded_m": ee["commanded_m"],
+            "joints_rad": joints["position_rad"], **{k: status[k] for k in keys}}  # fmt: skip
+
+
+def wait_at(client: TestClient, point_m, what: str, within_m: float = 2e-3) -> None:
+    """Wait until /api/status measures the platform within ``within_m`` of ``point_m``;
+    a timeout says where it was, the mode and any warning or fault."""
+
+    def seen() -> dict:
+        status = ok_json(client.get("/api/status"))
+        keys = ("mode", "torque", "warning", "faults")
+        return {"measured_m": status["ee"]["position_m"], **{k: status[k] for k in keys}}
+
+    wait_for(lambda: np.linalg.norm(measured(client) - point_m) < within_m,
+             f"{what} ({within_m * 1e3:g} mm of {list(point_m)} m)", seen=seen)  # fmt: skip
+
+
+def settle_at(client: TestClient, point_m, within_m: float = 0.003) -> None:
+    """Torque on, a goal at ``point_m`` [m], and wait for a defined pose: the approach done
+    (commanded there), the platform measured within ``within_m`` of it and the joints still.
+
+    Runs plan from the commanded point and refuse to start from a robot still moving (after
+    torque on the arm may still be falling), so a test that starts one settles here first.
+    """
+    ok_json(client.post("/api/torque", json={"enabled": True}))
+    ok_json(client.post("/api/goal", json={"position_m": list(point_m)}))
+
+    def status() -> dict:
+        return ok_json(client.get("/api/status"))
+
+    def settled() -> bool:
+        now = status()
+        commanded = np.linalg.norm(np.subtract(now["ee"]["commanded_m"], point_m)) < 1e-4
+        near = np.linalg.norm(np.subtract(now["ee"]["position_m"], point_m)) < within_m
+        still = all(abs(v or 0.0) < 0.02 for v in now["joints"]["velocity_rad_s"])  # rad/s
+        return commanded and near and still
+
+    def seen() -> dict:
+        now = status()
+        return {"commanded_m": now["ee"]["commanded_m"], "measured_m": now["ee"]["position_m"],
+                "velocity_rad_s": now["joints"]["velocity_rad_s"], "mode": now["mode"]}  # fmt: skip
+
+    wait_for(settled, f"the robot settled at {list(point_m)} m (within {within_m * 1e3:g} mm, "
+             "joints still)", seen=seen)  # fmt: skip
