@@ -17,6 +17,7 @@ def run(model: SimpleServoModel, command: MotionCommand, seconds: float, dt: flo
     return states
 
 
+@pytest.mark.slow
 @given(st.floats(-3.0, 3.0), st.integers(100, 16000))
 def test_position_loop_settles_on_the_goal(goal: float, p_gain: int) -> None:
     model = SimpleServoModel()

@@ -36,7 +36,10 @@ def test_one_bad_reply_is_retried_and_counted(bus: DynamixelBus, emulator, fault
         ("wrong_id_replies", "There is no status packet"),
     ],
 )
-def test_persistent_bad_replies_raise_naming_the_servo(bus, emulator, fault, reason) -> None:
+def test_persistent_bad_replies_raise_naming_the_servo(
+    patient_bus, emulator, fault, reason
+) -> None:
+    bus = patient_bus
     emulator.inject(2, **{fault: 3})
     with pytest.raises(CommError) as info:
         bus.read_state()
@@ -48,7 +51,8 @@ def test_persistent_bad_replies_raise_naming_the_servo(bus, emulator, fault, rea
     assert bus.read_state().position_rad.shape == (3,)  # fault spent: the bus works again
 
 
-def test_unplugged_servo_fails_reads_and_writes_then_recovers(bus, emulator) -> None:
+def test_unplugged_servo_fails_reads_and_writes_then_recovers(patient_bus, emulator) -> None:
+    bus = patient_bus
     emulator.inject(3, unplugged=True)
     with pytest.raises(CommError, match="on servo 3 failed after 3 tries: servo 3: There is no"):
         bus.read_state()

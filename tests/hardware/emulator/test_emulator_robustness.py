@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -13,6 +14,7 @@ instructions = st.sampled_from([int(i) for i in Instruction] + [0x00, 0x07, 0x7F
 packet_ids = st.sampled_from([1, 2, 3, 9, 0xFE])
 
 
+@pytest.mark.slow
 @settings(max_examples=300)
 @given(st.lists(st.tuples(packet_ids, instructions, st.binary(max_size=48)), max_size=6))
 def test_random_packets_never_raise(packets: list[tuple[int, int, bytes]]) -> None:

@@ -82,6 +82,7 @@ def test_errors_raised_in_the_child_reach_the_caller(bus: ProcessSimBus) -> None
     assert bus.read_state().position_rad.shape == (3,)
 
 
+@pytest.mark.slow
 def test_after_disconnect_the_child_is_gone_and_calls_fail() -> None:
     sim = ProcessSimBus(SimBusConfig())
     with pytest.raises(NotConnectedError):
@@ -98,6 +99,7 @@ def test_after_disconnect_the_child_is_gone_and_calls_fail() -> None:
         sim.torque(True)
 
 
+@pytest.mark.slow
 def test_a_dead_simulator_is_a_bus_error_not_a_frozen_robot() -> None:
     sim = ProcessSimBus(SimBusConfig())
     sim.connect()

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from hardware.dynamixel.control_table import RAD_PER_TICK, HardwareErrorFlag
 from hardware.sim.masses import DeltaMasses
@@ -78,6 +79,7 @@ def run_feedforward(masses: DeltaMasses, model: MassModel, seconds: float = 0.4)
     return worst
 
 
+@pytest.mark.slow
 def test_mechanism_follows_the_lagrangian_inverse_dynamics() -> None:
     masses = DeltaMasses(payload_kg=0.1)
     right = masses.mass_model(THESIS_DELTA.L)
