@@ -28,6 +28,7 @@ from hardware.errors import BusError
 from kinematics import LinearDelta, RotaryDelta
 
 log = logging.getLogger(__name__)
+MAX_FAULT_CAUSES = 20  # distinct causes kept in the fault list; older ones are dropped
 
 
 @dataclass(frozen=True)
@@ -89,10 +90,20 @@ def require_motion(state: LoopState) -> None:
 
 
 def record_fault(state: LoopState, fault: Fault) -> None:
-    """Record a fault (once per reason) and stop: hold where the robot is."""
-    if any(f.source == fault.source and f.reason == fault.reason for f in state.faults):
-        return
+    """Record a fault once per cause (counting repeats) and stop: hold where the robot is.
+
+    The list keeps at most MAX_FAULT_CAUSES causes; the oldest go first, counted in
+    ``state.faults_dropped``, so a bus that stays down cannot grow the status without bound.
+    """
+    for i, seen in enumerate(state.faults):
+        if seen.cause == fault.cause:
+            state.faults[i] = seen.again(fault)
+            state.source = None
+            return
     log.error("fault: %s", fault.reason)
+    if len(state.faults) >= MAX_FAULT_CAUSES:
+        del state.faults[0]
+        state.faults_dropped += 1
     state.faults.append(fault)
     state.source = None
 
@@ -224,6 +235,7 @@ def reset_now(state: LoopState, ctx: CommandContext, bus: ServoBus) -> dict:
         bus.reboot(failing)
         state.torque = False  # a reboot leaves torque off
     state.faults.clear()
+    state.faults_dropped = 0
     state.estopped = False
     state.warning = None
     state.following.reset()

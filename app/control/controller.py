@@ -186,7 +186,9 @@ class Controller:
                 self.step()
             except Exception as exc:  # a bug must stop motion, not the loop
                 log.exception("control tick failed")
-                fault = Fault("loop", f"internal error: {exc!r}", time_s=self._now())
+                fault = Fault(
+                    "loop", f"internal error: {exc!r}", time_s=self._now(), kind=type(exc).__name__
+                )
                 record_fault(self.state, fault)
             self.timing.record(deadline, lateness, time.perf_counter() - started)
 
@@ -230,7 +232,7 @@ class Controller:
         except BusError as exc:
             if state.misses.miss():
                 reason = f"{state.misses.consecutive} reads failed: {exc}"
-                record_fault(state, Fault("bus", reason, time_s=self._now()))
+                record_fault(state, Fault("bus", reason, time_s=self._now(), kind="reads failed"))
             return False
         state.misses.ok()
         state.joints = joints
@@ -246,7 +248,8 @@ class Controller:
         setpoint = source.next(state.dt_s)
         state.phase, state.extra = setpoint.phase, setpoint.extra
         if setpoint.fault is not None:
-            fault = Fault("source", f"{source.name}: {setpoint.fault}", time_s=self._now())
+            reason = f"{source.name}: {setpoint.fault}"
+            fault = Fault("source", reason, time_s=self._now(), kind=source.name)
             record_fault(state, fault)
             return
         if setpoint.goal_m is not None:
@@ -284,7 +287,9 @@ class Controller:
             self.bus.write_goal(joints)
         except BusError as exc:
             if state.misses.miss():
-                record_fault(state, Fault("bus", f"goal writes failing: {exc}", time_s=self._now()))
+                reason = f"goal writes failing: {exc}"
+                fault = Fault("bus", reason, time_s=self._now(), kind="writes failed")
+                record_fault(state, fault)
             return
         state.commanded_rad = joints
         state.commanded_point_m = self.robot.fk(joints).points

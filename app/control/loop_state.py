@@ -38,6 +38,7 @@ class LoopState:
     torque: bool = False
     estopped: bool = False
     faults: list[Fault] = field(default_factory=list)
+    faults_dropped: int = 0  # causes dropped from the front of ``faults`` (bounded list)
     warning: str | None = None
     joints: JointState | None = None
     point_m: np.ndarray = field(default_factory=_nan3)
@@ -89,6 +90,7 @@ class LoopState:
             torque=self.torque,
             estopped=self.estopped,
             faults=tuple(self.faults),
+            faults_dropped=self.faults_dropped,
             warning=self.warning,
             joints_measured_rad=state.position_rad if state else nan3,
             point_measured_m=self.point_m,

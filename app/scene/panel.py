@@ -40,7 +40,8 @@ def status_markdown(snap: Snapshot, backend: str, message: str) -> str:
              f"goal [mm] {_mm(snap.goal_m)}"]  # fmt: skip
     for fault in snap.faults[:3]:
         servo = f" (servo {fault.servo_id})" if fault.servo_id is not None else ""
-        lines.append(f"⚠ **{fault.source}**{servo}: {fault.reason}")
+        times = f" (×{fault.count})" if fault.count > 1 else ""
+        lines.append(f"⚠ **{fault.source}**{servo}: {fault.reason}{times}")
     if snap.warning:
         lines.append(f"⚠ {snap.warning}")
     if message:

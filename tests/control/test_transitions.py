@@ -205,6 +205,12 @@ def fault(state: LoopState, ctx: CommandContext, bus: FakeBus) -> None:
     commands.record_fault(state, FAULT)
 
 
+def bus_down_twice(state: LoopState, ctx: CommandContext, bus: FakeBus) -> int:
+    for n in (3, 4):  # the text counts the reads; the cause stays the same
+        commands.record_fault(state, Fault("bus", f"{n} reads failed", kind="reads failed"))
+    return state.faults[-1].count
+
+
 # fmt: off
 TABLE = [  # given, command, then: one row per transition
     # torque
@@ -304,6 +310,10 @@ TABLE = [  # given, command, then: one row per transition
     pytest.param(
         Given(**ON, faulted=True), fault, Then("fault", True, faults=1),
         id="the same fault twice is recorded once",
+    ),
+    pytest.param(
+        Given(**ON, faulted=True), bus_down_twice, Then("fault", True, result=2, faults=2),
+        id="the same cause with a new text: counted, not added",
     ),
     # motion refused
     pytest.param(

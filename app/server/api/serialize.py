@@ -27,6 +27,7 @@ def status(controller: Controller) -> dict[str, Any]:
         "torque": snap.torque,
         "estopped": snap.estopped,
         "faults": [f.as_dict() for f in snap.faults],
+        "faults_dropped": snap.faults_dropped,
         "warning": snap.warning,
         "time_s": snap.time_s,
         "joints": {
