@@ -10,6 +10,7 @@ never touch the bus: they are queued and run at the start of the next tick, in t
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -116,12 +117,16 @@ class Controller:
         self.gate.solve(goal, self._near_measured())
         return self.submit(lambda: commands.jog_to(self.state, self.ctx, goal))
 
-    def jog(self, delta_m: Any) -> Future:
-        """Relative jog step [m]; a target outside the workspace is clamped onto it."""
+    def jog(self, delta_m: Any, speed_m_s: float | None = None) -> Future:
+        """Relative jog step [m] from what the loop commands when the step runs (not from a
+        goal the caller saw); a target outside the workspace is clamped onto it.
+        ``speed_m_s`` caps the speed per axis (None: the configured jog limit)."""
         delta = np.asarray(delta_m, dtype=np.float64)
         if delta.shape != (3,) or not np.isfinite(delta).all():
             raise GoalRejected(f"delta_m: expected 3 finite numbers, got {delta_m!r}")
-        return self.submit(lambda: commands.jog_by(self.state, self.ctx, delta))
+        if speed_m_s is not None and not (math.isfinite(speed_m_s) and speed_m_s > 0):
+            raise GoalRejected(f"speed_m_s: expected a positive number, got {speed_m_s!r}")
+        return self.submit(lambda: commands.jog_by(self.state, self.ctx, delta, speed_m_s))
 
     def move(
         self,

@@ -69,6 +69,7 @@ class Snapshot:
     faults: tuple[Fault, ...] = ()
     faults_dropped: int = 0  # older causes no longer in ``faults``
     warning: str | None = None
+    notice: str | None = None  # about the last motion command, e.g. where it started from
     joints_measured_rad: np.ndarray = field(default_factory=lambda: _NAN3)
     point_measured_m: np.ndarray = field(default_factory=lambda: _NAN3)
     joints_commanded_rad: np.ndarray = field(default_factory=lambda: _NAN3)

@@ -68,6 +68,7 @@ function renderFaults(s) {
   if (s.faults_dropped) items.push(`<li class="muted">${s.faults_dropped} older faults not shown</li>`);
   if (s.estopped) items.unshift("<li><strong>E-stop engaged</strong>: nothing moves until Reset</li>");
   if (s.warning) items.push(`<li class="warn">${escape(s.warning)}</li>`);
+  if (s.notice) items.push(`<li class="muted">${escape(s.notice)}</li>`);
   const html = items.join("");
   if (list.innerHTML !== html) list.innerHTML = html;
   list.hidden = items.length === 0;

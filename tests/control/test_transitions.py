@@ -148,6 +148,7 @@ class Then:
     faults: int = 0
     same_source: bool | None = None  # the active source object is (not) the one before
     warning: str | None = None
+    notice: str | None = None  # checked when given
 
 
 Command = Callable[[LoopState, CommandContext, FakeBus], Any]
@@ -203,6 +204,39 @@ def stop_active(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
 
 def fault(state: LoopState, ctx: CommandContext, bus: FakeBus) -> None:
     commands.record_fault(state, FAULT)
+
+
+def settle(state: LoopState, bus: FakeBus, joints_rad) -> None:
+    """The arm moves without a command (sags under load, falls with torque off); re-read."""
+    bus.position = np.array(joints_rad, dtype=np.float64)
+    state.joints = bus.read_state()
+    state.point_m = ROBOT.fk(state.joints.position_rad).points
+
+
+SAG_RAD = 0.004  # ~1 mm lower at HOME: the measured sag of the simulated arm per e-stop
+FALLEN_M = np.array([-0.012, 0.021, -0.33])  # relaxed, 11 cm below HOME; inside the gate
+HANG_RAD = tuple(float(q) for q in ROBOT.ik(FALLEN_M).joints)
+HANG_M = ROBOT.fk(np.array(HANG_RAD)).points
+
+
+def estop_reset_x4(state: LoopState, ctx: CommandContext, bus: FakeBus) -> tuple:
+    for _ in range(4):
+        settle(state, bus, state.commanded_rad + SAG_RAD)  # the servo sags below its goal
+        commands.estop_now(state, ctx, bus)
+        commands.reset_now(state, ctx, bus)
+    return (*state.commanded_rad, *state.goal_m)
+
+
+def jog_after_torque_cycle(state: LoopState, ctx: CommandContext, bus: FakeBus) -> list:
+    commands.torque_to(state, bus, False)
+    settle(state, bus, HANG_RAD)  # relaxed, the arm falls and hangs
+    commands.torque_to(state, bus, True)
+    return commands.jog_by(state, ctx, np.array([0.005, 0.0, 0.0]))
+
+
+def estop_during_jog_goal(state: LoopState, ctx: CommandContext, bus: FakeBus) -> list:
+    commands.estop_now(state, ctx, bus)
+    return state.goal_m.tolist()
 
 
 def bus_down_twice(state: LoopState, ctx: CommandContext, bus: FakeBus) -> int:
@@ -268,6 +302,16 @@ TABLE = [  # given, command, then: one row per transition
     pytest.param(
         Given(**ON, faulted=True), estop, Then("estop", True, HOLD, "hold", faults=1),
         id="e-stop while faulted: e-stop shows first",
+    ),
+    pytest.param(
+        Given(**ON, source="jog"), estop_during_jog_goal,
+        Then("estop", True, HOLD, pytest.approx(list(HOME_M))),
+        id="e-stop: goal is the held point, not the jog's old target",
+    ),
+    pytest.param(
+        Given(**ON), estop_reset_x4,
+        Then("idle", True, HOLD * 4, pytest.approx((*HOME_RAD, *HOME_M))),
+        id="e-stop / reset x4 with a sagging arm: the commanded joints do not ratchet",
     ),
     # reset
     pytest.param(
@@ -352,6 +396,13 @@ TABLE = [  # given, command, then: one row per transition
         id="jog from idle",
     ),
     pytest.param(
+        Given(**ON, source="jog"), jog_after_torque_cycle,
+        Then("jog", True, RELEASE + (("write_goal", HANG_RAD), ("torque", True)),
+             pytest.approx(list(HANG_M + [0.005, 0, 0])), same_source=False,
+             notice="starting from the measured position"),
+        id="jog after torque off / on: from the measured point, by the step only",
+    ),
+    pytest.param(
         Given(**ON, source="jog"),
         jog_up,
         Then("jog", True, (), pytest.approx([0.01, 0.0, -0.21]), same_source=True),
@@ -414,6 +465,8 @@ def test_transition(given: Given, command: Command, then: Then) -> None:
         assert state.warning is None
     else:
         assert then.warning in state.warning
+    if then.notice is not None:
+        assert then.notice in (state.notice or "")
 
 
 def test_reset_clears_the_safety_detectors() -> None:

@@ -118,6 +118,10 @@ class StatusOut(_Out):
     faults: list[FaultOut]
     faults_dropped: int = Field(description="older causes dropped from the bounded list")
     warning: str | None
+    notice: str | None = Field(
+        description="about the last motion command, e.g. that it started from the measured "
+        "position (the first motion after torque off, an e-stop or a fault)"
+    )
     time_s: float
     joints: JointsStatus
     ee: PlatformStatus
