@@ -37,7 +37,8 @@ class CommandContext:
 
     jog_limits: per-axis Cartesian limits of jogs and Cartesian moves [m/s, m/s^2, m/s^3];
     joint_speed_rad_s: the joint speed limit that joint-space moves are scaled from;
-    estop_action: "hold" (hold position with torque on) or "release" (torque off).
+    estop_action: "hold" (hold position with torque on) or "release" (torque off);
+    hold_timeout_s: a held jog stops this long after its last heartbeat [s].
     """
 
     robot: RotaryDelta | LinearDelta
@@ -47,6 +48,7 @@ class CommandContext:
     jog_limits: Limits
     joint_speed_rad_s: float
     estop_action: Literal["hold", "release"]
+    hold_timeout_s: float = 0.2
 
     @classmethod
     def from_settings(cls, settings: Settings) -> CommandContext:
@@ -71,6 +73,7 @@ class CommandContext:
             Limits(jog.max_velocity_m_s, jog.max_acceleration_m_s2, jog.max_jerk_m_s3),
             settings.limits.joint_speed_rad_s,
             settings.safety.estop_action,
+            jog.hold_timeout_s,
         )
 
 
@@ -117,6 +120,7 @@ def stop_motion(state: LoopState) -> None:
     """
     state.source = None
     state.resync = True
+    state.hold_deadline_s = state.hold_velocity_m_s = None
     state.goal_m = state.commanded_point_m.copy() if state.torque else np.full(3, np.nan)
 
 
@@ -166,7 +170,9 @@ def check_move(
 def jog_source(state: LoopState, ctx: CommandContext) -> JogSource:
     """The active jog source, or a new one starting where the next motion starts."""
     require_motion(state)
-    if not isinstance(state.source, JogSource):
+    if isinstance(state.source, JogSource):
+        state.notice = None  # a new command: the last one's notice no longer applies
+    else:
         begin_motion(state, JogSource(start_point(state), ctx.jog_limits, ctx.period_s))
     assert isinstance(state.source, JogSource)
     return state.source
@@ -177,8 +183,13 @@ def jog_to(
 ) -> list[float]:
     """Jog towards ``goal`` [m] (already gated), starting a jog source if none is active;
     ``speed_m_s`` caps its speed per axis (None: the configured jog limit)."""
-    source = jog_source(state, ctx)
-    state.hold_deadline_s = None  # a step or a goal ends a held jog
+    return _retarget(state, jog_source(state, ctx), goal, speed_m_s)
+
+
+def _retarget(
+    state: LoopState, source: JogSource, goal: np.ndarray, speed_m_s: float | None
+) -> list[float]:
+    state.hold_deadline_s = state.hold_velocity_m_s = None  # a step or a goal ends a held jog
     source.set_speed(None if speed_m_s is None else np.full(3, speed_m_s))
     source.set_target(goal)
     state.goal_m = goal
@@ -197,7 +208,7 @@ def jog_by(
     source = jog_source(state, ctx)
     base = source.aim_m
     goal = ctx.gate.clamp_towards(base, base + delta, state.reference_rad)
-    return jog_to(state, ctx, goal, speed_m_s)
+    return _retarget(state, source, goal, speed_m_s)
 
 
 def move(

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from app.config import Settings
-from app.control import commands
+from app.control import commands, held_jog
 from app.control.commands import CommandContext, record_fault
 from app.control.errors import GoalRejected
 from app.control.loop_state import LoopState
@@ -45,7 +45,12 @@ class Controller:
     """
 
     def __init__(
-        self, settings: Settings, bus: ServoBus, backend: str, backend_description: str = ""
+        self,
+        settings: Settings,
+        bus: ServoBus,
+        backend: str,
+        backend_description: str = "",
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.settings = settings
         self.ctx = CommandContext.from_settings(settings)
@@ -61,7 +66,8 @@ class Controller:
         self._thread: threading.Thread | None = None
         # the simulator's "motion capture" of the platform; real buses have none
         self._external = bus.measure_platform if isinstance(bus, SimulatedBus) else None
-        self._t0 = time.monotonic()
+        self._clock = clock  # loop time [s]; tests step a controller on a fake one
+        self._t0 = clock()
         self._snapshot = Snapshot()
         self.pose_status: Callable[[], dict] | None = None  # set by the world service
 
@@ -127,6 +133,15 @@ class Controller:
         if speed_m_s is not None and not (math.isfinite(speed_m_s) and speed_m_s > 0):
             raise GoalRejected(f"speed_m_s: expected a positive number, got {speed_m_s!r}")
         return self.submit(lambda: commands.jog_by(self.state, self.ctx, delta, speed_m_s))
+
+    def hold_jog(self, velocity_m_s: Any) -> Future:
+        """Start or renew a held jog at ``velocity_m_s`` [m/s] (zero stops it): it moves
+        only while these calls keep coming; the loop stops it ``jog.hold_timeout_s`` after
+        the last one (app/control/held_jog.py)."""
+        velocity = np.asarray(velocity_m_s, dtype=np.float64)
+        if velocity.shape != (3,) or not np.isfinite(velocity).all():
+            raise GoalRejected(f"velocity_m_s: expected 3 finite numbers, got {velocity_m_s!r}")
+        return self.submit(lambda: held_jog.hold_jog(self.state, self.ctx, velocity, self._now()))
 
     def move(
         self,
@@ -250,6 +265,7 @@ class Controller:
         state, source = self.state, self.state.source
         if source is None or not commands.motion_allowed(state) or state.joints is None:
             return
+        held_jog.tick(state, self.ctx, self._now())  # a held jog whose heartbeat is late stops
         setpoint = source.next(state.dt_s)
         state.phase, state.extra = setpoint.phase, setpoint.extra
         if setpoint.fault is not None:
@@ -301,7 +317,7 @@ class Controller:
         state.warning = None
 
     def _now(self) -> float:
-        return time.monotonic() - self._t0
+        return self._clock() - self._t0
 
     def _publish(self) -> None:
         self._snapshot = self.state.snapshot(self._now())
