@@ -167,11 +167,16 @@ def check_move(
     return (target, True) if joint_space else (goal, False)
 
 
-def jog_source(state: LoopState, ctx: CommandContext) -> JogSource:
-    """The active jog source, or a new one starting where the next motion starts."""
+def jog_source(state: LoopState, ctx: CommandContext, renewal: bool = False) -> JogSource:
+    """The active jog source, or a new one starting where the next motion starts.
+
+    A new command clears the last one's notice; a ``renewal`` (a held jog's heartbeat)
+    keeps it, so a notice about the hold's start stays visible while it is held.
+    """
     require_motion(state)
     if isinstance(state.source, JogSource):
-        state.notice = None  # a new command: the last one's notice no longer applies
+        if not renewal:
+            state.notice = None
     else:
         begin_motion(state, JogSource(start_point(state), ctx.jog_limits, ctx.period_s))
     assert isinstance(state.source, JogSource)

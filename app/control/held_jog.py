@@ -36,7 +36,7 @@ def hold_jog(state: LoopState, ctx: CommandContext, velocity_m_s: np.ndarray, no
         return {"velocity_m_s": [0.0, 0.0, 0.0], "hold_s": 0.0, "time_s": now_s}
     if speed > ctx.jog_limits.velocity:
         velocity = velocity * (ctx.jog_limits.velocity / speed)
-    source = jog_source(state, ctx)
+    source = jog_source(state, ctx, renewal=state.hold_deadline_s is not None)
     source.set_speed(np.abs(velocity))
     state.hold_velocity_m_s = velocity
     try:

@@ -94,6 +94,14 @@ def test_no_heartbeat_for_the_timeout_freezes_the_target_and_decelerates_to_a_st
     print(f"stopped {stop_s * 1e3:.0f} ms after the last heartbeat (fake clock, 200 Hz)")
 
 
+def test_the_first_hold_after_torque_on_says_so_while_held() -> None:
+    loop, clock, _ = held()
+    for _ in range(5):
+        tick(loop, clock, 10)
+        heartbeat(loop)
+    assert loop.snapshot().notice == "starting from the measured position"
+
+
 def test_a_zero_velocity_brakes_at_once() -> None:
     loop, clock, _ = held()
     tick(loop, clock, 20)
