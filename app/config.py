@@ -140,6 +140,9 @@ class JogSettings(_Section):
     max_acceleration_m_s2: float = Field(4.0, gt=0, description="per axis [m/s^2]")
     max_jerk_m_s3: float = Field(100.0, gt=0, description="per axis [m/s^3]")
     step_m: float = Field(0.005, gt=0, le=0.1, description="default jog step [m]")
+    hold_timeout_s: float = Field(
+        0.2, gt=0, le=2.0, description="a held jog stops this long after its last heartbeat [s]"
+    )
 
 
 class SafetySettings(_Section):

@@ -28,6 +28,7 @@ from hardware.errors import BusError
 from kinematics import LinearDelta, RotaryDelta
 
 log = logging.getLogger(__name__)
+MAX_FAULT_CAUSES = 20  # distinct causes kept in the fault list; older ones are dropped
 
 
 @dataclass(frozen=True)
@@ -36,7 +37,8 @@ class CommandContext:
 
     jog_limits: per-axis Cartesian limits of jogs and Cartesian moves [m/s, m/s^2, m/s^3];
     joint_speed_rad_s: the joint speed limit that joint-space moves are scaled from;
-    estop_action: "hold" (hold position with torque on) or "release" (torque off).
+    estop_action: "hold" (hold position with torque on) or "release" (torque off);
+    hold_timeout_s: a held jog stops this long after its last heartbeat [s].
     """
 
     robot: RotaryDelta | LinearDelta
@@ -46,6 +48,7 @@ class CommandContext:
     jog_limits: Limits
     joint_speed_rad_s: float
     estop_action: Literal["hold", "release"]
+    hold_timeout_s: float = 0.2
 
     @classmethod
     def from_settings(cls, settings: Settings) -> CommandContext:
@@ -70,6 +73,7 @@ class CommandContext:
             Limits(jog.max_velocity_m_s, jog.max_acceleration_m_s2, jog.max_jerk_m_s3),
             settings.limits.joint_speed_rad_s,
             settings.safety.estop_action,
+            jog.hold_timeout_s,
         )
 
 
@@ -89,19 +93,60 @@ def require_motion(state: LoopState) -> None:
 
 
 def record_fault(state: LoopState, fault: Fault) -> None:
-    """Record a fault (once per reason) and stop: hold where the robot is."""
-    if any(f.source == fault.source and f.reason == fault.reason for f in state.faults):
-        return
+    """Record a fault once per cause (counting repeats) and stop: hold where the robot is.
+
+    The list keeps at most MAX_FAULT_CAUSES causes; the oldest go first, counted in
+    ``state.faults_dropped``, so a bus that stays down cannot grow the status without bound.
+    """
+    for i, seen in enumerate(state.faults):
+        if seen.cause == fault.cause:
+            state.faults[i] = seen.again(fault)
+            state.source = None
+            return
     log.error("fault: %s", fault.reason)
+    if len(state.faults) >= MAX_FAULT_CAUSES:
+        del state.faults[0]
+        state.faults_dropped += 1
     state.faults.append(fault)
+    stop_motion(state)
+
+
+def stop_motion(state: LoopState) -> None:
+    """After torque off, e-stop or a fault: no source, and the next motion starts afresh.
+
+    The servos keep their last goal, so ``goal_m`` becomes that held point (NaN with torque
+    off: the loop uses no setpoint then); the robot may have been pushed, have sagged or
+    have fallen meanwhile, so the next motion starts from the measured position.
+    """
     state.source = None
+    state.resync = True
+    state.hold_deadline_s = state.hold_velocity_m_s = None
+    state.goal_m = state.commanded_point_m.copy() if state.torque else np.full(3, np.nan)
 
 
 def start_point(state: LoopState) -> np.ndarray:
-    """Where a new path starts: the commanded point, else the measured one."""
-    if np.isfinite(state.commanded_point_m).all():
+    """Where a new path starts: the commanded point, else (first motion after torque off,
+    e-stop or a fault, or nothing commanded yet) the measured one."""
+    if not state.resync and np.isfinite(state.commanded_point_m).all():
         return state.commanded_point_m
     return state.point_m
+
+
+def start_joints(state: LoopState) -> np.ndarray:
+    """The joints a joint-space path starts from, by the same rule as :func:`start_point`."""
+    if state.resync and state.joints is not None:
+        return state.joints.position_rad
+    return state.reference_rad
+
+
+def begin_motion(state: LoopState, source: GoalSource) -> None:
+    """Make ``source`` the active one; the first after a stop says where it starts from."""
+    if state.resync:
+        state.notice = "starting from the measured position"
+        state.resync = False
+    else:
+        state.notice = None
+    state.source = source
 
 
 # ---- motion ----
@@ -122,21 +167,53 @@ def check_move(
     return (target, True) if joint_space else (goal, False)
 
 
-def jog_to(state: LoopState, ctx: CommandContext, goal: np.ndarray) -> list[float]:
-    """Jog towards ``goal`` [m] (already gated), starting a jog source if none is active."""
+def jog_source(state: LoopState, ctx: CommandContext, renewal: bool = False) -> JogSource:
+    """The active jog source, or a new one starting where the next motion starts.
+
+    A new command clears the last one's notice; a ``renewal`` (a held jog's heartbeat)
+    keeps it, so a notice about the hold's start stays visible while it is held.
+    """
     require_motion(state)
-    if not isinstance(state.source, JogSource):
-        state.source = JogSource(start_point(state), ctx.jog_limits, ctx.period_s)
-    state.source.set_target(goal)
+    if isinstance(state.source, JogSource):
+        if not renewal:
+            state.notice = None
+    else:
+        begin_motion(state, JogSource(start_point(state), ctx.jog_limits, ctx.period_s))
+    assert isinstance(state.source, JogSource)
+    return state.source
+
+
+def jog_to(
+    state: LoopState, ctx: CommandContext, goal: np.ndarray, speed_m_s: float | None = None
+) -> list[float]:
+    """Jog towards ``goal`` [m] (already gated), starting a jog source if none is active;
+    ``speed_m_s`` caps its speed per axis (None: the configured jog limit)."""
+    return _retarget(state, jog_source(state, ctx), goal, speed_m_s)
+
+
+def _retarget(
+    state: LoopState, source: JogSource, goal: np.ndarray, speed_m_s: float | None
+) -> list[float]:
+    state.hold_deadline_s = state.hold_velocity_m_s = None  # a step or a goal ends a held jog
+    source.set_speed(None if speed_m_s is None else np.full(3, speed_m_s))
+    source.set_target(goal)
     state.goal_m = goal
     return goal.tolist()
 
 
-def jog_by(state: LoopState, ctx: CommandContext, delta: np.ndarray) -> list[float]:
-    """Jog by ``delta`` [m] from the jog target (or from here), clamped onto what passes."""
-    require_motion(state)
-    base = state.goal_m if isinstance(state.source, JogSource) else start_point(state)
-    return jog_to(state, ctx, ctx.gate.clamp_towards(base, base + delta, state.reference_rad))
+def jog_by(
+    state: LoopState, ctx: CommandContext, delta: np.ndarray, speed_m_s: float | None = None
+) -> list[float]:
+    """Jog by ``delta`` [m], clamped onto what passes, from what the loop holds now.
+
+    The base is read here, in the control thread, when the command runs: the active jog's
+    aim (so steps add up), else where the next motion starts (the commanded point, or the
+    measured one after a stop); never a goal a client remembered.
+    """
+    source = jog_source(state, ctx)
+    base = source.aim_m
+    goal = ctx.gate.clamp_towards(base, base + delta, state.reference_rad)
+    return _retarget(state, source, goal, speed_m_s)
 
 
 def move(
@@ -151,14 +228,13 @@ def move(
     if joint_space:
         speed = ctx.joint_speed_rad_s
         limits = Limits(0.5 * speed, 4.0 * speed, 40.0 * speed)
-        start = state.reference_rad
-        state.goal_m = ctx.robot.fk(target).points
+        start = start_joints(state)
+        goal = ctx.robot.fk(target).points
     else:
-        limits = ctx.jog_limits
-        start = start_point(state)
-        state.goal_m = target
+        limits, start, goal = ctx.jog_limits, start_point(state), target
     source = MoveSource(start, target, limits, duration_s, joint_space=joint_space)
-    state.source = source
+    begin_motion(state, source)
+    state.goal_m = goal
     return {"duration_s": source.duration_s}
 
 
@@ -168,7 +244,7 @@ def run_source(state: LoopState, source: GoalSource, start_m: np.ndarray, tol_m:
     moved = float(np.linalg.norm(start_point(state) - start_m))
     if math.isfinite(tol_m) and not moved <= tol_m:
         raise MotionRefused(f"the robot moved {moved * 1e3:.1f} mm since the plan; start again")
-    state.source = source
+    begin_motion(state, source)
     return source.name
 
 
@@ -177,42 +253,62 @@ def stop_source(state: LoopState, source: GoalSource) -> bool:
     if state.source is not source:
         return False
     state.source = None
+    state.goal_m = state.commanded_point_m.copy()  # the servos hold the last command
     return True
 
 
 # ---- torque, e-stop, reset ----
 def torque_to(state: LoopState, bus: ServoBus, enabled: bool) -> bool:
-    """Torque on (holding where the robot is, so nothing moves) or off (stopping any source)."""
+    """Torque on (holding where the robot is, so nothing moves) or off (stopping any source).
+
+    Torque on while it is on keeps holding the commanded joints (not the sagged measured
+    ones); from off it holds the measured joints, where the relaxed arm is.
+    """
     if enabled:
         if state.estopped or state.faults:
             require_motion(state)  # raises with the reason
         if state.joints is None:
             raise MotionRefused("no joint state read yet: check the bus")
-        hold = state.joints.position_rad
+        hold, point = held(state)
         bus.write_goal(hold)  # where it is, so enabling torque moves nothing
         bus.torque(True)
-        state.commanded_rad, state.commanded_point_m = hold.copy(), state.point_m.copy()
+        state.commanded_rad, state.commanded_point_m, state.goal_m = hold, point, point.copy()
     else:
-        state.source = None
         bus.torque(False)
     state.torque = enabled
+    if not enabled:
+        stop_motion(state)
     return enabled
 
 
+def held(state: LoopState) -> tuple[np.ndarray, np.ndarray]:
+    """What a hold keeps, (joints [rad], point [m]): the commanded ones while torque stayed
+    on, else (relaxed, or nothing commanded yet) the measured ones. Copies."""
+    if state.torque and state.commanded_rad is not None:
+        return state.commanded_rad.copy(), state.commanded_point_m.copy()
+    assert state.joints is not None  # callers check
+    return state.joints.position_rad.copy(), state.point_m.copy()
+
+
 def estop_now(state: LoopState, ctx: CommandContext, bus: ServoBus) -> str:
-    """Stop at once: hold where the robot is, or release torque, per ``ctx.estop_action``."""
-    state.source = None
+    """Stop at once: hold, or release torque, per ``ctx.estop_action``.
+
+    The hold keeps the commanded joints while torque stayed on (no ratchet: the measured
+    position sags under load, and holding it would lower the arm each e-stop); with torque
+    off (or nothing commanded yet) the measured ones.
+    """
     state.estopped = True
     try:
         if ctx.estop_action == "release" or state.joints is None:
             bus.torque(False)
             state.torque = False
         else:
-            bus.write_goal(state.joints.position_rad)
-            state.commanded_rad = state.joints.position_rad.copy()
-            state.commanded_point_m = state.point_m.copy()
+            hold, point = held(state)
+            bus.write_goal(hold)
+            state.commanded_rad, state.commanded_point_m = hold, point
     except BusError as exc:  # still e-stopped; say the bus did not answer
         state.warning = f"e-stop could not reach the servos: {exc}"
+    stop_motion(state)
     return ctx.estop_action
 
 
@@ -223,10 +319,11 @@ def reset_now(state: LoopState, ctx: CommandContext, bus: ServoBus) -> dict:
     if failing:
         bus.reboot(failing)
         state.torque = False  # a reboot leaves torque off
+    stop_motion(state)  # the servos keep holding what they held (no new goal is written)
     state.faults.clear()
+    state.faults_dropped = 0
     state.estopped = False
     state.warning = None
     state.following.reset()
     state.misses.ok()
-    state.source = None
     return {"rebooted": failing}

@@ -10,6 +10,7 @@ never touch the bus: they are queued and run at the start of the next tick, in t
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -20,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from app.config import Settings
-from app.control import commands
+from app.control import commands, held_jog
 from app.control.commands import CommandContext, record_fault
 from app.control.errors import GoalRejected
 from app.control.loop_state import LoopState
@@ -44,7 +45,12 @@ class Controller:
     """
 
     def __init__(
-        self, settings: Settings, bus: ServoBus, backend: str, backend_description: str = ""
+        self,
+        settings: Settings,
+        bus: ServoBus,
+        backend: str,
+        backend_description: str = "",
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.settings = settings
         self.ctx = CommandContext.from_settings(settings)
@@ -60,7 +66,8 @@ class Controller:
         self._thread: threading.Thread | None = None
         # the simulator's "motion capture" of the platform; real buses have none
         self._external = bus.measure_platform if isinstance(bus, SimulatedBus) else None
-        self._t0 = time.monotonic()
+        self._clock = clock  # loop time [s]; tests step a controller on a fake one
+        self._t0 = clock()
         self._snapshot = Snapshot()
         self.pose_status: Callable[[], dict] | None = None  # set by the world service
 
@@ -116,12 +123,25 @@ class Controller:
         self.gate.solve(goal, self._near_measured())
         return self.submit(lambda: commands.jog_to(self.state, self.ctx, goal))
 
-    def jog(self, delta_m: Any) -> Future:
-        """Relative jog step [m]; a target outside the workspace is clamped onto it."""
+    def jog(self, delta_m: Any, speed_m_s: float | None = None) -> Future:
+        """Relative jog step [m] from what the loop commands when the step runs (not from a
+        goal the caller saw); a target outside the workspace is clamped onto it.
+        ``speed_m_s`` caps the speed per axis (None: the configured jog limit)."""
         delta = np.asarray(delta_m, dtype=np.float64)
         if delta.shape != (3,) or not np.isfinite(delta).all():
             raise GoalRejected(f"delta_m: expected 3 finite numbers, got {delta_m!r}")
-        return self.submit(lambda: commands.jog_by(self.state, self.ctx, delta))
+        if speed_m_s is not None and not (math.isfinite(speed_m_s) and speed_m_s > 0):
+            raise GoalRejected(f"speed_m_s: expected a positive number, got {speed_m_s!r}")
+        return self.submit(lambda: commands.jog_by(self.state, self.ctx, delta, speed_m_s))
+
+    def hold_jog(self, velocity_m_s: Any) -> Future:
+        """Start or renew a held jog at ``velocity_m_s`` [m/s] (zero stops it): it moves
+        only while these calls keep coming; the loop stops it ``jog.hold_timeout_s`` after
+        the last one (app/control/held_jog.py)."""
+        velocity = np.asarray(velocity_m_s, dtype=np.float64)
+        if velocity.shape != (3,) or not np.isfinite(velocity).all():
+            raise GoalRejected(f"velocity_m_s: expected 3 finite numbers, got {velocity_m_s!r}")
+        return self.submit(lambda: held_jog.hold_jog(self.state, self.ctx, velocity, self._now()))
 
     def move(
         self,
@@ -186,7 +206,9 @@ class Controller:
                 self.step()
             except Exception as exc:  # a bug must stop motion, not the loop
                 log.exception("control tick failed")
-                fault = Fault("loop", f"internal error: {exc!r}", time_s=self._now())
+                fault = Fault(
+                    "loop", f"internal error: {exc!r}", time_s=self._now(), kind=type(exc).__name__
+                )
                 record_fault(self.state, fault)
             self.timing.record(deadline, lateness, time.perf_counter() - started)
 
@@ -230,7 +252,7 @@ class Controller:
         except BusError as exc:
             if state.misses.miss():
                 reason = f"{state.misses.consecutive} reads failed: {exc}"
-                record_fault(state, Fault("bus", reason, time_s=self._now()))
+                record_fault(state, Fault("bus", reason, time_s=self._now(), kind="reads failed"))
             return False
         state.misses.ok()
         state.joints = joints
@@ -243,10 +265,12 @@ class Controller:
         state, source = self.state, self.state.source
         if source is None or not commands.motion_allowed(state) or state.joints is None:
             return
+        held_jog.tick(state, self.ctx, self._now())  # a held jog whose heartbeat is late stops
         setpoint = source.next(state.dt_s)
         state.phase, state.extra = setpoint.phase, setpoint.extra
         if setpoint.fault is not None:
-            fault = Fault("source", f"{source.name}: {setpoint.fault}", time_s=self._now())
+            reason = f"{source.name}: {setpoint.fault}"
+            fault = Fault("source", reason, time_s=self._now(), kind=source.name)
             record_fault(state, fault)
             return
         if setpoint.goal_m is not None:
@@ -284,14 +308,16 @@ class Controller:
             self.bus.write_goal(joints)
         except BusError as exc:
             if state.misses.miss():
-                record_fault(state, Fault("bus", f"goal writes failing: {exc}", time_s=self._now()))
+                reason = f"goal writes failing: {exc}"
+                fault = Fault("bus", reason, time_s=self._now(), kind="writes failed")
+                record_fault(state, fault)
             return
         state.commanded_rad = joints
         state.commanded_point_m = self.robot.fk(joints).points
         state.warning = None
 
     def _now(self) -> float:
-        return time.monotonic() - self._t0
+        return self._clock() - self._t0
 
     def _publish(self) -> None:
         self._snapshot = self.state.snapshot(self._now())

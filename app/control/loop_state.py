@@ -28,8 +28,13 @@ class LoopState:
 
     joints: the last successful read; point_m: FK of it (the measured platform position);
     commanded_rad / commanded_point_m: the last goal written to the servos (None / NaN before
-    any); goal_m: the active goal (a jog target, a move's end, a run's nominal point);
+    any); goal_m: the setpoint the loop is using (a jog target, a move's end, a run's
+    nominal point, the held point after a stop; NaN with torque off);
     external_m: the simulator's own measurement of the platform at the last read.
+    resync: the command is stale (torque off, e-stop or a fault since the last motion, or
+    none yet): the next motion starts from the measured position and ``notice`` says so.
+    hold_deadline_s: while an operator holds a jog (app/control/held_jog.py), the loop
+    time [s] after which it stops unless a heartbeat renews it; None otherwise.
     """
 
     misses: MissCounter
@@ -38,7 +43,12 @@ class LoopState:
     torque: bool = False
     estopped: bool = False
     faults: list[Fault] = field(default_factory=list)
+    faults_dropped: int = 0  # causes dropped from the front of ``faults`` (bounded list)
     warning: str | None = None
+    notice: str | None = None  # about the last motion command (e.g. where it started from)
+    resync: bool = True
+    hold_deadline_s: float | None = None
+    hold_velocity_m_s: np.ndarray | None = None  # the held jog's velocity [m/s]
     joints: JointState | None = None
     point_m: np.ndarray = field(default_factory=_nan3)
     commanded_rad: np.ndarray | None = None
@@ -89,7 +99,9 @@ class LoopState:
             torque=self.torque,
             estopped=self.estopped,
             faults=tuple(self.faults),
+            faults_dropped=self.faults_dropped,
             warning=self.warning,
+            notice=self.notice,
             joints_measured_rad=state.position_rad if state else nan3,
             point_measured_m=self.point_m,
             joints_commanded_rad=commanded,

@@ -54,6 +54,7 @@ class FollowingError:
             f"joint {joint + 1} lags its command by {np.degrees(error[joint]):.1f} deg "
             f"for {now_s - self._over_since:.2f} s (limit {np.degrees(self.limit_rad):.1f} deg)",
             time_s=now_s,
+            kind="following",
         )
 
     def reset(self) -> None:
@@ -65,7 +66,7 @@ def servo_faults(
 ) -> list[Fault]:
     """One Fault per servo that reports hardware error bits, naming them."""
     return [
-        Fault("servo", f"servo {sid}: hardware error {', '.join(names)}", sid, now_s)
+        Fault("servo", f"servo {sid}: hardware error {', '.join(names)}", sid, now_s, "hardware")
         for sid, names in zip(servo_ids, errors, strict=True)
         if names
     ]

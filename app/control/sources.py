@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from ruckig import InputParameter, OutputParameter, Result, Ruckig
+from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig
 
 from app.control.errors import GoalRejected
 
@@ -44,6 +44,9 @@ class GoalSource(Protocol):
         """The setpoint for the tick ``dt_s`` [s] after the previous one."""
 
 
+MIN_SPEED_M_S = 1e-4  # ruckig needs a positive limit on every axis, even one not jogged
+
+
 @dataclass(frozen=True)
 class Limits:
     """Per-axis velocity, acceleration and jerk limits [units/s, /s^2, /s^3]."""
@@ -66,12 +69,18 @@ def _ruckig_input(start: np.ndarray, limits: Limits) -> InputParameter:
 
 
 class JogSource:
-    """Follows an operator target along a jerk-limited path recomputed every tick."""
+    """Follows an operator target along a jerk-limited path recomputed every tick.
+
+    Two ways to stop: reach the target, or :meth:`brake` (ruckig's velocity interface to
+    zero velocity, a jerk-limited stop wherever the path is now), after which the target
+    is the point where it stopped.
+    """
 
     name = "jog"
 
     def __init__(self, start_m: np.ndarray, limits: Limits, dt_s: float) -> None:
         self._otg = Ruckig(3, dt_s)
+        self._limits = limits
         self._inp = _ruckig_input(np.asarray(start_m, dtype=np.float64), limits)
         self._out = OutputParameter(3)
 
@@ -83,16 +92,41 @@ class JogSource:
     def commanded_m(self) -> np.ndarray:
         return np.array(self._inp.current_position)
 
+    @property
+    def braking(self) -> bool:
+        return self._inp.control_interface == ControlInterface.Velocity
+
+    @property
+    def aim_m(self) -> np.ndarray:
+        """Where the jog is heading: its target, or while braking where it is now."""
+        return self.commanded_m if self.braking else self.target_m
+
     def set_target(self, target_m: np.ndarray) -> None:
         """New target (already gated); the path bends towards it from where it is now."""
+        self._inp.control_interface = ControlInterface.Position
         self._inp.target_position = np.asarray(target_m, dtype=np.float64).tolist()
+
+    def set_speed(self, per_axis_m_s: np.ndarray | None) -> None:
+        """Cap the speed per axis [m/s] at most at the limits; None: the limits themselves."""
+        limit = self._limits.velocity
+        speed = np.full(3, limit) if per_axis_m_s is None else np.minimum(per_axis_m_s, limit)
+        self._inp.max_velocity = np.maximum(speed, MIN_SPEED_M_S).tolist()
+
+    def brake(self) -> None:
+        """Stop as soon as the limits allow, where the path is now (not at the target)."""
+        self._inp.control_interface = ControlInterface.Velocity
+        self._inp.target_velocity = [0.0, 0.0, 0.0]
+        self._inp.target_acceleration = [0.0, 0.0, 0.0]
 
     def next(self, dt_s: float) -> Setpoint:
         result = self._otg.update(self._inp, self._out)
         if result not in (Result.Working, Result.Finished):
             raise RuntimeError(f"ruckig could not plan the jog path: {result}")
         self._out.pass_to_input(self._inp)
-        return Setpoint(point_m=np.array(self._out.new_position))
+        if result == Result.Finished and self.braking:  # stopped: hold here from now on
+            self.set_target(self.commanded_m)
+        point = np.array(self._out.new_position)
+        return Setpoint(point_m=point, goal_m=point if self.braking else self.target_m)
 
 
 class MoveSource:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -11,19 +11,46 @@ _NAN3 = np.full(3, np.nan)
 
 @dataclass(frozen=True)
 class Fault:
-    """Why the robot stopped: ``source`` is bus, servo, following, gate or loop."""
+    """Why the robot stopped: ``source`` is bus, servo, following, source, gate or loop.
+
+    One cause is recorded once (see :meth:`cause`) however often it recurs: ``count`` times
+    seen, first / last seen at ``first_time_s`` / ``last_time_s`` [s, loop time];
+    ``time_s`` is the first time (kept for older clients); ``reason`` is the latest text.
+    ``kind`` is the stable part of the cause (e.g. "reads failed" while the text counts
+    the reads); empty means the reason itself is the cause.
+    """
 
     source: str
     reason: str
     servo_id: int | None = None
     time_s: float = 0.0
+    kind: str = ""
+    count: int = 1
+    last_time_s: float | None = None  # None: same as time_s (seen once)
+
+    @property
+    def cause(self) -> tuple[str, int | None, str]:
+        """What makes two faults the same: source, servo and kind (else the reason)."""
+        return (self.source, self.servo_id, self.kind or self.reason)
+
+    @property
+    def first_time_s(self) -> float:
+        return self.time_s
+
+    def again(self, later: Fault) -> Fault:
+        """This cause seen once more, as ``later`` reports it (its text, its time)."""
+        return replace(self, reason=later.reason, count=self.count + 1, last_time_s=later.time_s)
 
     def as_dict(self) -> dict:
         return {
             "source": self.source,
+            "kind": self.kind or self.reason,
             "reason": self.reason,
             "servo_id": self.servo_id,
             "time_s": self.time_s,
+            "count": self.count,
+            "first_time_s": self.time_s,
+            "last_time_s": self.time_s if self.last_time_s is None else self.last_time_s,
         }
 
 
@@ -40,7 +67,9 @@ class Snapshot:
     torque: bool = False
     estopped: bool = False
     faults: tuple[Fault, ...] = ()
+    faults_dropped: int = 0  # older causes no longer in ``faults``
     warning: str | None = None
+    notice: str | None = None  # about the last motion command, e.g. where it started from
     joints_measured_rad: np.ndarray = field(default_factory=lambda: _NAN3)
     point_measured_m: np.ndarray = field(default_factory=lambda: _NAN3)
     joints_commanded_rad: np.ndarray = field(default_factory=lambda: _NAN3)

@@ -61,7 +61,6 @@ class GoalView:
         self._latest = 0
         self._dragging = False
         self._drag_ended_at = 0.0
-        self._accepted: np.ndarray | None = None
         self._trail: deque[tuple[float, np.ndarray]] = deque()
         self._show_trail = True
         scene = server.scene
@@ -124,15 +123,14 @@ class GoalView:
             future = self.controller.set_goal(goal)
         except GoalRejected:
             # In the workspace but past a joint limit or near a singularity: the furthest
-            # good point on the way there from the last accepted goal, as jog does.
-            start = self._accepted if self._accepted is not None else self._here()
+            # good point on the way there from where the loop is now, as jog does.
+            start = self._here()
             try:
                 goal = self.gate.clamp_towards(start, goal, self._near())
                 future = self.controller.set_goal(goal)
             except GoalRejected as exc:
                 self.message = str(exc)
                 return None
-        self._accepted = goal
         future.add_done_callback(self._outcome)
         return goal
 

@@ -40,7 +40,8 @@ def status_markdown(snap: Snapshot, backend: str, message: str) -> str:
              f"goal [mm] {_mm(snap.goal_m)}"]  # fmt: skip
     for fault in snap.faults[:3]:
         servo = f" (servo {fault.servo_id})" if fault.servo_id is not None else ""
-        lines.append(f"⚠ **{fault.source}**{servo}: {fault.reason}")
+        times = f" (×{fault.count})" if fault.count > 1 else ""
+        lines.append(f"⚠ **{fault.source}**{servo}: {fault.reason}{times}")
     if snap.warning:
         lines.append(f"⚠ {snap.warning}")
     if message:
@@ -101,26 +102,17 @@ class ControlPanel:
         self.message = "" if error is None else str(error)
 
     def jog(self, direction: tuple[int, int, int]) -> None:
-        """One jog step along ``direction`` at the panel's speed (a timed smooth move)."""
+        """One bounded jog step along ``direction`` at the panel's speed.
+
+        viser buttons are clicks, not press-and-hold, so the scene jogs in discrete steps
+        (hold-to-move's safe equivalent: each click moves at most one step). The step is
+        relative to what the loop commands when it runs (controller.jog), never to a goal
+        this panel saw earlier: after torque off and on it moves by the step only.
+        """
         step_m = 1e-3 * float(self.gui_jog_step.value)
         speed_m_s = 1e-3 * float(self.gui_jog_speed.value)
-        snap = self.controller.snapshot()
-        start = snap.goal_m if np.isfinite(snap.goal_m).all() else snap.point_commanded_m
-        if not np.isfinite(start).all():
-            start = snap.point_measured_m
-        near = snap.joints_measured_rad
-        if not (np.isfinite(start).all() and np.isfinite(near).all()):
-            self.message = "the robot's position is unknown: check the bus"
-            return
-        try:
-            target = self.controller.gate.clamp_towards(
-                start, start + step_m * np.asarray(direction, float), near)
-        except GoalRejected as exc:
-            self.message = str(exc)
-            return
-        distance = float(np.linalg.norm(target - start))
-        self._call(lambda: self.controller.move(point=target,
-                                                duration_s=max(distance / speed_m_s, 0.05)))
+        delta = step_m * np.asarray(direction, dtype=np.float64)
+        self._call(self.controller.jog, delta, speed_m_s)
 
     def save_point(self) -> None:
         snap = self.controller.snapshot()

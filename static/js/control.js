@@ -1,4 +1,5 @@
-// Operator commands: e-stop (Space / Esc), torque, reset, jog pad and keys, gamepad, go-to.
+// Operator commands: e-stop (Space / Esc), torque, reset, go-to, and hold-to-move jogs from
+// the pad, the arrow keys and a gamepad (they move only while held: see startHold).
 
 import { post, clientName } from "./api.js";
 import { showError, showMessage, setText } from "./ui.js";
@@ -7,12 +8,11 @@ const KEY_AXES = {
   ArrowRight: [0, 1], ArrowLeft: [0, -1], ArrowUp: [1, 1], ArrowDown: [1, -1],
   PageUp: [2, 1], PageDown: [2, -1],
 };
-const GAMEPAD_PERIOD_MS = 50; // velocity jog as steps at 20 Hz
+const HEARTBEAT_MS = 50; // a held jog's heartbeat; the server stops it 200 ms after the last
+const GAMEPAD_PERIOD_MS = 50;
 const DEADZONE = 0.15;
 const DEADMAN_BUTTON = 4; // LB on standard-mapping pads
-let gamepadBusy = false;
-let keyJogBusy = false;
-let jogSpeed = 0.05; // [m/s] at full stick, capped by /api/info's jog limit
+let maxSpeed = 0.5; // [m/s], /api/info's jog limit
 
 // A command that needs the control lease; another holder is taken over only if the operator agrees.
 export async function command(path, body) {
@@ -33,14 +33,57 @@ export function estop() {
   post("/api/estop").then(() => showMessage("E-stop", "error")).catch(showError);
 }
 
-function stepM() {
-  return Number(document.getElementById("step").value) / 1000;
+function speedMS() {
+  return Math.min(Number(document.getElementById("jog-speed").value) / 1000, maxSpeed);
 }
 
-export function jog(axis, sign, size = stepM()) {
-  const delta = [0, 0, 0];
-  delta[axis] = sign * size;
-  return command("/api/jog", { delta_m: delta }).catch(showError);
+// Hold-to-move: while a key, pad button or the gamepad's deadman is held, the jog's
+// velocity is posted every HEARTBEAT_MS; the server stops the jog 0.2 s after the last
+// one (a frozen tab or a lost link stops the robot). Release sends a zero velocity.
+// One hold at a time (the latest press wins); one request in flight at most.
+const hold = { owner: null, velocity: null, timer: null, inflight: Promise.resolve(), busy: false };
+
+function beat() {
+  if (hold.busy || !hold.velocity) return;
+  hold.busy = true;
+  const owner = hold.owner;
+  hold.inflight = command("/api/jog", { velocity_m_s: hold.velocity })
+    .catch((err) => {
+      if (hold.owner === owner) stopHold(); // refused (torque off, e-stop...): stop trying
+      showError(err);
+    })
+    .finally(() => { hold.busy = false; });
+}
+
+// Start holding a jog at ``velocity`` [m/s], or (same owner) change its velocity.
+export function startHold(owner, velocity) {
+  const fresh = hold.owner !== owner;
+  hold.owner = owner;
+  hold.velocity = velocity;
+  if (!hold.timer) hold.timer = setInterval(beat, HEARTBEAT_MS);
+  if (fresh) beat(); // at once on a press; later changes go with the next heartbeat
+}
+
+function stopHold() {
+  clearInterval(hold.timer);
+  hold.timer = null;
+  hold.owner = null;
+  hold.velocity = null;
+}
+
+// Stop the hold ``owner`` started (any hold when owner is null); the zero velocity goes
+// after the request in flight, so a late heartbeat cannot restart the jog.
+export function releaseHold(owner = null) {
+  if (!hold.timer || (owner !== null && hold.owner !== owner)) return;
+  stopHold();
+  hold.inflight = hold.inflight.then(() =>
+    command("/api/jog", { velocity_m_s: [0, 0, 0] }).catch(showError));
+}
+
+function axisVelocity(axis, sign) {
+  const velocity = [0, 0, 0];
+  velocity[axis] = sign * speedMS();
+  return velocity;
 }
 
 function typing(target) {
@@ -60,10 +103,12 @@ function onKey(event) {
   // Keys jog only while this page has focus and the operator has switched keyboard jog on.
   if (!document.getElementById("jog-keys").checked || !document.hasFocus()) return;
   event.preventDefault();
-  // a held key repeats ~30 times a second: one jog in flight at most, so none pile up
-  if (keyJogBusy) return;
-  keyJogBusy = true;
-  jog(axis[0], axis[1]).finally(() => { keyJogBusy = false; });
+  if (event.repeat) return; // the hold's own heartbeat keeps it going
+  startHold(`key:${event.key}`, axisVelocity(axis[0], axis[1]));
+}
+
+function onKeyUp(event) {
+  if (KEY_AXES[event.key]) releaseHold(`key:${event.key}`);
 }
 
 function bindButtons() {
@@ -73,10 +118,16 @@ function bindButtons() {
   on("torque-on", "/api/torque", { enabled: true });
   on("torque-off", "/api/torque", { enabled: false });
   on("reset", "/api/reset");
-  document.querySelector(".pad").addEventListener("click", (event) => {
+  const pad = document.querySelector(".pad");
+  pad.addEventListener("pointerdown", (event) => {
     const spec = event.target.closest("[data-jog]")?.dataset.jog;
-    if (spec) jog("xyz".indexOf(spec[0]), spec[1] === "+" ? 1 : -1);
+    if (!spec) return;
+    event.target.setPointerCapture?.(event.pointerId); // the release comes here, wherever it is
+    startHold("pad", axisVelocity("xyz".indexOf(spec[0]), spec[1] === "+" ? 1 : -1));
   });
+  for (const type of ["pointerup", "pointercancel", "lostpointercapture"]) {
+    pad.addEventListener(type, () => releaseHold("pad"));
+  }
   document.getElementById("goal-form").addEventListener("submit", (event) => {
     event.preventDefault();
     const form = new FormData(event.target);
@@ -87,32 +138,38 @@ function bindButtons() {
   });
 }
 
-// Sticks = velocity: each period send the step the stick asks for, only while the deadman is held.
+// Sticks = velocity, held only while the deadman button is: each poll renews the hold.
 function pollGamepad() {
   const pad = [...(navigator.getGamepads ? navigator.getGamepads() : [])].find(Boolean);
   const enabled = document.getElementById("jog-pad").checked;
   if (!pad) {
+    releaseHold("gamepad"); // unplugged mid-jog
     setText("gamepad-state", "no gamepad (press a button on it to connect)");
     return;
   }
   const held = Boolean(pad.buttons[DEADMAN_BUTTON]?.pressed);
   setText("gamepad-state", `${pad.id.slice(0, 40)}: ${enabled ? (held ? "jogging" : "hold LB to jog") : "off"}`);
-  if (!enabled || !held || !document.hasFocus()) return;
   const axis = (i) => (Math.abs(pad.axes[i] || 0) < DEADZONE ? 0 : pad.axes[i]);
-  const dt = GAMEPAD_PERIOD_MS / 1000;
   // left stick x/y (screen up = +y), right stick vertical = z
-  const delta = [axis(0), -axis(1), -axis(3)].map((v) => v * jogSpeed * dt);
-  if (gamepadBusy || delta.every((v) => v === 0)) return;
-  // one request in flight at most, so a slow link cannot queue up motion
-  gamepadBusy = true;
-  command("/api/jog", { delta_m: delta }).catch(showError).finally(() => { gamepadBusy = false; });
+  const velocity = [axis(0), -axis(1), -axis(3)].map((v) => v * speedMS());
+  if (!enabled || !held || !document.hasFocus() || velocity.every((v) => v === 0)) {
+    releaseHold("gamepad");
+    return;
+  }
+  startHold("gamepad", velocity); // each poll is the heartbeat, with the stick's velocity now
 }
 
 export function startControl(info) {
-  if (info && info.jog_max_velocity_m_s) jogSpeed = Math.min(jogSpeed, info.jog_max_velocity_m_s);
+  if (info && info.jog_max_velocity_m_s) maxSpeed = info.jog_max_velocity_m_s;
   bindButtons();
   document.addEventListener("keydown", onKey);
-  // Keyboard jog switches itself off when the page loses focus: no stray jogs on return.
-  window.addEventListener("blur", () => { document.getElementById("jog-keys").checked = false; });
+  document.addEventListener("keyup", onKeyUp);
+  // Losing focus or the tab going hidden ends any hold at once (the server's deadline would
+  // anyway), and keyboard jog switches itself off: no stray jogs on return.
+  window.addEventListener("blur", () => {
+    releaseHold();
+    document.getElementById("jog-keys").checked = false;
+  });
+  document.addEventListener("visibilitychange", () => { if (document.hidden) releaseHold(); });
   setInterval(pollGamepad, GAMEPAD_PERIOD_MS);
 }

@@ -62,10 +62,13 @@ function renderFaults(s) {
   const list = document.getElementById("faults");
   const items = s.faults.map((f) => {
     const who = f.servo_id === null || f.servo_id === undefined ? f.source : `servo ${f.servo_id}`;
-    return `<li><strong>${escape(who)}</strong>: ${escape(f.reason)}</li>`;
+    const times = f.count > 1 ? ` <span class="muted">(×${f.count})</span>` : "";
+    return `<li><strong>${escape(who)}</strong>: ${escape(f.reason)}${times}</li>`;
   });
+  if (s.faults_dropped) items.push(`<li class="muted">${s.faults_dropped} older faults not shown</li>`);
   if (s.estopped) items.unshift("<li><strong>E-stop engaged</strong>: nothing moves until Reset</li>");
   if (s.warning) items.push(`<li class="warn">${escape(s.warning)}</li>`);
+  if (s.notice) items.push(`<li class="muted">${escape(s.notice)}</li>`);
   const html = items.join("");
   if (list.innerHTML !== html) list.innerHTML = html;
   list.hidden = items.length === 0;

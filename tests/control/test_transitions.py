@@ -25,8 +25,7 @@ from app.control.errors import MotionRefused
 from app.control.loop_state import LoopState
 from app.control.sources import JogSource, MoveSource, Setpoint
 from app.control.state import Fault
-from hardware.bus import JointState
-from hardware.errors import CommError
+from tests.support.fake_bus import HOME_M, HOME_RAD, NO_ERRORS, FakeBus
 
 SETTINGS = load_settings()
 CTX = {
@@ -34,53 +33,8 @@ CTX = {
     "release": dataclasses.replace(CommandContext.from_settings(SETTINGS), estop_action="release"),
 }
 ROBOT = CTX["hold"].robot
-HOME_M = np.array([0.0, 0.0, -0.22])
-HOME_RAD = tuple(float(q) for q in ROBOT.ik(HOME_M).joints)  # inside every limit
-NO_ERRORS: tuple[tuple[str, ...], ...] = ((), (), ())
 SERVO_2_OVERLOAD = ((), ("overload",), ())
 FAULT = Fault("following", "joint 2 lags its command")
-
-
-class FakeBus:
-    """Records torque / write_goal / reboot; reads back an ideal servo (or a stuck one)."""
-
-    def __init__(self, errors: tuple[tuple[str, ...], ...] = NO_ERRORS) -> None:
-        self.calls: list[tuple] = []
-        self.position = np.array(HOME_RAD)
-        self.errors = errors
-        self.fail_reads = self.fail_writes = self.stuck = False
-
-    def torque(self, enabled: bool) -> None:
-        self._fail_if(self.fail_writes, "write torque")
-        self.calls.append(("torque", enabled))
-
-    def write_goal(self, positions_rad) -> None:
-        self._fail_if(self.fail_writes, "sync write goal")
-        self.calls.append(("write_goal", tuple(float(q) for q in positions_rad)))
-        if not self.stuck:
-            self.position = np.array(positions_rad, dtype=np.float64)
-
-    def reboot(self, ids=None) -> None:
-        self.calls.append(("reboot", tuple(ids)))
-        self.errors = NO_ERRORS
-
-    def read_state(self) -> JointState:
-        self._fail_if(self.fail_reads, "sync read state")
-        return JointState(
-            position_rad=self.position.copy(),
-            velocity_rad_s=np.zeros(3),
-            current_a=np.zeros(3),
-            voltage_v=np.full(3, 12.0),
-            temperature_c=np.full(3, 30.0),
-            moving=np.zeros(3, dtype=bool),
-            hardware_errors=self.errors,
-            stamp_s=0.0,
-        )
-
-    @staticmethod
-    def _fail_if(failing: bool, instruction: str) -> None:
-        if failing:
-            raise CommError((1, 2, 3), instruction, "no status packet (fake)")
 
 
 class RunSource:
@@ -148,6 +102,7 @@ class Then:
     faults: int = 0
     same_source: bool | None = None  # the active source object is (not) the one before
     warning: str | None = None
+    notice: str | None = None  # checked when given
 
 
 Command = Callable[[LoopState, CommandContext, FakeBus], Any]
@@ -203,6 +158,45 @@ def stop_active(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
 
 def fault(state: LoopState, ctx: CommandContext, bus: FakeBus) -> None:
     commands.record_fault(state, FAULT)
+
+
+def settle(state: LoopState, bus: FakeBus, joints_rad) -> None:
+    """The arm moves without a command (sags under load, falls with torque off); re-read."""
+    bus.position = np.array(joints_rad, dtype=np.float64)
+    state.joints = bus.read_state()
+    state.point_m = ROBOT.fk(state.joints.position_rad).points
+
+
+SAG_RAD = 0.004  # ~1 mm lower at HOME: the measured sag of the simulated arm per e-stop
+FALLEN_M = np.array([-0.012, 0.021, -0.33])  # relaxed, 11 cm below HOME; inside the gate
+HANG_RAD = tuple(float(q) for q in ROBOT.ik(FALLEN_M).joints)
+HANG_M = ROBOT.fk(np.array(HANG_RAD)).points
+
+
+def estop_reset_x4(state: LoopState, ctx: CommandContext, bus: FakeBus) -> tuple:
+    for _ in range(4):
+        settle(state, bus, state.commanded_rad + SAG_RAD)  # the servo sags below its goal
+        commands.estop_now(state, ctx, bus)
+        commands.reset_now(state, ctx, bus)
+    return (*state.commanded_rad, *state.goal_m)
+
+
+def jog_after_torque_cycle(state: LoopState, ctx: CommandContext, bus: FakeBus) -> list:
+    commands.torque_to(state, bus, False)
+    settle(state, bus, HANG_RAD)  # relaxed, the arm falls and hangs
+    commands.torque_to(state, bus, True)
+    return commands.jog_by(state, ctx, np.array([0.005, 0.0, 0.0]))
+
+
+def estop_during_jog_goal(state: LoopState, ctx: CommandContext, bus: FakeBus) -> list:
+    commands.estop_now(state, ctx, bus)
+    return state.goal_m.tolist()
+
+
+def bus_down_twice(state: LoopState, ctx: CommandContext, bus: FakeBus) -> int:
+    for n in (3, 4):  # the text counts the reads; the cause stays the same
+        commands.record_fault(state, Fault("bus", f"{n} reads failed", kind="reads failed"))
+    return state.faults[-1].count
 
 
 # fmt: off
@@ -263,6 +257,16 @@ TABLE = [  # given, command, then: one row per transition
         Given(**ON, faulted=True), estop, Then("estop", True, HOLD, "hold", faults=1),
         id="e-stop while faulted: e-stop shows first",
     ),
+    pytest.param(
+        Given(**ON, source="jog"), estop_during_jog_goal,
+        Then("estop", True, HOLD, pytest.approx(list(HOME_M))),
+        id="e-stop: goal is the held point, not the jog's old target",
+    ),
+    pytest.param(
+        Given(**ON), estop_reset_x4,
+        Then("idle", True, HOLD * 4, pytest.approx((*HOME_RAD, *HOME_M))),
+        id="e-stop / reset x4 with a sagging arm: the commanded joints do not ratchet",
+    ),
     # reset
     pytest.param(
         Given(**ON, estopped=True), reset, Then("idle", True, (), {"rebooted": []}),
@@ -305,6 +309,10 @@ TABLE = [  # given, command, then: one row per transition
         Given(**ON, faulted=True), fault, Then("fault", True, faults=1),
         id="the same fault twice is recorded once",
     ),
+    pytest.param(
+        Given(**ON, faulted=True), bus_down_twice, Then("fault", True, result=2, faults=2),
+        id="the same cause with a new text: counted, not added",
+    ),
     # motion refused
     pytest.param(
         Given(), jog, Then("idle", False, refused="torque is off"),
@@ -340,6 +348,13 @@ TABLE = [  # given, command, then: one row per transition
     pytest.param(
         Given(**ON), jog, Then("jog", True, (), GOAL.tolist()),
         id="jog from idle",
+    ),
+    pytest.param(
+        Given(**ON, source="jog"), jog_after_torque_cycle,
+        Then("jog", True, RELEASE + (("write_goal", HANG_RAD), ("torque", True)),
+             pytest.approx(list(HANG_M + [0.005, 0, 0])), same_source=False,
+             notice="starting from the measured position"),
+        id="jog after torque off / on: from the measured point, by the step only",
     ),
     pytest.param(
         Given(**ON, source="jog"),
@@ -404,6 +419,8 @@ def test_transition(given: Given, command: Command, then: Then) -> None:
         assert state.warning is None
     else:
         assert then.warning in state.warning
+    if then.notice is not None:
+        assert then.notice in (state.notice or "")
 
 
 def test_reset_clears_the_safety_detectors() -> None:

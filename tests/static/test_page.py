@@ -19,7 +19,7 @@ from tests.support.server import Server, wait_for
 
 SKIP = browser_skip_reason()
 pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
-STEP_M = 0.005  # the page's default jog step (5 mm)
+STEP_M = 0.005  # how far a held jog must go before the test lets go
 SCENE_STUB = "<p style='font: 14px sans-serif'>3D scene (viser): stubbed in this test</p>"
 
 
@@ -38,6 +38,14 @@ def page(server: Server) -> Iterator[Any]:
 
 def measured(server: Server) -> list[float]:
     return server.get("/api/status")["ee"]["position_m"]
+
+
+def commanded_still(server: Server) -> list[float] | None:
+    """The commanded point once two reads 0.2 s of loop time apart agree; None if moving."""
+    first = server.get("/api/status")
+    wait_for(lambda: server.get("/api/status")["time_s"] > first["time_s"] + 0.2, "loop time")
+    now = server.get("/api/status")["ee"]["commanded_m"]
+    return now if now == first["ee"]["commanded_m"] else None
 
 
 def shot(page: Any, name: str) -> None:
@@ -75,16 +83,37 @@ def test_go_to_then_jog_by_key_and_by_pad(page: Any, server: Server) -> None:
     wait_for(lambda: abs(measured(server)[2] + 0.24) < 0.002, "arrival at z = -240 mm")
     shown = text(page, "#pos-meas")
 
-    page.check("#jog-keys")
+    page.check("#jog-keys")  # hold-to-move: it jogs while the key is down, stops on release
     x_before = measured(server)[0]
-    page.keyboard.press("ArrowRight")
-    wait_for(lambda: measured(server)[0] > x_before + 0.8 * STEP_M, "+x after the arrow key")
+    page.keyboard.down("ArrowRight")
+    wait_for(lambda: measured(server)[0] > x_before + STEP_M, "+x while the arrow key is held")
+    page.keyboard.up("ArrowRight")
+    wait_for(lambda: commanded_still(server), "the jog to stop when the key is released")
     wait_for(lambda: text(page, "#pos-meas") != shown, "the page's measured position to change")
 
     z_before = measured(server)[2]
-    page.click("[data-jog='z+']")
-    wait_for(lambda: measured(server)[2] > z_before + 0.8 * STEP_M, "+z after the pad button")
+    page.hover("[data-jog='z+']")
+    page.mouse.down()
+    wait_for(lambda: measured(server)[2] > z_before + STEP_M, "+z while the pad button is held")
+    page.mouse.up()
+    wait_for(lambda: commanded_still(server), "the jog to stop when the button is released")
     shot(page, "jogged")
+
+
+def test_a_held_jog_stops_by_itself_when_the_link_is_lost(page: Any, server: Server) -> None:
+    """The killed client: heartbeats stop reaching the server while the key is still down."""
+    page.check("#jog-keys")
+    x_before = measured(server)[0]
+    page.keyboard.down("ArrowLeft")
+    wait_for(lambda: measured(server)[0] < x_before - 0.002, "-x while the key is held")
+    page.route("**/api/jog", lambda route: route.abort())  # the link drops mid-jog
+    try:
+        stopped = wait_for(lambda: commanded_still(server), "the server to stop the jog itself")
+        assert "no heartbeat" in (server.get("/api/status")["notice"] or "")
+        assert server.get("/api/status")["ee"]["commanded_m"] == stopped
+    finally:
+        page.keyboard.up("ArrowLeft")
+        page.unroute("**/api/jog")
 
 
 def test_keys_do_not_jog_while_keyboard_jog_is_off(page: Any, server: Server) -> None:

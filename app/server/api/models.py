@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vector3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
@@ -20,7 +20,22 @@ class GoalRequest(_Body):
 
 
 class JogRequest(_Body):
-    delta_m: Vector3 = Field(description="relative step [m]; clamped onto the workspace")
+    """Exactly one of: a bounded step (scripts), or a held jog's velocity (hold-to-move)."""
+
+    delta_m: Vector3 | None = Field(
+        None, description="relative step [m] from what the loop commands now; clamped"
+    )
+    velocity_m_s: Vector3 | None = Field(
+        None,
+        description="held jog [m/s]: moves only while repeated (every ~50 ms); stops "
+        "jog.hold_timeout_s (0.2 s) after the last; zero stops at once; capped at the jog speed",
+    )
+
+    @model_validator(mode="after")
+    def _one_of(self) -> JogRequest:
+        if (self.delta_m is None) == (self.velocity_m_s is None):
+            raise ValueError("give exactly one of delta_m or velocity_m_s")
+        return self
 
 
 class MoveRequest(_Body):

@@ -23,12 +23,21 @@ class _Out(BaseModel):
 
 
 class FaultOut(_Out):
-    """Why the robot stopped: source is bus, servo, following, gate or loop."""
+    """Why the robot stopped, one entry per cause however often it recurs.
+
+    source is bus, servo, following, source, gate or loop; kind the stable part of the
+    cause; reason the latest text; count how often it was seen, first and last at loop
+    times [s]; time_s is first_time_s (kept for older clients).
+    """
 
     source: str
+    kind: str
     reason: str
     servo_id: int | None = None
     time_s: float
+    count: int = Field(ge=1)
+    first_time_s: float
+    last_time_s: float
 
 
 class JointsStatus(_Out):
@@ -107,7 +116,12 @@ class StatusOut(_Out):
     torque: bool
     estopped: bool
     faults: list[FaultOut]
+    faults_dropped: int = Field(description="older causes dropped from the bounded list")
     warning: str | None
+    notice: str | None = Field(
+        description="about the last motion command, e.g. that it started from the measured "
+        "position (the first motion after torque off, an e-stop or a fault)"
+    )
     time_s: float
     joints: JointsStatus
     ee: PlatformStatus

@@ -27,7 +27,9 @@ def status(controller: Controller) -> dict[str, Any]:
         "torque": snap.torque,
         "estopped": snap.estopped,
         "faults": [f.as_dict() for f in snap.faults],
+        "faults_dropped": snap.faults_dropped,
         "warning": snap.warning,
+        "notice": snap.notice,
         "time_s": snap.time_s,
         "joints": {
             "servo_ids": list(controller.servo_ids),

@@ -1,0 +1,58 @@
+"""A fake servo bus for tests of the control layer without a thread, a simulator or a pty:
+it records torque / write_goal / reboot calls and reads back an ideal servo (or a stuck one,
+or one whose reads and writes fail)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.config import load_settings
+from hardware.bus import JointState
+from hardware.errors import CommError
+
+ROBOT = load_settings().robot.build()
+HOME_M = np.array([0.0, 0.0, -0.22])
+HOME_RAD = tuple(float(q) for q in ROBOT.ik(HOME_M).joints)  # inside every default limit
+NO_ERRORS: tuple[tuple[str, ...], ...] = ((), (), ())
+
+
+class FakeBus:
+    """Records torque / write_goal / reboot; reads back an ideal servo (or a stuck one)."""
+
+    def __init__(self, errors: tuple[tuple[str, ...], ...] = NO_ERRORS) -> None:
+        self.calls: list[tuple] = []
+        self.position = np.array(HOME_RAD)
+        self.errors = errors
+        self.fail_reads = self.fail_writes = self.stuck = False
+
+    def torque(self, enabled: bool) -> None:
+        self._fail_if(self.fail_writes, "write torque")
+        self.calls.append(("torque", enabled))
+
+    def write_goal(self, positions_rad) -> None:
+        self._fail_if(self.fail_writes, "sync write goal")
+        self.calls.append(("write_goal", tuple(float(q) for q in positions_rad)))
+        if not self.stuck:
+            self.position = np.array(positions_rad, dtype=np.float64)
+
+    def reboot(self, ids=None) -> None:
+        self.calls.append(("reboot", tuple(ids)))
+        self.errors = NO_ERRORS
+
+    def read_state(self) -> JointState:
+        self._fail_if(self.fail_reads, "sync read state")
+        return JointState(
+            position_rad=self.position.copy(),
+            velocity_rad_s=np.zeros(3),
+            current_a=np.zeros(3),
+            voltage_v=np.full(3, 12.0),
+            temperature_c=np.full(3, 30.0),
+            moving=np.zeros(3, dtype=bool),
+            hardware_errors=self.errors,
+            stamp_s=0.0,
+        )
+
+    @staticmethod
+    def _fail_if(failing: bool, instruction: str) -> None:
+        if failing:
+            raise CommError((1, 2, 3), instruction, "no status packet (fake)")
