@@ -13,6 +13,7 @@ from fastapi.testclient import TestClient
 from app.config import load_settings
 from app.server import create_app
 from app.server.backends import open_backend
+from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
 
@@ -29,6 +30,7 @@ def make_client(runs_folder=None, **overrides) -> TestClient:
 @pytest.fixture(scope="module")
 def client() -> Iterator[TestClient]:
     with make_client() as test_client:
+        take_lease(test_client)
         yield test_client
 
 

@@ -9,6 +9,7 @@ from fastapi.testclient import TestClient
 
 from app.config import load_settings
 from app.server import create_app
+from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
 from .conftest import settle_at
@@ -18,6 +19,7 @@ def test_default_backend_is_the_twin_and_reaches_a_goal():
     settings = load_settings(runs={"folder": tempfile.mkdtemp(prefix="deltadash-runs-")})
     assert settings.hardware.backend == "sim"
     with TestClient(create_app(settings)) as client:
+        take_lease(client)
         status = ok_json(client.get("/api/status"))
         assert status["backend"] == "sim" and status["mode"] == "idle"
         # torque off: the arm falls and hangs under gravity
@@ -49,6 +51,7 @@ def test_sinusoid_on_the_twin_has_tracking_and_validation_stats():
     Table 6.2): FK of the encoders agrees with it to encoder resolution."""
     settings = load_settings(runs={"folder": tempfile.mkdtemp(prefix="deltadash-runs-")})
     with TestClient(create_app(settings)) as client:
+        take_lease(client)
         # a defined pose first: after torque on the twin's arm may still be falling
         settle_at(client, [0.0, 0.0, -0.24])
         external = ok_json(client.get("/api/status"))["ee"]["external_m"]

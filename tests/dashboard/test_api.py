@@ -15,6 +15,7 @@ from app.config import load_settings
 from app.runs.trajectories import SinusoidParams
 from app.server import create_app
 from app.server.api.dashboard import peak_joint_speed
+from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
 
@@ -38,6 +39,7 @@ def hold_at_centre(client: TestClient) -> None:
 @pytest.fixture(scope="module")
 def client() -> Iterator[TestClient]:
     with make_client() as test_client:
+        take_lease(test_client)
         hold_at_centre(test_client)
         yield test_client
 

@@ -12,6 +12,7 @@ from fastapi.testclient import TestClient
 from app.config import load_settings
 from app.server import create_app
 from app.server.backends import open_backend
+from tests.support.lease import take_lease
 from tests.support.wait import WAIT_S, ok_json, wait_for
 
 
@@ -22,6 +23,7 @@ def app_client(tmp_path_factory) -> Iterator[TestClient]:
                              server={"viser_port": 0})  # fmt: skip
     opener = functools.partial(open_backend, emulator_in_process=True)
     with TestClient(create_app(settings, backend_opener=opener)) as client:
+        take_lease(client)
         yield client
 
 

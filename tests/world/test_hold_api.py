@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 
 from tests.app.conftest import make_client
+from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
 
 @pytest.fixture(scope="module")
 def client():
     with make_client() as test_client:
+        take_lease(test_client)
         yield test_client
 
 
