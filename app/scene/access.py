@@ -33,6 +33,7 @@ class _Client:
     unlocked: bool
     lease_id: str | None = None
     message: str = ""
+    refused: int = 0  # commands refused so far (what tests wait on)
     handles: dict[str, Any] = field(default_factory=dict)
 
 
@@ -75,10 +76,12 @@ class SceneAccess:
                 token = gui.add_text("Token", "", hint="the server's token (--token)")
                 unlock = gui.add_button("Unlock", icon=viser.Icon.LOCK_OPEN)
                 unlock.on_click(lambda _: self._unlock_from_field(handle.client_id, token))
+                client.handles.update(token=token, unlock=unlock)
             take = gui.add_button("Take control", icon=viser.Icon.HAND_GRAB)
             give = gui.add_button("Give back control", icon=viser.Icon.HAND_OFF)
         take.on_click(lambda _: self.take(handle.client_id, take_over=True))
         give.on_click(lambda _: self.give_back(handle.client_id))
+        client.handles.update(take=take, give_back=give)
 
     def _on_disconnect(self, handle: viser.ClientHandle) -> None:
         self.disconnect(handle.client_id)
@@ -127,6 +130,11 @@ class SceneAccess:
         client = self._client(client_id) if client_id is not None else None
         if client is None:
             return False  # not a connected client: nobody to answer, nothing to move
+        allowed = self._allow(client, client_id)
+        client.refused += not allowed
+        return allowed
+
+    def _allow(self, client: _Client, client_id: int) -> bool:
         if not client.unlocked:
             self._say(client, LOCKED)
             return False
@@ -158,6 +166,17 @@ class SceneAccess:
         """The last refusal shown to this client ("" when none)."""
         client = self._client(client_id)
         return client.message if client is not None else ""
+
+    def refused(self, client_id: int) -> int:
+        """How many of this client's commands were refused."""
+        client = self._client(client_id)
+        return client.refused if client is not None else 0
+
+    def handle(self, client_id: int, name: str) -> Any:
+        """One of this client's own GUI handles: "status", "token", "unlock", "take",
+        "give_back" (None before its Control folder is built)."""
+        client = self._client(client_id)
+        return client.handles.get(name) if client is not None else None
 
     def holds(self, client_id: int) -> bool:
         client = self._client(client_id)
