@@ -101,7 +101,7 @@ def post_lease(body: LeaseRequest, authority: AuthorityDep, _: TokenChecked) -> 
     return {"lease_id": lease_id, "holder": body.client, "timeout_s": authority.timeout_s}
 
 
-@router.delete("/lease", response_model=LeaseOut, responses=UNAUTHORISED)
+@router.delete("/lease", response_model=LeaseOut, responses={**UNAUTHORISED, **INVALID})
 def delete_lease(
     authority: AuthorityDep,
     _: TokenChecked,
