@@ -28,7 +28,10 @@ export class ApiError extends Error {
 let tokenPrompt = null; // a single prompt even when several requests fail at once
 
 // Ask once for the token; stored per tab (sessionStorage) so it is gone when the tab is.
-export function promptToken(reason) {
+// ``sent``: the token the refused request carried; when another request's prompt has set a
+// different one since (several reads are refused at once on a networked server), no prompt.
+export function promptToken(reason, sent = null) {
+  if (token() && token() !== sent) return Promise.resolve(true);
   if (!tokenPrompt) {
     tokenPrompt = Promise.resolve().then(() => {
       const value = window.prompt(`${reason}\nServer token:`, "");
@@ -52,14 +55,15 @@ async function detailOf(response) {
 // JSON request; a 401 asks for the token and retries once. Throws ApiError with the detail.
 export async function request(method, path, body, retried = false) {
   const headers = {};
+  const sent = token();
   if (body !== undefined) headers["Content-Type"] = "application/json";
-  if (token()) headers.Authorization = `Bearer ${token()}`;
+  if (sent) headers.Authorization = `Bearer ${sent}`;
   if (leaseId) headers["X-Lease"] = leaseId;
   const response = await fetch(path, {
     method, headers, body: body === undefined ? undefined : JSON.stringify(body),
   });
   if (response.status === 401 && !retried) {
-    if (await promptToken("This server requires a token for control.")) {
+    if (await promptToken("This server requires a token.", sent)) {
       return request(method, path, body, true);
     }
   }
