@@ -79,7 +79,7 @@ class SceneAccess:
                 client.handles.update(token=token, unlock=unlock)
             take = gui.add_button("Take control", icon=viser.Icon.HAND_GRAB)
             give = gui.add_button("Give back control", icon=viser.Icon.HAND_OFF)
-        take.on_click(lambda _: self.take(handle.client_id, take_over=True))
+        take.on_click(lambda _: self._take_over(handle.client_id))
         give.on_click(lambda _: self.give_back(handle.client_id))
         client.handles.update(take=take, give_back=give)
 
@@ -116,6 +116,9 @@ class SceneAccess:
         self._say(client, "")
         return True
 
+    def _take_over(self, client_id: int) -> None:
+        self.take(client_id, take_over=True)
+
     def give_back(self, client_id: int) -> None:
         client = self._client(client_id)
         if client is not None:
@@ -128,7 +131,7 @@ class SceneAccess:
         """May this client command the robot now? Renews its lease; when it holds none and
         nobody else does, takes one. A refusal is shown in that client's Control folder."""
         client = self._client(client_id) if client_id is not None else None
-        if client is None:
+        if client is None or client_id is None:
             return False  # not a connected client: nobody to answer, nothing to move
         allowed = self._allow(client, client_id)
         client.refused += not allowed
