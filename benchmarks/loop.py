@@ -38,13 +38,16 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
                  "--enable-unsafe-swiftshader"]  # fmt: skip
 
 
+_LEASE: dict[str, str] = {}  # X-Lease once taken: commands need the control lease
+
+
 def _http(method: str, path: str, body: dict | None = None) -> dict:
     data = None if body is None else json.dumps(body).encode()
     request = urllib.request.Request(
         f"http://127.0.0.1:{PORT}{path}",
         data=data,
         method=method,
-        headers={"content-type": "application/json"},
+        headers={"content-type": "application/json", **_LEASE},
     )
     with urllib.request.urlopen(request, timeout=5) as response:
         return json.load(response)
@@ -170,6 +173,8 @@ def run_once(args: argparse.Namespace, rate_hz: float) -> None:
     )
     try:
         _wait_up()
+        lease = _http("POST", "/api/lease", {"client": "benchmarks/loop.py", "take_over": True})
+        _LEASE["x-lease"] = lease["lease_id"]
         if args.torque:
             _http("POST", "/api/torque", {"enabled": True})
         floor = None if args.no_floor else _start_floor(args.seconds, rate_hz)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 import urllib.error
@@ -42,6 +43,11 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     sine.add_argument("--duration", type=float, default=_D.duration_s, help="timed part [s]")
     sine.add_argument("--feedforward", action="store_true", help="command the path ahead")
     sine.add_argument("--url", help="a running server, e.g. http://127.0.0.1:8000")
+    token = os.environ.get("DELTADASH_TOKEN")
+    sine.add_argument("--token", default=token, help="the server's token ($DELTADASH_TOKEN)")
+    sine.add_argument(
+        "--take-over", action="store_true", help="take control from another client that holds it"
+    )
     sine.add_argument("--backend", default="emulated", help="headless backend (default emulated)")
     sine.add_argument("--json", action="store_true", help="print the run as JSON")
     sine.set_defaults(handler=run_sinusoid)
@@ -59,17 +65,29 @@ def _params(args: argparse.Namespace) -> SinusoidParams:
     )
 
 
-def _http(url: str, method: str = "GET", body: dict | None = None) -> Any:
+def _http(
+    url: str, method: str = "GET", body: dict | None = None, headers: dict | None = None
+) -> Any:
     data = None if body is None else json.dumps(body).encode()
-    request = urllib.request.Request(
-        url, data=data, method=method, headers={"content-type": "application/json"}
-    )
+    headers = {"content-type": "application/json", **(headers or {})}
+    request = urllib.request.Request(url, data=data, method=method, headers=headers)
     with urllib.request.urlopen(request, timeout=10) as response:
         return json.load(response)
 
 
-def _remote(url: str, params: SinusoidParams) -> dict[str, Any]:
-    _http(f"{url}/api/torque", "POST", {"enabled": True})
+def _take_control(url: str, token: str | None, take_over: bool) -> dict[str, str]:
+    """Take the control lease; the headers every later request sends (token, lease id)."""
+    headers = {"authorization": f"Bearer {token}"} if token else {}
+    body = {"client": "deltadash run", "take_over": take_over}
+    lease = _http(f"{url}/api/lease", "POST", body, headers)
+    return {**headers, "x-lease": lease["lease_id"]}
+
+
+def _remote(
+    url: str, params: SinusoidParams, token: str | None = None, take_over: bool = False
+) -> dict[str, Any]:
+    headers = _take_control(url, token, take_over)
+    _http(f"{url}/api/torque", "POST", {"enabled": True}, headers)
     body = {
         "amplitude_m": params.amplitude_m,
         "frequency_hz": params.frequency_hz,
@@ -78,8 +96,8 @@ def _remote(url: str, params: SinusoidParams) -> dict[str, Any]:
         "duration_s": params.duration_s,
         "feedforward": params.feedforward,
     }
-    run_id = _http(f"{url}/api/tests/sinusoid", "POST", body)["run_id"]
-    while (run := _http(f"{url}/api/runs/{run_id}"))["state"] == "running":
+    run_id = _http(f"{url}/api/tests/sinusoid", "POST", body, headers)["run_id"]
+    while (run := _http(f"{url}/api/runs/{run_id}", headers=headers))["state"] == "running":
         time.sleep(0.25)
     base = f"{url}/api/runs/{run_id}"
     run["files"] = {name: f"{base}/{name}" for name in ("log.mcap", "log.csv", "report.png")}
@@ -131,7 +149,10 @@ def run_sinusoid(args: argparse.Namespace) -> int:
 
     try:
         params = _params(args)
-        run = _remote(args.url.rstrip("/"), params) if args.url else _headless(params, args.backend)
+        if args.url:
+            run = _remote(args.url.rstrip("/"), params, args.token, args.take_over)
+        else:
+            run = _headless(params, args.backend)
     except (GoalRejected, MotionRefused, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -18,6 +18,7 @@ from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import viser
@@ -25,6 +26,9 @@ import viser
 from app.control.errors import GoalRejected
 from app.control.state import Snapshot
 from app.scene.goal_store import load_points, save_points
+
+if TYPE_CHECKING:
+    from app.scene.access import SceneAccess
 
 log = logging.getLogger(__name__)
 
@@ -46,9 +50,15 @@ class GoalView:
     """Owns the goal gizmo, goal marker, saved points, path and trail handles."""
 
     def __init__(
-        self, server: viser.ViserServer, controller, trail_s: float = 4.0, store: Path | None = None
+        self,
+        server: viser.ViserServer,
+        controller,
+        trail_s: float = 4.0,
+        store: Path | None = None,
+        access: SceneAccess | None = None,
     ) -> None:
         self.server = server
+        self.access = access  # who may drag the goal (token, lease); None: anyone
         self.store = store  # where saved points are kept across restarts (None: not kept)
         self.controller = controller
         self.gate = controller.gate
@@ -87,6 +97,10 @@ class GoalView:
 
     # ---- dragging (viser's threads) ----
     def _on_gizmo(self, event: viser.TransformControlsEvent) -> None:
+        if self.access is not None and not self.access.allow(event.client_id):
+            if event.phase == "end":  # a refused drag: the gizmo goes back to the goal
+                self.gizmo.position = self.marker.position
+            return
         self._dragging = event.phase != "end"
         self.drag_to(np.asarray(event.target.position, dtype=np.float64), event.phase == "end")
 

@@ -1,7 +1,9 @@
 """The scene's control panel: status, e-stop, torque, jog, goal points, view toggles.
 
 Every callback runs on one of viser's threads and only calls the controller's thread-safe
-methods (they queue work for the control thread); none touches the bus. The UI shows mm;
+methods (they queue work for the control thread); none touches the bus. Every control but
+the e-stop first asks the clicking client's access (app/scene/access.py: the token, the
+control lease); the e-stop is open to anyone. The UI shows mm;
 everything handed to the controller is SI (m, s). The e-stop sits above every folder so it
 is always visible.
 """
@@ -18,11 +20,17 @@ from app.control.errors import GoalRejected, MotionRefused
 from app.control.state import Snapshot
 
 if TYPE_CHECKING:
+    from app.scene.access import SceneAccess
     from app.scene.goal_view import GoalView
 
 JOG_AXES = {"+X": (1, 0, 0), "-X": (-1, 0, 0), "+Y": (0, 1, 0), "-Y": (0, -1, 0),
             "+Z": (0, 0, 1), "-Z": (0, 0, -1)}  # fmt: skip
 MODE_COLOURS = {"estop": "red", "fault": "red", "idle": "gray"}
+
+
+def _open(action):
+    """No access check (a panel built without ``SceneAccess``, driven from Python)."""
+    return action
 
 
 def _mm(point: np.ndarray) -> str:
@@ -52,28 +60,36 @@ def status_markdown(snap: Snapshot, backend: str, message: str) -> str:
 class ControlPanel:
     """GUI handles (``gui_*``) for operating the robot from the scene."""
 
-    def __init__(self, server: viser.ViserServer, controller, goals: GoalView) -> None:
+    def __init__(
+        self,
+        server: viser.ViserServer,
+        controller,
+        goals: GoalView,
+        access: SceneAccess | None = None,
+    ) -> None:
         self.controller = controller
         self.goals = goals
         self.message = ""
+        # every control but the e-stop asks the client's access (token, lease) first
+        guard = access.guarded if access is not None else _open
         gui = server.gui
         self.gui_status = gui.add_markdown("connecting…")
         self.gui_estop = gui.add_button("E-STOP", color="red", icon=viser.Icon.HAND_STOP)
         self.gui_reset = gui.add_button("Reset e-stop / faults", icon=viser.Icon.REFRESH)
         self.gui_torque = gui.add_button_group("Torque", ("on", "off"))
         self.gui_estop.on_click(lambda _: self._call(self.controller.estop))
-        self.gui_reset.on_click(lambda _: self._call(self.controller.reset))
-        self.gui_torque.on_click(
-            lambda e: self._call(self.controller.set_torque, e.target.value == "on"))
+        self.gui_reset.on_click(guard(lambda _: self._call(self.controller.reset)))
+        self.gui_torque.on_click(guard(
+            lambda e: self._call(self.controller.set_torque, e.target.value == "on")))
         with gui.add_folder("Jog"):
             self.gui_jog_step = gui.add_number("Step [mm]", 5.0, min=0.1, max=50.0, step=0.5)
             self.gui_jog_speed = gui.add_number("Speed [mm/s]", 50.0, min=1.0, max=500.0,
                                                 step=5.0)  # fmt: skip
             self.gui_jog = gui.add_button_group("Jog", tuple(JOG_AXES))
-            self.gui_jog.on_click(lambda e: self.jog(JOG_AXES[e.target.value]))
-        self._add_goal_points(gui)
+            self.gui_jog.on_click(guard(lambda e: self.jog(JOG_AXES[e.target.value])))
+        self._add_goal_points(gui, guard)
 
-    def _add_goal_points(self, gui) -> None:
+    def _add_goal_points(self, gui, guard) -> None:
         with gui.add_folder("Goal points", expand_by_default=False):
             self.gui_point_name = gui.add_text("Name", "point 1")
             self.gui_save_point = gui.add_button("Save current goal", icon=viser.Icon.PIN)
@@ -81,7 +97,7 @@ class ControlPanel:
             self.gui_go_to = gui.add_button("Go to", icon=viser.Icon.PLAYER_PLAY)
             self.gui_delete_point = gui.add_button("Delete", icon=viser.Icon.TRASH)
         self.gui_save_point.on_click(lambda _: self.save_point())
-        self.gui_go_to.on_click(lambda _: self.go_to(self.gui_points.value))
+        self.gui_go_to.on_click(guard(lambda _: self.go_to(self.gui_points.value)))
         self.gui_delete_point.on_click(lambda _: self.delete_point(self.gui_points.value))
         if self.goals.saved:  # kept from an earlier session
             self._refresh_points(None)

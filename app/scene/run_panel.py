@@ -11,12 +11,15 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import viser
 
 from app.control.state import Snapshot
+
+if TYPE_CHECKING:
+    from app.scene.access import SceneAccess
 
 PLOT_WINDOW_S = 10.0
 AXIS_COLOURS = ("#de4c40", "#40a85a", "#3c70d6")
@@ -55,8 +58,11 @@ class RunPanel:
         server: viser.ViserServer,
         runs: Callable[[], Any],
         show_path: Callable[[np.ndarray | None], None],
+        access: SceneAccess | None = None,
     ) -> None:
         self.runs = runs
+        # start and abort ask the clicking client's access (token, lease) first
+        self._guard = access.guarded if access is not None else (lambda action: action)
         self.show_path = show_path
         self.message = ""
         self.run_id: str | None = None
@@ -93,8 +99,8 @@ class RunPanel:
         self.gui_start = gui.add_button("Start", color="green", icon=viser.Icon.PLAYER_PLAY)
         self.gui_abort = gui.add_button("Abort", color="orange", icon=viser.Icon.PLAYER_STOP)
         self.gui_preview.on_click(lambda _: self.preview())
-        self.gui_start.on_click(lambda _: self.start())
-        self.gui_abort.on_click(lambda _: self.abort())
+        self.gui_start.on_click(self._guard(lambda _: self.start()))
+        self.gui_abort.on_click(self._guard(lambda _: self.abort()))
 
     def params(self) -> Any:
         """SinusoidParams (SI) from the panel's fields."""

@@ -9,7 +9,6 @@ controller's thread-safe methods. Nothing here ever touches the servo bus.
 
 from __future__ import annotations
 
-import ipaddress
 import logging
 import threading
 import time
@@ -19,6 +18,8 @@ from typing import Any
 import numpy as np
 import viser
 
+from app.control.authority import Authority, is_loopback
+from app.scene.access import SceneAccess
 from app.scene.goal_store import FILE_NAME as POINTS_FILE
 from app.scene.goal_view import GoalView
 from app.scene.panel import ControlPanel
@@ -46,8 +47,12 @@ class Scene:
         host: str = "127.0.0.1",
         port: int = 8080,
         rate_hz: float = 30.0,
+        authority: Authority | None = None,
     ) -> None:
         self.controller = controller
+        # the app's Authority, shared with the HTTP API; alone, the scene keeps its own
+        self.authority = authority or Authority(None, getattr(
+            getattr(controller.settings, "server", None), "lease_timeout_s", 30.0))
         self.runs = runs
         self.host = host
         self.port = port
@@ -80,9 +85,10 @@ class Scene:
         self.ghost = RobotView(server, robot, "/ghost", ghost=True)
         runs_settings = getattr(settings, "runs", None)
         store = runs_settings.folder_path / POINTS_FILE if runs_settings is not None else None
-        self.goals = GoalView(server, self.controller, store=store)
-        self.panel = ControlPanel(server, self.controller, self.goals)
-        self.tests = RunPanel(server, self.runs, self.goals.show_path)
+        self.access = SceneAccess(server, self.authority)
+        self.goals = GoalView(server, self.controller, store=store, access=self.access)
+        self.panel = ControlPanel(server, self.controller, self.goals, self.access)
+        self.tests = RunPanel(server, self.runs, self.goals.show_path, self.access)
         self.world = WorldView(server, _mount(settings))
         self._add_view_toggles(server)
         self._stop.clear()
@@ -159,23 +165,24 @@ def _mount(settings: Any) -> Pose:
 
 
 def scene_host(host: str) -> str:
-    """Where the scene may listen: viser has no token check, and every scene client can
-    drive the robot, so beyond loopback it stays on 127.0.0.1 (reach it by SSH tunnel)."""
-    try:
-        loopback = host == "localhost" or ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        loopback = False
+    """Where the scene may listen: viser serves the robot's view to anyone who connects
+    (only its controls are locked by the token), so beyond loopback it stays on 127.0.0.1
+    (reach it by SSH tunnel)."""
+    loopback = is_loopback(host)
     if not loopback:
-        log.warning("3D scene bound to 127.0.0.1, not %s: it has no token check", host)
+        log.warning("3D scene bound to 127.0.0.1, not %s: its view has no token check", host)
     return host if loopback else "127.0.0.1"
 
 
-def start_scene(settings: Any, controller: Any, runs: Callable[[], Any]) -> Scene | None:
-    """The lifespan's hook: a started Scene per ``settings.server``, or None if disabled."""
+def start_scene(
+    settings: Any, controller: Any, runs: Callable[[], Any], authority: Authority | None = None
+) -> Scene | None:
+    """The lifespan's hook: a started Scene per ``settings.server``, or None if disabled;
+    ``authority`` is the app's (the scene's controls obey the same token and lease)."""
     if not settings.server.scene:
         return None
     host = scene_host(settings.server.host)
-    scene = Scene(controller, runs, host, settings.server.viser_port)
+    scene = Scene(controller, runs, host, settings.server.viser_port, authority=authority)
     scene.start()
     wanted = settings.server.viser_port
     if scene.server is not None and wanted and scene.server.get_port() != wanted:

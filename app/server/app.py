@@ -13,16 +13,17 @@ import gc
 import sys
 from collections.abc import AsyncIterator, Callable
 
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI
 from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 
 from app.config import Settings
+from app.control.authority import Authority
 from app.control.controller import Controller
 from app.runs.manager import RunManager
 from app.scene import start_scene
 from app.server.api import dashboard, mav, robot, runs, telemetry
-from app.server.api.deps import Lease
+from app.server.api.deps import require_read_token
 from app.server.backends import open_backend
 from app.server.errors import install_error_handlers
 from app.static_files import static_dir
@@ -54,7 +55,9 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
             app.state.world = WorldService(controller)
             controller.pose_status = app.state.world.tracker.status
             runs = lambda: app.state.runs  # noqa: E731
-            app.state.scene = await asyncio.to_thread(start_scene, settings, controller, runs)
+            app.state.scene = await asyncio.to_thread(
+                start_scene, settings, controller, runs, app.state.authority
+            )
             try:
                 yield
             finally:
@@ -70,13 +73,16 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
         lifespan=lifespan,
     )
     app.state.settings = settings
-    app.state.lease = Lease()
+    # one authority for motion: the HTTP routes and the 3D scene check the same lease
+    app.state.authority = Authority(settings.server.token, settings.server.lease_timeout_s)
     install_error_handlers(app)
-    app.include_router(robot.router, prefix="/api")
-    app.include_router(telemetry.router, prefix="/api")
-    app.include_router(runs.router, prefix="/api")
-    app.include_router(mav.router, prefix="/api")
-    app.include_router(dashboard.router)  # /api/info, sinusoid check, /vendor for static/
+    reads = [Depends(require_read_token)]  # the token on reads too, beyond loopback
+    app.include_router(robot.router, prefix="/api", dependencies=reads)
+    app.include_router(telemetry.router, prefix="/api", dependencies=reads)
+    app.include_router(runs.router, prefix="/api", dependencies=reads)
+    app.include_router(mav.router, prefix="/api", dependencies=reads)
+    # /api/info (the page asks it whether to prompt for the token), sinusoid check, /vendor
+    app.include_router(dashboard.router)
     if (STATIC_DIR / "index.html").exists():
         app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="static")
     return app

@@ -4,7 +4,7 @@
 const TOKEN_KEY = "deltadash.token";
 const CLIENT_KEY = "deltadash.client";
 
-// One control lease per browser tab: the server's lease is per X-Client name.
+// The name this tab shows as the lease holder (GET /api/lease): a label, not authority.
 export function clientName() {
   let name = sessionStorage.getItem(CLIENT_KEY);
   if (!name) {
@@ -28,7 +28,10 @@ export class ApiError extends Error {
 let tokenPrompt = null; // a single prompt even when several requests fail at once
 
 // Ask once for the token; stored per tab (sessionStorage) so it is gone when the tab is.
-export function promptToken(reason) {
+// ``sent``: the token the refused request carried; when another request's prompt has set a
+// different one since (several reads are refused at once on a networked server), no prompt.
+export function promptToken(reason, sent = null) {
+  if (token() && token() !== sent) return Promise.resolve(true);
   if (!tokenPrompt) {
     tokenPrompt = Promise.resolve().then(() => {
       const value = window.prompt(`${reason}\nServer token:`, "");
@@ -51,14 +54,16 @@ async function detailOf(response) {
 
 // JSON request; a 401 asks for the token and retries once. Throws ApiError with the detail.
 export async function request(method, path, body, retried = false) {
-  const headers = { "X-Client": clientName() };
+  const headers = {};
+  const sent = token();
   if (body !== undefined) headers["Content-Type"] = "application/json";
-  if (token()) headers.Authorization = `Bearer ${token()}`;
+  if (sent) headers.Authorization = `Bearer ${sent}`;
+  if (leaseId) headers["X-Lease"] = leaseId;
   const response = await fetch(path, {
     method, headers, body: body === undefined ? undefined : JSON.stringify(body),
   });
   if (response.status === 401 && !retried) {
-    if (await promptToken("This server requires a token for control.")) {
+    if (await promptToken("This server requires a token.", sent)) {
       return request(method, path, body, true);
     }
   }
@@ -68,6 +73,33 @@ export async function request(method, path, body, retried = false) {
 
 export const get = (path) => request("GET", path);
 export const post = (path, body) => request("POST", path, body);
+
+// This tab's control lease: the secret id from POST /api/lease, in memory only (a reload or
+// another tab is another client). Sent as X-Lease with every request.
+let leaseId = null;
+
+export async function takeLease(takeOver = false) {
+  const lease = await post("/api/lease", { client: clientName(), take_over: takeOver });
+  leaseId = lease.lease_id;
+  return lease;
+}
+
+const heldByAnother = (err) => err.status === 409 && err.message.includes("control is held by");
+
+// A command that moves the robot or changes its power: takes the lease on first use, and once
+// more when the server no longer knows ours (restarted, lapsed and released). When another
+// client holds control it throws the 409 "control is held by ..." (see control.js's command).
+export async function postControl(path, body) {
+  if (!leaseId) await takeLease(false);
+  try {
+    return await post(path, body);
+  } catch (err) {
+    if (err.status !== 409 || heldByAnother(err) || !err.message.includes("/api/lease")) throw err;
+    leaseId = null;
+    await takeLease(false);
+    return post(path, body);
+  }
+}
 
 export function telemetryUrl(hz) {
   const proto = location.protocol === "https:" ? "wss:" : "ws:";

@@ -1,7 +1,7 @@
 // Operator commands: e-stop (Space / Esc), torque, reset, go-to, and hold-to-move jogs from
 // the pad, the arrow keys and a gamepad (they move only while held: see startHold).
 
-import { post, clientName } from "./api.js";
+import { post, postControl, takeLease } from "./api.js";
 import { showError, showMessage, setText } from "./ui.js";
 
 const KEY_AXES = {
@@ -14,15 +14,16 @@ const DEADZONE = 0.15;
 const DEADMAN_BUTTON = 4; // LB on standard-mapping pads
 let maxSpeed = 0.5; // [m/s], /api/info's jog limit
 
-// A command that needs the control lease; another holder is taken over only if the operator agrees.
+// A command that needs the control lease (api.js takes it on first use); another holder is
+// taken over only if the operator agrees.
 export async function command(path, body) {
   try {
-    return await post(path, body);
+    return await postControl(path, body);
   } catch (err) {
     if (err.status === 409 && err.message.includes("control is held by")) {
       if (window.confirm(`${err.message}\n\nTake control?`)) {
-        await post("/api/lease", { client: clientName(), take_over: true });
-        return post(path, body);
+        await takeLease(true);
+        return postControl(path, body);
       }
     }
     throw err;

@@ -5,7 +5,7 @@
 // relative to now, y ranges with hysteresis) and a full redraw only when a range must change.
 // Ring buffers hold a fixed 10 s, so an hour-long session stays as fast as the first minute.
 
-import { telemetryUrl, promptToken } from "./api.js";
+import { telemetryUrl, promptToken, token } from "./api.js";
 import { Ring } from "./ring.js";
 
 const HZ = 50;
@@ -168,6 +168,7 @@ function onMessage(message) {
 }
 
 function connect(onState) {
+  const sent = token();
   const ws = new WebSocket(telemetryUrl(HZ));
   ws.onopen = () => { plotStats.connected = true; onState(true); };
   ws.onmessage = onMessage;
@@ -175,7 +176,7 @@ function connect(onState) {
     plotStats.connected = false;
     onState(false);
     // 1008 = policy: the server wants a token; ask, then reconnect with it
-    if (event.code === 1008) await promptToken("The telemetry stream requires a token.");
+    if (event.code === 1008) await promptToken("The telemetry stream requires a token.", sent);
     setTimeout(() => connect(onState), 1000);
   };
 }

@@ -1,6 +1,7 @@
 // Header, faults and the servo table from GET /api/status, polled; connection banner.
 
-import { get, post, mm, deg, fixed } from "./api.js";
+import { get, mm, deg, fixed } from "./api.js";
+import { command } from "./control.js";
 import { showError, setText } from "./ui.js";
 
 const POLL_MS = 200;
@@ -126,7 +127,7 @@ export function startStatus() {
   // A servo in error is rebooted by the reset, which reboots every servo reporting errors.
   document.getElementById("servo-rows").addEventListener("click", (event) => {
     const id = event.target.dataset.reboot;
-    if (id) post("/api/reset").catch(showError);
+    if (id) command("/api/reset").catch(showError);
   });
   poll();
 }

@@ -8,12 +8,14 @@ import pytest
 from fastapi.testclient import TestClient
 
 from tests.support.app_client import make_client
+from tests.support.lease import take_lease
 from tests.support.wait import WAIT_S
 
 
 @pytest.fixture(scope="module")
 def app_client(tmp_path_factory) -> Iterator[TestClient]:
     with make_client(tmp_path_factory.mktemp("runs"), server={"scene": True}) as client:
+        take_lease(client)
         yield client
 
 

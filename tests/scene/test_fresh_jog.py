@@ -8,24 +8,23 @@ after torque on), and status says the motion started from the measured position.
 
 from __future__ import annotations
 
-import tempfile
 from collections.abc import Iterator
 
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.config import load_settings
-from app.server import create_app
+from tests.support.app_client import make_client
+from tests.support.lease import take_lease
 from tests.support.wait import WAIT_S, ok_json, wait_for
 
 
 @pytest.fixture(scope="module")
-def sim_client() -> Iterator[TestClient]:
-    folder = tempfile.mkdtemp(prefix="deltadash-runs-")
-    settings = load_settings(runs={"folder": folder}, server={"viser_port": 0})
-    assert settings.hardware.backend == "sim"
-    with TestClient(create_app(settings)) as client:
+def sim_client(tmp_path_factory) -> Iterator[TestClient]:
+    with make_client(
+        tmp_path_factory.mktemp("runs"), backend="sim", server={"scene": True}
+    ) as client:
+        take_lease(client)  # for the HTTP goal; the panel is driven from Python, unguarded
         yield client
 
 

@@ -58,7 +58,7 @@ class Server:
 
     def up(self) -> bool:
         try:
-            self.get("/api/status")
+            self.get("/api/info")  # open even where reads need the token
             return True
         except (urllib.error.URLError, OSError):
             return False

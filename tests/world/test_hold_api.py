@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 
 from tests.support.app_client import make_client
+from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory):
     with make_client(tmp_path_factory.mktemp("runs")) as test_client:
+        take_lease(test_client)
         yield test_client
 
 

@@ -1,22 +1,23 @@
 """Typed dependencies: what routes read from ``app.state`` (controller, runs, world, scene,
-settings, lease), the token check and the control lease. Only this module reads
-``app.state``; routes declare what they need as ``Annotated[..., Depends(...)]`` aliases."""
+settings, authority), the token check and the control lease (app/control/authority.py).
+Only this module reads ``app.state``; routes declare what they need as
+``Annotated[..., Depends(...)]`` aliases."""
 
 from __future__ import annotations
 
-import secrets
-import time
-from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, Header, HTTPException, WebSocket
 from starlette.requests import HTTPConnection
 
 from app.config import Settings
+from app.control.authority import Authority, ControlRefused, TokenRequired, is_loopback
 from app.control.controller import Controller
 from app.runs.manager import RunManager
 from app.scene import Scene
 from app.world.service import WorldService
+
+READS = ("GET", "HEAD")
 
 
 def get_controller(connection: HTTPConnection) -> Controller:
@@ -44,69 +45,68 @@ def get_scene(connection: HTTPConnection) -> Scene | None:
     return getattr(connection.app.state, "scene", None)
 
 
-def get_lease(connection: HTTPConnection) -> Lease:
-    return connection.app.state.lease
+def get_authority(connection: HTTPConnection) -> Authority:
+    return connection.app.state.authority
 
 
-def token_ok(settings: Settings, supplied: str | None) -> bool:
-    """True when no token is configured or ``supplied`` matches it."""
-    expected = settings.server.token
-    return expected is None or (
-        supplied is not None and secrets.compare_digest(supplied.encode(), expected.encode())
-    )
-
-
-def _bearer(authorization: str | None) -> str | None:
-    if authorization and authorization.lower().startswith("bearer "):
-        return authorization[7:].strip()
-    return authorization
+def bearer(authorization: str | None) -> str | None:
+    """The token in ``Authorization: Bearer <token>``; None for anything else, a bare token
+    included (it would teach clients a form other servers and proxies do not treat as a
+    credential)."""
+    scheme, _, value = (authorization or "").strip().partition(" ")
+    return (value.strip() or None) if scheme.lower() == "bearer" else None
 
 
 def require_token(
-    settings: Annotated[Settings, Depends(get_settings)],
+    authority: Annotated[Authority, Depends(get_authority)],
     authorization: Annotated[str | None, Header()] = None,
 ) -> None:
     """Control requests carry ``Authorization: Bearer <token>`` when a token is set."""
-    if not token_ok(settings, _bearer(authorization)):
-        raise HTTPException(401, "missing or wrong token (Authorization: Bearer <token>)")
+    try:
+        authority.require_token(bearer(authorization))
+    except TokenRequired as exc:
+        raise HTTPException(401, str(exc)) from None
+
+
+def reads_need_token(settings: Settings) -> bool:
+    """A token is set and the server is reachable from other machines (not loopback)."""
+    return settings.server.token is not None and not is_loopback(settings.server.host)
+
+
+def require_read_token(
+    connection: HTTPConnection,
+    authority: Annotated[Authority, Depends(get_authority)],
+    settings: Annotated[Settings, Depends(get_settings)],
+) -> None:
+    """GETs need the token too where other machines can reach the server (see
+    ``reads_need_token``). Commands check it themselves (e-stop is open to anyone);
+    WebSockets check it on connecting (``websocket_token_ok``)."""
+    reading = connection.scope["type"] == "http" and connection.scope["method"] in READS
+    if not reading or not reads_need_token(settings):
+        return
+    try:
+        authority.require_token(bearer(connection.headers.get("authorization")))
+    except TokenRequired as exc:
+        raise HTTPException(401, str(exc)) from None
 
 
 def websocket_token_ok(websocket: WebSocket) -> bool:
-    supplied = websocket.query_params.get("token") or _bearer(
-        websocket.headers.get("authorization")
-    )
-    return token_ok(websocket.app.state.settings, supplied)
+    """``?token=`` (browsers cannot set headers on a WebSocket) or a Bearer header."""
+    supplied = websocket.query_params.get("token") or bearer(websocket.headers.get("authorization"))
+    return websocket.app.state.authority.token_ok(supplied)
 
 
-@dataclass
-class Lease:
-    """Which client holds control, until when (monotonic seconds)."""
-
-    holder: str | None = None
-    expires_s: float = 0.0
-
-    def active(self) -> bool:
-        return self.holder is not None and time.monotonic() < self.expires_s
-
-    def renew(self, client: str, timeout_s: float) -> None:
-        self.holder, self.expires_s = client, time.monotonic() + timeout_s
-
-
-def require_lease(
-    lease: Annotated[Lease, Depends(get_lease)],
-    settings: Annotated[Settings, Depends(get_settings)],
+def require_control(
+    authority: Annotated[Authority, Depends(get_authority)],
     _: Annotated[None, Depends(require_token)],
-    x_client: Annotated[str | None, Header()] = None,
+    x_lease: Annotated[str | None, Header(description="lease_id from POST /api/lease")] = None,
 ) -> str:
-    """One client controls at a time; its lease renews with each control request."""
-    client = x_client or "anonymous"
-    if lease.active() and lease.holder != client:
-        raise HTTPException(
-            409,
-            f"control is held by {lease.holder!r}; POST /api/lease with take_over=true to take it",
-        )
-    lease.renew(client, settings.server.lease_timeout_s)
-    return client
+    """The one check for commands that move the robot or change its power: the token, then
+    the lease id in ``X-Lease`` (renewed). Returns the holder's display name."""
+    try:
+        return authority.check(x_lease)
+    except ControlRefused as exc:
+        raise HTTPException(409, str(exc)) from None
 
 
 ControllerDep = Annotated[Controller, Depends(get_controller)]
@@ -114,6 +114,6 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 RunsDep = Annotated[RunManager, Depends(get_runs)]
 WorldDep = Annotated[WorldService, Depends(get_world)]
 SceneDep = Annotated[Scene | None, Depends(get_scene)]
-LeaseDep = Annotated[Lease, Depends(get_lease)]
-ControlClient = Annotated[str, Depends(require_lease)]
+AuthorityDep = Annotated[Authority, Depends(get_authority)]
+ControlClient = Annotated[str, Depends(require_control)]
 TokenChecked = Annotated[None, Depends(require_token)]

@@ -52,7 +52,9 @@ class TorqueRequest(_Body):
 
 
 class LeaseRequest(_Body):
-    client: Annotated[str, Field(min_length=1, max_length=64)]
+    client: Annotated[str, Field(min_length=1, max_length=64)] = Field(
+        description="a display name for the holder (shown by GET /api/lease; not a credential)"
+    )
     take_over: bool = Field(False, description="take control from the current holder")
 
 

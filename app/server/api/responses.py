@@ -225,7 +225,21 @@ class WindowStats(_Out):
 
 
 class LeaseOut(_Out):
-    holder: str | None = Field(description="who holds control; null when nobody does")
+    """The public view of the control lease: never anything that lets a client act for
+    the holder (the lease id is only in the answer to the POST that took it)."""
+
+    held: bool = Field(description="someone holds control now (the lease has not lapsed)")
+    holder: str | None = Field(description="the holder's display name (a label, not authority)")
+    since_s: float | None = Field(description="when control was taken [s, Unix time]")
+    idle_s: float | None = Field(description="seconds since the holder's last command [s]")
+
+
+class LeaseTaken(_Out):
+    """Control taken: send ``lease_id`` as ``X-Lease`` with every command."""
+
+    lease_id: str = Field(description="the secret lease id; only its holder knows it")
+    holder: str = Field(description="the display name given")
+    timeout_s: float = Field(description="the lease lapses after this long without a command")
 
 
 class PoseAccepted(_Out):

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import asyncio
 from concurrent.futures import Future
-from typing import Any
+from dataclasses import asdict
+from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException
+from fastapi import APIRouter, Header, HTTPException
 
+from app.control.authority import LeaseHeld
 from app.server.api import serialize
-from app.server.api.deps import ControlClient, ControllerDep, LeaseDep, SettingsDep, TokenChecked
+from app.server.api.deps import AuthorityDep, ControlClient, ControllerDep, TokenChecked
 from app.server.api.models import (
     Accepted,
     GoalRequest,
@@ -18,7 +20,7 @@ from app.server.api.models import (
     MoveRequest,
     TorqueRequest,
 )
-from app.server.api.responses import LeaseOut, StatusOut
+from app.server.api.responses import LeaseOut, LeaseTaken, StatusOut
 from app.server.errors import CONFLICT, CONTROL, INVALID, UNAUTHORISED, UNAVAILABLE
 
 router = APIRouter(tags=["robot"])
@@ -71,11 +73,10 @@ async def post_torque(body: TorqueRequest, controller: ControllerDep, _: Control
     return await _outcome(controller.set_torque(body.enabled))
 
 
-@router.post(
-    "/estop", response_model=Accepted, responses={**UNAUTHORISED, **INVALID, **UNAVAILABLE}
-)
-async def post_estop(controller: ControllerDep, _: TokenChecked):
-    """Stop at once; holds or releases torque per config. Needs no lease: anyone may stop."""
+@router.post("/estop", response_model=Accepted, responses=UNAVAILABLE)
+async def post_estop(controller: ControllerDep):
+    """Stop at once; holds or releases torque per config. Open to anyone (no token, no
+    lease): whoever sees the robot about to hurt someone may stop it."""
     return await _outcome(controller.estop())
 
 
@@ -86,17 +87,30 @@ async def post_reset(controller: ControllerDep, _: ControlClient):
 
 
 @router.get("/lease", response_model=LeaseOut)
-def get_lease(lease: LeaseDep) -> dict[str, Any]:
-    """Who holds control now (null when nobody does)."""
-    return {"holder": lease.holder if lease.active() else None}
+def get_lease(authority: AuthorityDep) -> dict[str, Any]:
+    """Whether control is held, by which display name, since when; never the lease id."""
+    return asdict(authority.view())
 
 
-@router.post("/lease", response_model=LeaseOut, responses={**UNAUTHORISED, **CONFLICT, **INVALID})
-def post_lease(
-    body: LeaseRequest, lease: LeaseDep, settings: SettingsDep, _: TokenChecked
+@router.post(
+    "/lease", response_model=LeaseTaken, responses={**UNAUTHORISED, **CONFLICT, **INVALID}
+)
+def post_lease(body: LeaseRequest, authority: AuthorityDep, _: TokenChecked) -> dict[str, Any]:
+    """Take control: a new secret lease id to send as ``X-Lease`` with each command.
+    Taking it from another client (one whose lease has not lapsed) needs take_over=true."""
+    try:
+        lease_id = authority.take(body.client, body.take_over)
+    except LeaseHeld as exc:
+        raise HTTPException(409, str(exc)) from None
+    return {"lease_id": lease_id, "holder": body.client, "timeout_s": authority.timeout_s}
+
+
+@router.delete("/lease", response_model=LeaseOut, responses={**UNAUTHORISED, **INVALID})
+def delete_lease(
+    authority: AuthorityDep,
+    _: TokenChecked,
+    x_lease: Annotated[str | None, Header(description="the lease id to give back")] = None,
 ) -> dict[str, Any]:
-    """Take the control lease; taking it from another client needs take_over=true."""
-    if lease.active() and lease.holder != body.client and not body.take_over:
-        raise HTTPException(409, f"control is held by {lease.holder!r}; set take_over=true")
-    lease.renew(body.client, settings.server.lease_timeout_s)
-    return {"holder": body.client}
+    """Give control back (the holder's lease id in ``X-Lease``); anything else changes nothing."""
+    authority.release(x_lease)
+    return asdict(authority.view())

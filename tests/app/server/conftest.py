@@ -8,11 +8,13 @@ import pytest
 from fastapi.testclient import TestClient
 
 from tests.support.app_client import cleared, make_client
+from tests.support.lease import take_lease
 
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory) -> Iterator[TestClient]:
     with make_client(tmp_path_factory.mktemp("runs")) as test_client:
+        take_lease(test_client)
         yield test_client
 
 

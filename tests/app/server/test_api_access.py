@@ -8,7 +8,7 @@ from starlette.websockets import WebSocketDisconnect
 from app.cli.serve import check_exposure
 from app.config import ConfigError, load_settings
 from tests.support.app_client import make_client
-from tests.support.wait import ok_json
+from tests.support.lease import take_lease
 
 TOKEN = "s3cret-token"
 
@@ -20,13 +20,11 @@ def guarded(tmp_path_factory):
         yield client
 
 
-def test_control_needs_the_token_status_does_not(guarded):
-    assert guarded.get("/api/status").status_code == 200
-    assert guarded.post("/api/estop").status_code == 401
+def test_control_needs_the_token(guarded):
     assert guarded.post("/api/torque", json={"enabled": False}).status_code == 401
     wrong = {"Authorization": "Bearer nope-nope-nope"}
     assert guarded.post("/api/reset", headers=wrong).status_code == 401
-    right = {"Authorization": f"Bearer {TOKEN}"}
+    right = take_lease(guarded, token=TOKEN, sticky=False)
     assert guarded.post("/api/reset", headers=right).status_code == 200
 
 
@@ -41,20 +39,6 @@ def test_binding_beyond_loopback_needs_a_token():
     with pytest.raises(ConfigError, match="token"):
         check_exposure(load_settings(server={"host": "0.0.0.0"}))
     check_exposure(load_settings(server={"host": "127.0.0.1"}))
-
-
-def test_one_client_holds_control_until_taken_over(client):
-    alice, bob = {"X-Client": "alice"}, {"X-Client": "bob"}
-    assert client.post("/api/reset", headers=alice).status_code == 200
-    refused = client.post("/api/reset", headers=bob)
-    assert refused.status_code == 409, refused.text
-    assert "alice" in refused.json()["detail"]
-    assert client.post("/api/estop", headers=bob).status_code == 200  # anyone may stop
-    assert client.post("/api/lease", json={"client": "bob"}).status_code == 409
-    assert client.post("/api/lease", json={"client": "bob", "take_over": True}).status_code == 200
-    assert ok_json(client.get("/api/lease"))["holder"] == "bob"
-    assert client.post("/api/reset", headers=bob).status_code == 200
-    client.post("/api/lease", json={"client": "anonymous", "take_over": True})
 
 
 def test_telemetry_streams_the_loop_state(client):

@@ -14,6 +14,7 @@ from app.config import load_settings
 from app.runs.trajectories import SinusoidParams
 from app.server.api.dashboard import peak_joint_speed
 from tests.support.app_client import make_client
+from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
 
@@ -30,6 +31,7 @@ def hold_at_centre(client: TestClient) -> None:
 def client(tmp_path_factory) -> Iterator[TestClient]:
     # the default backend, the simulator: no pty, no emulator process
     with make_client(tmp_path_factory.mktemp("runs"), backend="sim") as test_client:
+        take_lease(test_client)
         hold_at_centre(test_client)
         yield test_client
 

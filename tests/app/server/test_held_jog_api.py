@@ -8,7 +8,6 @@ changing by itself. The time from the last heartbeat to the stop is printed, not
 
 from __future__ import annotations
 
-import tempfile
 import time
 from collections.abc import Iterator
 
@@ -16,19 +15,17 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.config import load_settings
-from app.server import create_app
+from tests.support.app_client import make_client
+from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
 VELOCITY_M_S = [0.03, 0.0, 0.0]
 
 
 @pytest.fixture(scope="module")
-def client() -> Iterator[TestClient]:
-    settings = load_settings(
-        runs={"folder": tempfile.mkdtemp(prefix="deltadash-runs-")}, server={"viser_port": 0}
-    )
-    with TestClient(create_app(settings)) as test_client:
+def client(tmp_path_factory) -> Iterator[TestClient]:
+    with make_client(tmp_path_factory.mktemp("runs"), backend="sim") as test_client:
+        take_lease(test_client)
         yield test_client
 
 

@@ -8,12 +8,14 @@ from fastapi.testclient import TestClient
 
 from app.config import load_settings
 from tests.support.app_client import make_client, settle_at
+from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
 
 def test_default_backend_is_the_twin_and_reaches_a_goal(tmp_path):
     assert load_settings().hardware.backend == "sim"
     with make_client(tmp_path, backend="sim") as client:
+        take_lease(client)
         status = ok_json(client.get("/api/status"))
         assert status["backend"] == "sim" and status["mode"] == "idle"
         # torque off: the arm falls and hangs under gravity
@@ -45,6 +47,7 @@ def test_sinusoid_on_the_twin_has_tracking_and_validation_stats(tmp_path):
     """On the simulator the twin's true platform is the external measurement (thesis
     Table 6.2): FK of the encoders agrees with it to encoder resolution."""
     with make_client(tmp_path, backend="sim") as client:
+        take_lease(client)
         # a defined pose first: after torque on the twin's arm may still be falling
         settle_at(client, [0.0, 0.0, -0.24])
         external = ok_json(client.get("/api/status"))["ee"]["external_m"]
