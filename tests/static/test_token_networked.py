@@ -8,8 +8,8 @@ from typing import Any
 
 import pytest
 
-from tests.dashboard.conftest import Server, serve, wait_for
 from tests.support.browser import browser_skip_reason, chromium_page
+from tests.support.server import Server, serve, wait_for
 
 SKIP = browser_skip_reason()
 pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
