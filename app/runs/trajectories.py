@@ -148,11 +148,23 @@ def plan_sinusoid(params: TimedPath, start_m: np.ndarray) -> PlannedRun:
     if not all(math.isfinite(v) for v in (speed, accel, jerk)):
         raise ValueError("the path's speed, acceleration or jerk is not finite: too large")
     # The joins must be able to match the sinusoid's own motion, yet gentle when it is slow;
-    # A hair over the peaks, or rounding puts the path's own join state beyond them.
+    # a hair over the peaks, or rounding puts the path's own join state beyond them.
     limits = (max(speed, 0.1) * ROUNDING, max(accel, 1.0) * ROUNDING, max(jerk, 10.0) * 2.0)
-    begin = [params.derivatives(np.array(0.0), k).tolist() for k in range(3)]
+    begin = tuple(params.derivatives(np.array(0.0), k).tolist() for k in range(3))
     rest = (np.asarray(start_m, dtype=np.float64).tolist(), [0.0] * 3, [0.0] * 3)
-    approach = _ruckig(rest, tuple(begin), limits, velocity_only=False)
     end = [params.derivatives(np.array(params.duration_s), k).tolist() for k in range(3)]
-    stop = _ruckig(tuple(end), (end[0], [0.0] * 3, [0.0] * 3), limits, velocity_only=True)
+    approach = _join(rest, begin, limits, velocity_only=False)
+    stop = _join(tuple(end), (end[0], [0.0] * 3, [0.0] * 3), limits, velocity_only=True)
     return PlannedRun(params, approach, stop)
+
+
+def _join(start: tuple, target: tuple, limits: tuple, velocity_only: bool) -> Trajectory:
+    """A join within ``limits``; failing that, with the speed headroom a join that starts
+    or ends accelerating needs (a chirp's end: its speed grows by a^2 / 2j while the
+    acceleration is brought to zero at jerk j)."""
+    try:
+        return _ruckig(start, target, limits, velocity_only)
+    except ValueError:
+        speed, accel, jerk = limits
+        headroom = max(np.abs(start[2]).max(), np.abs(target[2]).max()) ** 2 / (2.0 * jerk)
+        return _ruckig(start, target, (speed + headroom, accel, jerk), velocity_only)

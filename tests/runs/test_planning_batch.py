@@ -3,22 +3,17 @@ longer than the configured bound is refused before it is sampled (planning time 
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.config import load_settings
-from app.control.commands import CommandContext
 from app.control.errors import GoalRejected
-from app.control.state import Snapshot
 from app.runs.feasibility import _follow_branch
-from app.runs.manager import RunManager
 from app.runs.paths import ChirpParams, StepParams, WaypointParams
 from app.runs.trajectories import SinusoidParams, plan_sinusoid
 from kinematics import THESIS_DELTA
+from tests.support.planning import resting_manager
 
 START = np.array([0.0, 0.0, -0.24])
 
@@ -44,6 +39,7 @@ def walks(draw) -> np.ndarray:
     step = draw(st.sampled_from([0.001, 0.01, 0.05, 0.2]))
     seed = draw(st.integers(0, 2**32 - 1))
     steps = np.random.default_rng(seed).normal(0.0, step, (count, 3))
+    steps[0] = 0.0  # from the start point, reachable: where a checked path begins
     return START + np.cumsum(steps, axis=0)
 
 
@@ -78,23 +74,8 @@ def test_batch_sampling_equals_point_at(params):
     np.testing.assert_allclose(points, expected, rtol=0, atol=1e-12)
 
 
-def manager(tmp_path, **runs) -> RunManager:
-    """A RunManager over a stand-in controller resting at START (no loop, no bus)."""
-    config = load_settings(runs={"folder": str(tmp_path), **runs})
-    ctx = CommandContext.from_settings(config)
-    snap = Snapshot(
-        joints_measured_rad=ctx.robot.ik(START).joints,
-        point_measured_m=START,
-        point_commanded_m=START,
-    )
-    controller = SimpleNamespace(
-        snapshot=lambda: snap, period_s=ctx.period_s, settings=config, gate=ctx.gate
-    )
-    return RunManager(controller, tmp_path)  # type: ignore[arg-type]
-
-
 def test_a_run_longer_than_max_samples_is_refused_naming_the_limit(tmp_path):
-    runs = manager(tmp_path, max_samples=2000)  # 10 s at 200 Hz
+    runs = resting_manager(tmp_path, START, max_samples=2000)  # 10 s at 200 Hz
     runs.plan(SinusoidParams(amplitude_m=(0.01, 0.01, 0.01), duration_s=5.0))
     with pytest.raises(GoalRejected, match="runs.max_samples = 2000"):
         runs.plan(SinusoidParams(amplitude_m=(0.01, 0.01, 0.01), duration_s=12.0))
