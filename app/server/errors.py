@@ -35,6 +35,10 @@ class ErrorBody(BaseModel):
     )
 
 
+class PlanningTimeout(TimeoutError):
+    """Planning a run took longer than its bound: the run is not started (503, this text)."""
+
+
 def _response(description: str) -> dict[str, Any]:
     return {"model": ErrorBody, "description": description}
 
@@ -87,6 +91,8 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(TimeoutError)  # a command the control loop did not answer in time
     async def timeout(_: Request, exc: TimeoutError) -> JSONResponse:
+        if isinstance(exc, PlanningTimeout):
+            return _error(503, str(exc))
         return _error(503, "the control loop did not answer in time")
 
     app.add_middleware(BugsAre500)
