@@ -25,6 +25,7 @@ from app.server.api import dashboard, mav, robot, runs, telemetry
 from app.server.api.deps import Lease
 from app.server.backends import open_backend
 from app.server.errors import install_error_handlers
+from app.server.limits import RequestLimits
 from app.static_files import static_dir
 from app.world.service import WorldService
 
@@ -72,6 +73,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
     app.state.settings = settings
     app.state.lease = Lease()
     install_error_handlers(app)
+    app.add_middleware(RequestLimits, settings=settings)  # outermost: before any body is read
     app.include_router(robot.router, prefix="/api")
     app.include_router(telemetry.router, prefix="/api")
     app.include_router(runs.router, prefix="/api")

@@ -48,7 +48,8 @@ NOT_FOUND = {404: _response("no such run or file")}
 CONFLICT = {409: _response("the robot cannot move now, or another client holds control")}
 INVALID = {422: _response("invalid body or goal; nearest_m when a point is out of reach")}
 UNAVAILABLE = {503: _response("the servo bus or the control loop did not answer")}
-CONTROL = {**UNAUTHORISED, **CONFLICT, **INVALID, **UNAVAILABLE}
+TOO_LARGE = {413: _response("request body over server.max_body_bytes (refused unread)")}
+CONTROL = {**UNAUTHORISED, **CONFLICT, **TOO_LARGE, **INVALID, **UNAVAILABLE}
 """What a control route (token, lease, command to the loop) can answer besides 200."""
 
 
