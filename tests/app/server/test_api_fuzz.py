@@ -21,7 +21,6 @@ from hypothesis import strategies as st
 
 from app.config import load_settings
 from app.server import create_app
-from tests.app.conftest import settle_at
 from tests.support.openapi import JUNK, bodies
 from tests.support.wait import ok_json, wait_for
 
@@ -73,11 +72,24 @@ def at_rest(client) -> bool:
 
 
 def to_rest(client) -> None:
-    """Back to the standard state: control taken, e-stop cleared, torque on, arm settled."""
-    ok_json(client.post("/api/lease", json={"client": "fuzz", "take_over": True}))
-    ok_json(client.post("/api/estop"))
-    ok_json(client.post("/api/reset"))
-    settle_at(client, REST_M)
+    """Back to the standard state: control taken, e-stop cleared, torque on, the goal at
+    REST_M and the setpoint still there. Each step is retried: on a loaded machine the
+    loop may answer a command late (503) just after an e-stop stopped a run."""
+    steps = [
+        ("/api/lease", {"client": "fuzz", "take_over": True}),
+        ("/api/estop", None),
+        ("/api/reset", None),
+        ("/api/torque", {"enabled": True}),
+        ("/api/goal", {"position_m": REST_M}),
+    ]
+    for path, body in steps:
+        answers = []
+
+        def accepted(path=path, body=body, answers=answers) -> bool:
+            answers.append(client.post(path, json=body))
+            return answers[-1].status_code == 200
+
+        wait_for(accepted, f"POST {path} accepted", seen=lambda answers=answers: answers[-1].text)
     wait_for(lambda: at_rest(client), "the arm at rest at the start point")
 
 
