@@ -33,13 +33,10 @@ async def telemetry(
     if not websocket_token_ok(websocket):
         await websocket.close(code=1008, reason="missing or wrong token (?token=)")
         return
-    try:
-        hz = float(websocket.query_params.get("hz", settings.server.telemetry_hz))
-    except ValueError:
-        hz = settings.server.telemetry_hz
+    hz = stream_rate_hz(websocket.query_params.get("hz"), settings.server.telemetry_hz)
     clock = asyncio.get_running_loop().time
     await websocket.accept()
-    pacer = Pacer(1.0 / min(max(hz, 1.0), 200.0), clock())
+    pacer = Pacer(1.0 / hz, clock())
     last_tick = -1
     try:
         while True:
@@ -50,6 +47,16 @@ async def telemetry(
             await asyncio.sleep(max(0.0, pacer.next(clock()) - clock()))
     except (WebSocketDisconnect, RuntimeError):
         return
+
+
+def stream_rate_hz(asked: str | None, default_hz: float) -> float:
+    """``?hz=`` clamped to 1-200 Hz; the default for a missing or non-numeric value, and
+    for NaN (which would compare as neither too low nor too high: no pacing at all)."""
+    try:
+        hz = float(asked) if asked is not None else default_hz
+    except ValueError:
+        hz = default_hz
+    return min(max(hz, 1.0), 200.0) if not math.isnan(hz) else default_hz
 
 
 class Pacer:

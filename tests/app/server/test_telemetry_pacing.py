@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import math
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from app.server.api.telemetry import Pacer
+from app.server.api.telemetry import Pacer, stream_rate_hz
 
 
 @given(
@@ -47,3 +48,12 @@ def test_fifty_hertz_with_ten_millisecond_sends_gives_fifty_sends_a_second():
         sends += 1
         now = max(now, pacer.next(now))  # the sleep until the next send
     assert sends == 500
+
+
+@pytest.mark.parametrize(
+    ("asked", "rate"),
+    [(None, 50.0), ("20", 20.0), ("0", 1.0), ("1e9", 200.0), ("inf", 200.0), ("-inf", 1.0),
+     ("nan", 50.0), ("fast", 50.0), ("", 50.0)],
+)  # fmt: skip
+def test_the_asked_rate_is_clamped_and_nan_is_the_default(asked, rate):
+    assert stream_rate_hz(asked, 50.0) == rate
