@@ -165,6 +165,9 @@ class ServerSettings(_Section):
     token: str | None = Field(None, min_length=8, description="required for control if set")
     telemetry_hz: float = Field(50.0, gt=0, le=200, description="WebSocket telemetry rate")
     lease_timeout_s: float = Field(30.0, gt=0, description="control lease lapses when idle")
+    max_body_bytes: int = Field(
+        1 << 20, ge=1024, description="larger request bodies are refused unread (413) [bytes]"
+    )
 
 
 class RunSettings(_Section):
@@ -181,6 +184,12 @@ class RunSettings(_Section):
     )
     stats_skip_s: float = Field(
         0.5, ge=0, description="tracking stats leave out the first seconds of the timed part"
+    )
+    max_samples: int = Field(
+        150_000, ge=1000, description="longest run, in loop periods (200 Hz: 750 s) [samples]"
+    )
+    plan_timeout_s: float = Field(
+        5.0, gt=0, description="a run whose planning and check took longer is not started [s]"
     )
 
 

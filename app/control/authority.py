@@ -69,6 +69,15 @@ def _same(supplied: str | None, secret: str) -> bool:
     return bool(supplied) and secrets.compare_digest(str(supplied).encode(), secret.encode())
 
 
+def token_ok(expected: str | None, supplied: str | None) -> bool:
+    """True when no token is set (``expected`` None) or ``supplied`` is it, compared in
+    constant time. The one token comparison of the HTTP routes, the request-limits
+    middleware and the 3D scene."""
+    return expected is None or (
+        supplied is not None and secrets.compare_digest(supplied.encode(), expected.encode())
+    )
+
+
 def is_loopback(host: str) -> bool:
     """True for addresses only this machine can reach: 127.0.0.0/8, ::1 and localhost."""
     if host == "localhost":
@@ -102,9 +111,7 @@ class Authority:
 
     def token_ok(self, supplied: str | None) -> bool:
         """True when no token is set or ``supplied`` is it (compared in constant time)."""
-        return self.token is None or (
-            supplied is not None and secrets.compare_digest(supplied.encode(), self.token.encode())
-        )
+        return token_ok(self.token, supplied)
 
     def require_token(self, supplied: str | None) -> None:
         if not self.token_ok(supplied):

@@ -7,7 +7,7 @@ import math
 import threading
 import time
 import uuid
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,6 +25,17 @@ if TYPE_CHECKING:
     from app.control.controller import Controller
 
 START_TIMEOUT_S = 2.0
+
+
+@dataclass(frozen=True)
+class PreparedRun:
+    """A planned and checked run, not started yet (see RunManager.prepare)."""
+
+    kind: str
+    params: dict[str, Any]
+    lead_s: float
+    source: TrajectorySource
+    start_m: np.ndarray
 
 
 class RunManager:
@@ -67,7 +78,15 @@ class RunManager:
             plan = plan_sinusoid(params, start)
         except ValueError as exc:
             raise GoalRejected(str(exc)) from exc
-        times, points = plan.sample(self.controller.period_s)
+        period_s, limit = self.controller.period_s, self.controller.settings.runs.max_samples
+        if not math.isfinite(plan.duration_s) or plan.samples(period_s) > limit:
+            # bounds the time the check takes
+            raise GoalRejected(
+                f"duration_s: the run with its approach and stop would last "
+                f"{plan.duration_s:.1f} s, over the limit of {limit * period_s:.0f} s "
+                f"(runs.max_samples = {limit} loop periods)"
+            )
+        times, points = plan.sample(period_s)
         check_path(self.controller.gate, times, points, snap.joints_measured_rad)
         return plan, start
 
@@ -77,12 +96,23 @@ class RunManager:
 
     def start(self, params: TimedPath, kind: str) -> Run:
         """Plan, check, start and record a run of any timed path; raises before any motion."""
+        return self.launch(self.prepare(params, kind))
+
+    def prepare(self, params: TimedPath, kind: str) -> PreparedRun:
+        """Plan and check a run from where the robot is now; nothing moves. The slow half of
+        :meth:`start`, so a caller can decide, after it, whether the run is still wanted."""
+        self._refuse_if_busy()
+        plan, start = self.plan(params)
+        lead = self.controller.settings.runs.feedforward_lead_s if params.feedforward else 0.0
+        return PreparedRun(kind, asdict(params), lead, TrajectorySource(plan, lead), start)
+
+    def launch(self, prepared: PreparedRun) -> Run:
+        """Start and record a prepared run. The loop refuses it if the robot has left the
+        planned start point meanwhile (the plan would step), or another run started."""
         with self._lock:
             self._refuse_if_busy()
-            plan, start = self.plan(params)
-            lead = self.controller.settings.runs.feedforward_lead_s if params.feedforward else 0.0
-            source = TrajectorySource(plan, lead)
-            return self._launch(kind, asdict(params), lead, source, start)
+            p = prepared
+            return self._launch(p.kind, p.params, p.lead_s, p.source, p.start_m)
 
     def start_source(self, kind: str, params: dict[str, Any], source: Any) -> Run:
         """Record a run of a ready-made source that starts smoothly from wherever the robot

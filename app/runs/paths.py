@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -45,9 +46,11 @@ class ChirpParams:
         return out + (np.asarray(self.offset_m) if order == 0 else 0.0)
 
     def peaks(self) -> tuple[float, float, float]:
+        # bounds of |derivatives|: the sweep's rate adds to the acceleration and jerk
         omega = TWO_PI * max(self.f0_hz, self.f1_hz)
+        sweep = TWO_PI * abs(self.f1_hz - self.f0_hz) / self.duration_s
         a = abs(self.amplitude_m)
-        return a * omega, a * omega**2, a * omega**3
+        return a * omega, a * (omega**2 + sweep), a * (omega**3 + 3 * sweep * omega)
 
 
 def _quintic(s: np.ndarray, order: int) -> np.ndarray:
@@ -79,9 +82,14 @@ class WaypointParams:
     def duration_s(self) -> float:
         return float(self.times_s[-1])
 
+    @cached_property
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        # converted once: the loop asks for a point every tick, the check for thousands
+        return np.asarray(self.times_s, dtype=np.float64), np.asarray(self.points_m, np.float64)
+
     def derivatives(self, t: np.ndarray, order: int) -> np.ndarray:
         t = np.asarray(t, dtype=np.float64)
-        times, points = np.asarray(self.times_s), np.asarray(self.points_m, dtype=np.float64)
+        times, points = self._arrays
         k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2)
         span = times[k + 1] - times[k]
         s = (t - times[k]) / span

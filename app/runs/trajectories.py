@@ -14,9 +14,10 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
-from ruckig import ControlInterface, InputParameter, Result, Ruckig, Trajectory
+from ruckig import ControlInterface, InputParameter, Result, Ruckig, RuckigError, Trajectory
 
 TWO_PI = 2.0 * math.pi
+ROUNDING = 1.0 + 1e-6
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,8 @@ class SinusoidParams:
         """Largest per-axis speed [m/s], acceleration [m/s^2] and jerk [m/s^3]."""
         amplitude = np.asarray(self.amplitude_m)
         omega = TWO_PI * np.asarray(self.frequency_hz)
-        return tuple(float(np.max(np.abs(amplitude) * omega**k)) for k in (1, 2, 3))
+        with np.errstate(over="ignore"):  # inf is an answer: the planner refuses it
+            return tuple(float(np.max(np.abs(amplitude) * omega**k)) for k in (1, 2, 3))
 
 
 def sinusoid_points(params: SinusoidParams, times_s: np.ndarray) -> np.ndarray:
@@ -62,7 +64,12 @@ def _ruckig(start: tuple, target: tuple, limits: tuple, velocity_only: bool) -> 
     if velocity_only:
         inp.control_interface = ControlInterface.Velocity
     trajectory = Trajectory(3)
-    result = Ruckig(3).calculate(inp, trajectory)
+    try:
+        result = Ruckig(3).calculate(inp, trajectory)
+    except RuckigError as exc:  # e.g. a path too fast at its ends for any finite limit
+        raise ValueError(
+            "no smooth approach or stop exists: the path moves too fast at its start or end"
+        ) from exc
     if result not in (Result.Working, Result.Finished):
         raise ValueError(f"no smooth approach or stop exists within the limits ({result})")
     return trajectory
@@ -111,19 +118,53 @@ class PlannedRun:
         return np.array(self.stop.at_time(timed - self.params.duration_s)[0])
 
     def sample(self, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-        """(times (N,), points (N, 3)) every ``dt_s`` over the whole plan."""
+        """(times (N,), points (N, 3)) every ``dt_s`` over the whole plan.
+
+        The timed part is one batch call of the path's ``derivatives``; only the short
+        approach and stop go through ruckig sample by sample. Same points as ``point_at``.
+        """
         times = np.arange(0.0, self.duration_s + dt_s, dt_s)
-        return times, np.array([self.point_at(t) for t in times])
+        clamped = np.clip(times, 0.0, self.duration_s)
+        timed = clamped - self.approach_s
+        points = np.empty((len(times), 3))
+        approach = clamped < self.approach_s
+        stop = ~approach & (timed > self.params.duration_s)
+        middle = ~approach & ~stop
+        points[middle] = self.params.derivatives(timed[middle], 0)
+        for index in np.flatnonzero(approach):
+            points[index] = self.approach.at_time(float(clamped[index]))[0]
+        for index in np.flatnonzero(stop):
+            points[index] = self.stop.at_time(float(timed[index] - self.params.duration_s))[0]
+        return times, points
+
+    def samples(self, dt_s: float) -> int:
+        """How many points :meth:`sample` gives for ``dt_s`` (without computing them)."""
+        return math.ceil((self.duration_s + dt_s) / dt_s)
 
 
 def plan_sinusoid(params: TimedPath, start_m: np.ndarray) -> PlannedRun:
     """Plan approach, timed path (sinusoid, chirp, waypoints) and stop from rest at ``start_m``."""
     speed, accel, jerk = params.peaks()
-    # The joins must be able to match the sinusoid's own motion, yet gentle when it is slow.
-    limits = (max(speed, 0.1), max(accel, 1.0), max(jerk, 10.0) * 2.0)
-    begin = [params.derivatives(np.array(0.0), k).tolist() for k in range(3)]
+    if not all(math.isfinite(v) for v in (speed, accel, jerk)):
+        raise ValueError("the path's speed, acceleration or jerk is not finite: too large")
+    # The joins must be able to match the sinusoid's own motion, yet gentle when it is slow;
+    # a hair over the peaks, or rounding puts the path's own join state beyond them.
+    limits = (max(speed, 0.1) * ROUNDING, max(accel, 1.0) * ROUNDING, max(jerk, 10.0) * 2.0)
+    begin = tuple(params.derivatives(np.array(0.0), k).tolist() for k in range(3))
     rest = (np.asarray(start_m, dtype=np.float64).tolist(), [0.0] * 3, [0.0] * 3)
-    approach = _ruckig(rest, tuple(begin), limits, velocity_only=False)
     end = [params.derivatives(np.array(params.duration_s), k).tolist() for k in range(3)]
-    stop = _ruckig(tuple(end), (end[0], [0.0] * 3, [0.0] * 3), limits, velocity_only=True)
+    approach = _join(rest, begin, limits, velocity_only=False)
+    stop = _join(tuple(end), (end[0], [0.0] * 3, [0.0] * 3), limits, velocity_only=True)
     return PlannedRun(params, approach, stop)
+
+
+def _join(start: tuple, target: tuple, limits: tuple, velocity_only: bool) -> Trajectory:
+    """A join within ``limits``; failing that, with the speed headroom a join that starts
+    or ends accelerating needs (a chirp's end: its speed grows by a^2 / 2j while the
+    acceleration is brought to zero at jerk j)."""
+    try:
+        return _ruckig(start, target, limits, velocity_only)
+    except ValueError:
+        speed, accel, jerk = limits
+        headroom = max(np.abs(start[2]).max(), np.abs(target[2]).max()) ** 2 / (2.0 * jerk)
+        return _ruckig(start, target, (speed + headroom, accel, jerk), velocity_only)

@@ -26,6 +26,7 @@ from app.server.api import dashboard, mav, robot, runs, telemetry
 from app.server.api.deps import require_read_token
 from app.server.backends import open_backend
 from app.server.errors import install_error_handlers
+from app.server.limits import RequestLimits
 from app.static_files import static_dir
 from app.world.service import WorldService
 
@@ -76,6 +77,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
     # one authority for motion: the HTTP routes and the 3D scene check the same lease
     app.state.authority = Authority(settings.server.token, settings.server.lease_timeout_s)
     install_error_handlers(app)
+    app.add_middleware(RequestLimits, settings=settings)  # outermost: before any body is read
     reads = [Depends(require_read_token)]  # the token on reads too, beyond loopback
     app.include_router(robot.router, prefix="/api", dependencies=reads)
     app.include_router(telemetry.router, prefix="/api", dependencies=reads)

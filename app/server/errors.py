@@ -35,6 +35,10 @@ class ErrorBody(BaseModel):
     )
 
 
+class PlanningTimeout(TimeoutError):
+    """Planning a run took longer than its bound: the run is not started (503, this text)."""
+
+
 def _response(description: str) -> dict[str, Any]:
     return {"model": ErrorBody, "description": description}
 
@@ -44,7 +48,8 @@ NOT_FOUND = {404: _response("no such run or file")}
 CONFLICT = {409: _response("the robot cannot move now, or another client holds control")}
 INVALID = {422: _response("invalid body or goal; nearest_m when a point is out of reach")}
 UNAVAILABLE = {503: _response("the servo bus or the control loop did not answer")}
-CONTROL = {**UNAUTHORISED, **CONFLICT, **INVALID, **UNAVAILABLE}
+TOO_LARGE = {413: _response("request body over server.max_body_bytes (refused unread)")}
+CONTROL = {**UNAUTHORISED, **CONFLICT, **TOO_LARGE, **INVALID, **UNAVAILABLE}
 """What a control route (token, lease, command to the loop) can answer besides 200."""
 
 
@@ -87,6 +92,8 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(TimeoutError)  # a command the control loop did not answer in time
     async def timeout(_: Request, exc: TimeoutError) -> JSONResponse:
+        if isinstance(exc, PlanningTimeout):
+            return _error(503, str(exc))
         return _error(503, "the control loop did not answer in time")
 
     app.add_middleware(BugsAre500)

@@ -36,7 +36,7 @@ class PoseBody(BaseModel):
     """One drone pose: source time [s], world position [m], quaternion (w, x, y, z) body to
     world, optional world velocity [m/s] and body angular velocity [rad/s]."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
     t: Finite
     position: Vector3
     quaternion: Annotated[list[Finite], Field(min_length=4, max_length=4)]
@@ -47,7 +47,7 @@ class PoseBody(BaseModel):
 class HoldRequest(BaseModel):
     """Hold the tool at a world point ("world") or where it is now ("current")."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
     position_m: Vector3 | None = None
     frame: Literal["world", "current"] = "world"
     source: Literal["external", "simulated"] = Field(
@@ -59,10 +59,10 @@ class HoldRequest(BaseModel):
 class HoldTestRequest(BaseModel):
     """The thesis's MAV compensation routine (ch. 6.2) on the simulated drone, as a run."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
     duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = 20.0
     latency_compensation: bool = True
-    seed: int = 0
+    seed: Annotated[int, Field(ge=0, lt=2**32)] = 0
     drift_m: Annotated[float, Field(ge=0, le=0.2, allow_inf_nan=False)] = DroneSimParams.drift_m
     tilt_deg: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = DroneSimParams.tilt_deg
     yaw_deg: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = DroneSimParams.yaw_deg

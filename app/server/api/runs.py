@@ -3,40 +3,55 @@
 from __future__ import annotations
 
 import asyncio
+import logging
+import time
+from itertools import pairwise
 from typing import Annotated, Any
 
 import numpy as np
-from fastapi import APIRouter, HTTPException
+from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from app.control.errors import GoalRejected
+from app.control.errors import GoalRejected, MotionRefused
 from app.runs.logs import read_messages
 from app.runs.manager import Run, RunManager
 from app.runs.paths import ChirpParams, StepParams, WaypointParams
 from app.runs.stats import error_stats, window_mask
-from app.runs.trajectories import SinusoidParams
+from app.runs.trajectories import SinusoidParams, TimedPath
 from app.server.api.deps import ControlClient, RunsDep
-from app.server.api.models import Vector3
+from app.server.api.models import ReachVector3, Vector3
 from app.server.api.responses import RunOut, RunStarted, WindowStats
-from app.server.errors import CONTROL, INVALID, NOT_FOUND
+from app.server.errors import CONTROL, INVALID, NOT_FOUND, PlanningTimeout
 
+log = logging.getLogger(__name__)
 router = APIRouter(tags=["runs"])
 _DEFAULT = SinusoidParams()
+MAX_WAYPOINTS = 1000
 FILES = {"log.mcap": "application/octet-stream", "log.csv": "text/csv", "report.png": "image/png"}
 
 
-class SinusoidRequest(BaseModel):
+Seconds = Annotated[float, Field(gt=0, le=600, allow_inf_nan=False, strict=True)]
+Axis = Annotated[int, Field(ge=0, le=2, strict=True, description="0 = x, 1 = y, 2 = z")]
+
+HzOrZero = Annotated[float, Field(ge=0, le=20, allow_inf_nan=False, strict=True)]
+Hz = Annotated[float, Field(gt=0, le=20, allow_inf_nan=False, strict=True)]
+
+
+class _RunBody(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+
+class SinusoidRequest(_RunBody):
     """Per-axis sinusoid; every field optional, defaults are the thesis test (ch. 6.1)."""
 
-    model_config = ConfigDict(extra="forbid")
-    amplitude_m: Vector3 = list(_DEFAULT.amplitude_m)
-    frequency_hz: Annotated[
-        list[Annotated[float, Field(ge=0, le=20)]], Field(min_length=3, max_length=3)
-    ] = list(_DEFAULT.frequency_hz)
+    amplitude_m: ReachVector3 = list(_DEFAULT.amplitude_m)
+    frequency_hz: Annotated[list[HzOrZero], Field(min_length=3, max_length=3)] = list(
+        _DEFAULT.frequency_hz
+    )
     phase_rad: Vector3 = list(_DEFAULT.phase_rad)
-    offset_m: Vector3 = list(_DEFAULT.offset_m)
-    duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = _DEFAULT.duration_s
+    offset_m: ReachVector3 = list(_DEFAULT.offset_m)
+    duration_s: Seconds = _DEFAULT.duration_s
     feedforward: bool = False
 
     def params(self) -> SinusoidParams:
@@ -50,46 +65,63 @@ class SinusoidRequest(BaseModel):
         )  # type: ignore[arg-type]
 
 
-class ChirpRequest(BaseModel):
+class ChirpRequest(_RunBody):
     """Linear frequency sweep on one axis, for identifying the servo response."""
 
-    model_config = ConfigDict(extra="forbid")
-    axis: Annotated[int, Field(ge=0, le=2, description="0 = x, 1 = y, 2 = z")] = 2
-    amplitude_m: Annotated[float, Field(gt=0, le=0.2, allow_inf_nan=False)] = 0.02
-    f0_hz: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = 0.2
-    f1_hz: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = 3.0
-    offset_m: Vector3 = list(_DEFAULT.offset_m)
-    duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = 10.0
+    axis: Axis = 2
+    amplitude_m: Annotated[float, Field(gt=0, le=0.2, allow_inf_nan=False, strict=True)] = 0.02
+    f0_hz: Hz = 0.2
+    f1_hz: Hz = 3.0
+    offset_m: ReachVector3 = list(_DEFAULT.offset_m)
+    duration_s: Seconds = 10.0
     feedforward: bool = False
 
     def params(self) -> ChirpParams:
         return ChirpParams(**{**self.model_dump(), "offset_m": tuple(self.offset_m)})
 
 
-class StepRequest(BaseModel):
-    """A position step on one axis (servo step response)."""
+class StepRequest(_RunBody):
+    """A position step on one axis (servo step response), within the run."""
 
-    model_config = ConfigDict(extra="forbid")
-    axis: Annotated[int, Field(ge=0, le=2, description="0 = x, 1 = y, 2 = z")] = 2
-    size_m: Annotated[float, Field(ge=-0.05, le=0.05, allow_inf_nan=False)] = 0.005
-    step_at_s: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False)] = 0.5
-    offset_m: Vector3 = list(_DEFAULT.offset_m)
-    duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = 2.0
+    axis: Axis = 2
+    size_m: Annotated[float, Field(ge=-0.05, le=0.05, allow_inf_nan=False, strict=True)] = 0.005
+    step_at_s: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False, strict=True)] = 0.5
+    offset_m: ReachVector3 = list(_DEFAULT.offset_m)
+    duration_s: Seconds = 2.0
+
+    @model_validator(mode="after")
+    def _step_inside(self) -> StepRequest:
+        if self.step_at_s >= self.duration_s:
+            raise ValueError(
+                f"step_at_s: {self.step_at_s:g} s is not before the run's end "
+                f"(duration_s = {self.duration_s:g} s)"
+            )
+        return self
 
     def params(self) -> StepParams:
         return StepParams(**{**self.model_dump(), "offset_m": tuple(self.offset_m)})
 
 
-class WaypointsRequest(BaseModel):
+class WaypointsRequest(_RunBody):
     """Points [m] reached at times [s] (first at 0), resting at each; minimum-jerk between."""
 
-    model_config = ConfigDict(extra="forbid")
-    points_m: Annotated[list[Vector3], Field(min_length=2, max_length=1000)]
+    points_m: Annotated[list[ReachVector3], Field(min_length=2, max_length=MAX_WAYPOINTS)]
     times_s: Annotated[
-        list[Annotated[float, Field(ge=0, allow_inf_nan=False)]],
-        Field(min_length=2, max_length=1000),
+        list[Annotated[float, Field(ge=0, le=600, allow_inf_nan=False, strict=True)]],
+        Field(min_length=2, max_length=MAX_WAYPOINTS),
     ]
     feedforward: bool = False
+
+    @model_validator(mode="after")
+    def _timed(self) -> WaypointsRequest:
+        if len(self.times_s) != len(self.points_m):
+            raise ValueError(
+                f"times_s: one time per point ({len(self.times_s)} times, "
+                f"{len(self.points_m)} points)"
+            )
+        if self.times_s[0] != 0.0 or not all(b > a for a, b in pairwise(self.times_s)):
+            raise ValueError("times_s: must start at 0 and increase")
+        return self
 
     def params(self) -> WaypointParams:
         points = tuple(tuple(p) for p in self.points_m)
@@ -106,32 +138,48 @@ def _run(runs: RunManager, run_id: str) -> Run:
     return run
 
 
-@router.post("/tests/sinusoid", response_model=RunStarted, responses=CONTROL)
-async def start_sinusoid(body: SinusoidRequest, runs: RunsDep, _: ControlClient):
-    """Check the whole path, then run it; 422 names the first infeasible time and point."""
-    run = await asyncio.to_thread(runs.start_sinusoid, body.params())
+async def _start(request: Request, runs: RunManager, params: TimedPath, kind: str) -> dict:
+    """Plan and check in a worker thread (other requests go on meanwhile), then start only
+    if the answer can still reach the caller: in time, and to a client still connected."""
+    began = time.monotonic()
+    prepared = await asyncio.to_thread(runs.prepare, params, kind)
+    took_s, limit_s = time.monotonic() - began, runs.controller.settings.runs.plan_timeout_s
+    if took_s > limit_s:
+        raise PlanningTimeout(
+            f"planning took {took_s:.1f} s, over the limit of {limit_s:g} s "
+            "(runs.plan_timeout_s): the run was not started; try a shorter run"
+        )
+    if await request.is_disconnected():
+        log.warning("%s run planned for a client that has gone: not started", kind)
+        raise MotionRefused("the client disconnected while the run was planned: not started")
+    run = await asyncio.to_thread(runs.launch, prepared)
     return {"run_id": run.run_id}
+
+
+@router.post("/tests/sinusoid", response_model=RunStarted, responses=CONTROL)
+async def start_sinusoid(request: Request, body: SinusoidRequest, runs: RunsDep, _: ControlClient):
+    """Check the whole path, then run it; 422 names the first infeasible time and point."""
+    return await _start(request, runs, body.params(), "sinusoid")
 
 
 @router.post("/tests/chirp", response_model=RunStarted, responses=CONTROL)
-async def start_chirp(body: ChirpRequest, runs: RunsDep, _: ControlClient):
+async def start_chirp(request: Request, body: ChirpRequest, runs: RunsDep, _: ControlClient):
     """A frequency sweep f0 -> f1 on one axis; checked like the sinusoid."""
-    run = await asyncio.to_thread(runs.start, body.params(), "chirp")
-    return {"run_id": run.run_id}
+    return await _start(request, runs, body.params(), "chirp")
 
 
 @router.post("/tests/step", response_model=RunStarted, responses=CONTROL)
-async def start_step(body: StepRequest, runs: RunsDep, _: ControlClient):
+async def start_step(request: Request, body: StepRequest, runs: RunsDep, _: ControlClient):
     """A step on one axis; small steps pass the joint-speed limit unchanged."""
-    run = await asyncio.to_thread(runs.start, body.params(), "step")
-    return {"run_id": run.run_id}
+    return await _start(request, runs, body.params(), "step")
 
 
 @router.post("/tests/waypoints", response_model=RunStarted, responses=CONTROL)
-async def start_waypoints(body: WaypointsRequest, runs: RunsDep, _: ControlClient):
+async def start_waypoints(
+    request: Request, body: WaypointsRequest, runs: RunsDep, _: ControlClient
+):
     """Timed waypoints (pick-and-place, raster); checked like the sinusoid."""
-    run = await asyncio.to_thread(runs.start, body.params(), "waypoints")
-    return {"run_id": run.run_id}
+    return await _start(request, runs, body.params(), "waypoints")
 
 
 @router.get("/runs", response_model=list[RunOut])

@@ -1,0 +1,124 @@
+"""Property-based API test: generated bodies for every POST route of /openapi.json.
+
+On the simulator with torque on and the arm settled, whatever is sent: never a 5xx, and a
+refused request (4xx) leaves the commanded point where it was. After an accepted request
+that moved anything, the arm is brought back to rest before the next example. The number of
+examples is bounded so the test stays in the fast suite.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from urllib.parse import quote
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+from tests.support.app_client import make_client
+from tests.support.lease import take_lease
+from tests.support.openapi import JUNK, bodies
+from tests.support.wait import ok_json, wait_for
+
+REST_M = [0.0, 0.0, -0.24]
+# bounded for the fast suite; DELTADASH_FUZZ_EXAMPLES=3000 for a long search
+EXAMPLES = int(os.environ.get("DELTADASH_FUZZ_EXAMPLES", "200"))
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    runs = {"max_samples": 4000}
+    with make_client(tmp_path_factory.mktemp("fuzz"), backend="sim", runs=runs) as client:
+        to_rest(client)
+        yield client
+
+
+def post_routes(client) -> list[tuple[str, dict | None]]:
+    doc = client.get("/openapi.json").json()
+    routes = []
+    for path, operations in doc["paths"].items():
+        if "post" in operations:
+            content = operations["post"].get("requestBody", {}).get("content", {})
+            schema = content.get("application/json", {}).get("schema")
+            routes.append((path, None if schema is None else (doc, schema)))
+    return routes
+
+
+def snapshot(client):
+    """The loop's latest state, read directly (as /api/status serialises it; cheaper)."""
+    return client.app.state.controller.snapshot()
+
+
+def commanded(client) -> np.ndarray:
+    return np.array(snapshot(client).point_commanded_m, dtype=float)
+
+
+def at_rest(client) -> bool:
+    """Torque on, no e-stop or fault, idle or holding a goal, commanded at REST_M, still."""
+    now = ok_json(client.get("/api/status"))
+    if not now["torque"] or now["estopped"] or now["faults"] or now["mode"] not in ("idle", "jog"):
+        return False
+    first, tick = commanded(client), snapshot(client).tick
+    wait_for(lambda: snapshot(client).tick > tick + 2, "loop ticks")
+    return np.allclose(first, REST_M, atol=1e-6) and np.allclose(first, commanded(client))
+
+
+def to_rest(client) -> None:
+    """Back to the standard state: control taken, e-stop cleared, torque on, the goal at
+    REST_M and the setpoint still there. Each step is retried: on a loaded machine the
+    loop may answer a command late (503) just after an e-stop stopped a run."""
+    take_lease(client, "fuzz")  # again: a generated request may have taken it over
+    steps = [
+        ("/api/estop", None),
+        ("/api/reset", None),
+        ("/api/torque", {"enabled": True}),
+        ("/api/goal", {"position_m": REST_M}),
+    ]
+    for path, body in steps:
+        answers = []
+
+        def accepted(path=path, body=body, answers=answers) -> bool:
+            answers.append(client.post(path, json=body))
+            return answers[-1].status_code == 200
+
+        wait_for(accepted, f"POST {path} accepted", seen=lambda answers=answers: answers[-1].text)
+    wait_for(lambda: at_rest(client), "the arm at rest at the start point")
+
+
+@st.composite
+def requests(draw, routes):
+    path, schema = draw(st.sampled_from(routes))
+    if "{run_id}" in path:
+        run_id = draw(st.text(st.characters(codec="ascii", exclude_characters="/"), max_size=12))
+        path = path.replace("{run_id}", quote(run_id, safe="") or "x")
+    body = draw(JUNK if schema is None else st.one_of(bodies(*schema), bodies(*schema), JUNK))
+    return path, json.dumps(body, allow_nan=True)
+
+
+def test_no_generated_body_gives_a_5xx_or_moves_the_robot_when_refused(sim):
+    routes = post_routes(sim)
+    assert len(routes) >= 15  # every POST route of the API is in the draw
+
+    @settings(
+        max_examples=EXAMPLES,
+        deadline=None,
+        database=None,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+    )
+    @given(requests(routes))
+    def check(request):
+        path, content = request
+        before = commanded(sim)
+        response = sim.post(path, content=content, headers={"content-type": "application/json"})
+        assert response.status_code < 500, (path, content, response.text)
+        event(f"{response.status_code} {path}")
+        if response.status_code >= 400:
+            after = commanded(sim)
+            assert np.allclose(before, after, rtol=0, atol=1e-9), (path, content, after - before)
+        elif not at_rest(sim):
+            event("brought back to rest")
+            to_rest(sim)
+
+    check()
