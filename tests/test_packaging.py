@@ -117,7 +117,7 @@ def build_wheel(work: Path) -> Path:
 
     shutil.copytree(REPO, sources, ignore=not_sources)
     pip_wheel = [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", work / "dist"]
-    run([*pip_wheel, "."], sources)
+    run([*pip_wheel, "."], sources, clean_env())
     (wheel,) = (work / "dist").glob("deltadash-*.whl")
     return wheel
 
@@ -133,7 +133,7 @@ def install_into_fresh_venv(wheel: Path, venv: Path) -> Path:
     run([sys.executable, "-m", "venv", "--without-pip", venv], venv.parent)
     python = venv / "bin" / "python"
     pip = [sys.executable, "-m", "pip", "--python", python]
-    run([*pip, "install", "--no-deps", "--no-index", "-q", wheel], venv.parent)
+    run([*pip, "install", "--no-deps", "--no-index", "-q", wheel], venv.parent, clean_env())
     purelib = run([python, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"], venv)
     (Path(purelib.strip()) / "deltadash-test-deps.pth").write_text(
         "\n".join(lent_site_packages()) + "\n"

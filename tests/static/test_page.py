@@ -170,6 +170,12 @@ def plotted_span_mm(page: Any) -> float:
 
 
 def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -> None:
+    # its own start, not the previous test's end: no e-stop or fault, torque on, at rest
+    page.click("#reset")
+    wait_for(lambda: server.get("/api/status")["mode"] in ("idle", "jog"), "no e-stop or fault")
+    page.click("#torque-on")
+    wait_for(lambda: server.get("/api/status")["torque"], "torque on")
+    wait_for(lambda: commanded_still(server), "the arm at rest")
     page.fill("input[name=duration]", "2")
     wait_for(lambda: text(page, "#sine-preview").rsplit(": ", 1)[-1] == "feasible",
              "the preview to say feasible")  # fmt: skip
