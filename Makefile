@@ -18,6 +18,7 @@ run: $(BIN)/.installed
 
 test: $(BIN)/.installed browser
 	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
 	$(BIN)/lint-imports
 	$(BIN)/mypy kinematics hardware
 	$(BIN)/pytest -q
@@ -25,6 +26,7 @@ test: $(BIN)/.installed browser
 # Lint and every test but the slow (> ~3 s: end-to-end runs, the wheel build) and browser ones.
 test-fast: $(BIN)/.installed
 	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
 	$(BIN)/pytest -q -m "not slow and not browser"
 
 # The scene's browser test drives Debian's chromium (no browser download); if it cannot be

@@ -39,8 +39,10 @@ REGIONS = {
 def _synthesis(args: argparse.Namespace) -> None:
     problem = Problem()
     thesis = score(problem, np.array(THESIS_DESIGN))
-    print(f"thesis Table 4.3: power of point {thesis.power_of_point:.5f} m^4, "
-          f"{int(thesis.violations)} violated (sample, leg) pairs")  # fmt: skip
+    print(
+        f"thesis Table 4.3: power of point {thesis.power_of_point:.5f} m^4, "
+        f"{int(thesis.violations)} violated (sample, leg) pairs"
+    )
     times, cpu = [], []
     for seed in range(args.seeds):
         start, start_cpu = time.perf_counter(), time.process_time()
@@ -48,20 +50,26 @@ def _synthesis(args: argparse.Namespace) -> None:
         times.append(time.perf_counter() - start)
         cpu.append(time.process_time() - start_cpu)
         mm = ", ".join(f"{v * 1e3:.1f}" for v in result.design)
-        print(f"seed {seed}: {times[-1]:.2f} s (cpu {cpu[-1]:.2f} s), {result.evaluations} "
-              f"designs, ({mm}) mm, "
-              f"PoP {result.power_of_point:.5f}, contains {result.contains}")  # fmt: skip
-    print(f"wall best {min(times):.2f} s, median {statistics.median(times):.2f} s; "
-          f"cpu median {statistics.median(cpu):.2f} s")  # fmt: skip
+        print(
+            f"seed {seed}: {times[-1]:.2f} s (cpu {cpu[-1]:.2f} s), {result.evaluations} "
+            f"designs, ({mm}) mm, "
+            f"PoP {result.power_of_point:.5f}, contains {result.contains}"
+        )
+    print(
+        f"wall best {min(times):.2f} s, median {statistics.median(times):.2f} s; "
+        f"cpu median {statistics.median(cpu):.2f} s"
+    )
 
 
 def _sizing() -> None:
     for name, (lower, upper) in REGIONS.items():
         sized = size_motors(THESIS_DELTA, THESIS_MASS, region_grid(lower, upper, 9))
-        print(f"{name}: static {sized.static_nm.value:.3f} N m, peak {sized.peak_nm.value:.3f} "
-              f"N m, speed {sized.speed_rpm.value:.1f} rpm, XM430-W210 12 V "
-              f"{'PASS' if sized.passes else 'FAIL'} (torque x{sized.torque_margin:.2f}, "
-              f"speed x{sized.speed_margin:.2f})")  # fmt: skip
+        print(
+            f"{name}: static {sized.static_nm.value:.3f} N m, peak {sized.peak_nm.value:.3f} "
+            f"N m, speed {sized.speed_rpm.value:.1f} rpm, XM430-W210 12 V "
+            f"{'PASS' if sized.passes else 'FAIL'} (torque x{sized.torque_margin:.2f}, "
+            f"speed x{sized.speed_margin:.2f})"
+        )
 
 
 def main() -> None:
@@ -70,8 +78,10 @@ def main() -> None:
     parser.add_argument("--popsize", type=int, default=40)
     parser.add_argument("--maxiter", type=int, default=300)
     args = parser.parse_args()
-    print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"Python {platform.python_version()}, load {os.getloadavg()[0]:.2f}")  # fmt: skip
+    print(
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}, load {os.getloadavg()[0]:.2f}"
+    )
     _synthesis(args)
     _sizing()
 

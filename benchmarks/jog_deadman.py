@@ -93,19 +93,23 @@ def main() -> None:
     settings = load_settings(
         runs={"folder": tempfile.mkdtemp(prefix="deltadash-runs-")}, server={"viser_port": 0}
     )
-    print(f"hold timeout {settings.jog.hold_timeout_s} s, loop {settings.loop.rate_hz:g} Hz, "
-          f"heartbeat every {HEARTBEAT_S * 1e3:.0f} ms; load {os.getloadavg()[0]:.2f}")  # fmt: skip
+    print(
+        f"hold timeout {settings.jog.hold_timeout_s} s, loop {settings.loop.rate_hz:g} Hz, "
+        f"heartbeat every {HEARTBEAT_S * 1e3:.0f} ms; load {os.getloadavg()[0]:.2f}"
+    )
     with TestClient(create_app(settings)) as client:
         controller = client.app.state.controller
         for speed in args.speeds:
             results = [trial(client, controller, speed) for _ in range(args.trials)]
             decided, stops, after, cut = ([r[i] for r in results] for i in range(4))
-            print(f"{speed * 1e3:4.0f} mm/s: braking from {statistics.median(decided):4.0f} ms "
-                  f"(worst {max(decided):4.0f}), standstill at {statistics.median(stops):4.0f} ms "
-                  f"(worst {max(stops):4.0f}) after the last heartbeat; "
-                  f"{statistics.median(after):.1f} mm (worst {max(after):.1f}) travelled "
-                  f"after it; {args.trials} trials, {sum(cut)} cut short by a late "
-                  "heartbeat")  # fmt: skip
+            print(
+                f"{speed * 1e3:4.0f} mm/s: braking from {statistics.median(decided):4.0f} ms "
+                f"(worst {max(decided):4.0f}), standstill at {statistics.median(stops):4.0f} ms "
+                f"(worst {max(stops):4.0f}) after the last heartbeat; "
+                f"{statistics.median(after):.1f} mm (worst {max(after):.1f}) travelled "
+                f"after it; {args.trials} trials, {sum(cut)} cut short by a late "
+                "heartbeat"
+            )
     print(f"load after: {os.getloadavg()[0]:.2f}")
 
 

@@ -32,10 +32,18 @@ import websockets
 
 PORT = 8765
 VISER_PORT = 8766
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-                 "--no-first-run", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--use-angle=swiftshader",
-                 "--enable-unsafe-swiftshader"]  # fmt: skip
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+]
 
 
 _LEASE: dict[str, str] = {}  # X-Lease once taken: commands need the control lease
@@ -79,17 +87,27 @@ def _camera_message() -> bytes:
     import msgspec
     from viser import _messages
 
-    camera = _messages.ViewerCameraMessage((1.0, 0.0, 0.0, 0.0), (0.5, -0.6, 0.1), 1.3, 0.01,
-                                           100.0, 800, 1280, (0.0, 0.0, -0.2), (0.0, 0.0, 1.0))
-    return msgspec.msgpack.encode(camera.as_serializable_dict())  # fmt: skip
+    camera = _messages.ViewerCameraMessage(
+        (1.0, 0.0, 0.0, 0.0),
+        (0.5, -0.6, 0.1),
+        1.3,
+        0.01,
+        100.0,
+        800,
+        1280,
+        (0.0, 0.0, -0.2),
+        (0.0, 0.0, 1.0),
+    )
+    return msgspec.msgpack.encode(camera.as_serializable_dict())
 
 
 async def _viser_client(seconds: float) -> int:
     import viser
 
     count, protocol = 0, websockets.Subprotocol(f"viser-v{viser.__version__}")
-    async with websockets.connect(f"ws://127.0.0.1:{VISER_PORT}", subprotocols=[protocol],
-                                  max_size=None) as ws:  # fmt: skip
+    async with websockets.connect(
+        f"ws://127.0.0.1:{VISER_PORT}", subprotocols=[protocol], max_size=None
+    ) as ws:
         await ws.send(_camera_message())
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
@@ -105,8 +123,12 @@ async def _browsers(count: int, seconds: float) -> None:
     from playwright.async_api import async_playwright
 
     async with async_playwright() as playwright:
-        browsers = [await playwright.chromium.launch(executable_path="/usr/bin/chromium",
-                                                     args=CHROMIUM_ARGS) for _ in range(count)]
+        browsers = [
+            await playwright.chromium.launch(
+                executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS
+            )
+            for _ in range(count)
+        ]
         for browser in browsers:
             page = await browser.new_page(viewport={"width": 1280, "height": 800})
             await page.goto(f"http://127.0.0.1:{VISER_PORT}/")

@@ -70,8 +70,10 @@ def main() -> None:
     parser.add_argument("--warmup", type=float, default=1.0, help="s left out at the start")
     parser.add_argument("--payload", type=float, default=0.0, help="payload [kg]")
     args = parser.parse_args()
-    print(f"thesis Table 6.1 RMSE [mm]: X {THESIS_RMSE_MM[0]}, Y {THESIS_RMSE_MM[1]}, "
-          f"Z {THESIS_RMSE_MM[2]}")  # fmt: skip
+    print(
+        f"thesis Table 6.1 RMSE [mm]: X {THESIS_RMSE_MM[0]}, Y {THESIS_RMSE_MM[1]}, "
+        f"Z {THESIS_RMSE_MM[2]}"
+    )
     print(f"payload {args.payload} kg, {args.seconds:g} s measured after {args.warmup:g} s")
     for name, phase in (("circle (Y 90 deg behind X)", np.pi / 2), ("in phase (diagonal)", 0.0)):
         result = run(phase, args.seconds, args.warmup, args.payload)

@@ -62,9 +62,13 @@ def certify_box(
 
 
 def certify_cylinder(
-    robot: Any, radius: float, z_low: float, z_high: float, tol: float = 1e-4,
+    robot: Any,
+    radius: float,
+    z_low: float,
+    z_high: float,
+    tol: float = 1e-4,
     max_cells: int = 2_000_000,
-) -> Containment:  # fmt: skip
+) -> Containment:
     """:func:`certify_box` for a vertical cylinder on the z axis, radius and z range [m]."""
 
     def nearest(c: np.ndarray) -> np.ndarray:

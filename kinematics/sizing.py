@@ -156,9 +156,14 @@ def size_motors(
     usable &= robot.signed_distance(pts) <= -margin_m
     pts, q = pts[usable], q[usable]
     static, peak = _torques(
-        robot, loaded, pts, gravity_m_s2 * np.array([0.0, 0.0, -1.0]), np.radians(tilt_deg),
-        acceleration_m_s2, speed_m_s * _fibonacci_sphere(velocity_directions),
-    )  # fmt: skip
+        robot,
+        loaded,
+        pts,
+        gravity_m_s2 * np.array([0.0, 0.0, -1.0]),
+        np.radians(tilt_deg),
+        acceleration_m_s2,
+        speed_m_s * _fibonacci_sphere(velocity_directions),
+    )
     eye = np.eye(3)
     inverse_jacobian = np.stack([robot.joint_velocity(q, e) for e in eye], -1)
     speed = speed_m_s * np.linalg.norm(inverse_jacobian, axis=-1) * RPM_PER_RAD_S
@@ -168,16 +173,28 @@ def size_motors(
     torque_margin = available / worst_peak.value
     speed_margin = servo.no_load_rpm / worst_speed.value
     return Sizing(
-        worst_static, worst_peak, worst_speed, servo, available, torque_margin, speed_margin,
-        bool(torque_margin >= 1.0 and speed_margin >= 1.0), int(usable.sum()),
+        worst_static,
+        worst_peak,
+        worst_speed,
+        servo,
+        available,
+        torque_margin,
+        speed_margin,
+        bool(torque_margin >= 1.0 and speed_margin >= 1.0),
+        int(usable.sum()),
         int((~usable).sum()),
-    )  # fmt: skip
+    )
 
 
 def _torques(
-    robot: RotaryDelta, loaded: MassModel, pts: np.ndarray, gravity: np.ndarray,
-    tilt_rad: float, acceleration: float, velocities: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    robot: RotaryDelta,
+    loaded: MassModel,
+    pts: np.ndarray,
+    gravity: np.ndarray,
+    tilt_rad: float,
+    acceleration: float,
+    velocities: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """Worst static and peak |torque| per point and joint [N m], each (N, 3).
 
     Gravity anywhere within tilt_rad of ``gravity``'s direction (same magnitude),

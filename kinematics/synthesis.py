@@ -204,9 +204,17 @@ def _search(
     # polish=False: F is a step function of the penalty, a gradient polish can't help.
     # tol=1e-4 (population spread / mean): stopping there costs 1e-5 of the objective.
     found = differential_evolution(
-        objective, problem.bounds.as_list(), popsize=popsize, maxiter=maxiter, rng=seed,
-        vectorized=True, updating="deferred", polish=False, tol=1e-4, callback=on_generation,
-    )  # fmt: skip
+        objective,
+        problem.bounds.as_list(),
+        popsize=popsize,
+        maxiter=maxiter,
+        rng=seed,
+        vectorized=True,
+        updating="deferred",
+        polish=False,
+        tol=1e-4,
+        callback=on_generation,
+    )
     return Design(*(float(v) for v in found.x)), evaluations
 
 
@@ -250,9 +258,14 @@ def synthesize(
         problem = _with_witness(problem, design, containment.witness)
     final = score(problem, np.array(design))
     return SynthesisResult(
-        design, float(final.objective), float(final.power_of_point), containment, extra_ok,
-        evaluations, round_,
-    )  # fmt: skip
+        design,
+        float(final.objective),
+        float(final.power_of_point),
+        containment,
+        extra_ok,
+        evaluations,
+        round_,
+    )
 
 
 def _with_witness(problem: Problem, design: Design, witness: np.ndarray) -> Problem:

@@ -100,9 +100,13 @@ def wait_for(condition: Callable[[], Any], what: str, timeout_s: float) -> Any:
 
 def run(command: list[str | Path], cwd: Path, env: dict[str, str] | None = None) -> str:
     done = subprocess.run(
-        [str(c) for c in command], cwd=cwd, env=env, capture_output=True, text=True,
+        [str(c) for c in command],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
         timeout=BUILD_S,
-    )  # fmt: skip
+    )
     assert done.returncode == 0, f"{command} failed:\n{done.stdout[-2000:]}{done.stderr[-3000:]}"
     return done.stdout
 
@@ -199,8 +203,11 @@ def installed(tmp_path_factory) -> Iterator[Installed]:
     with log.open("wb") as out:
         process = subprocess.Popen(
             [work / "venv" / "bin" / "deltadash", "serve", "--config", config],
-            cwd=outside, env=env, stdout=out, stderr=out,
-        )  # fmt: skip
+            cwd=outside,
+            env=env,
+            stdout=out,
+            stderr=out,
+        )
     served = Installed(f"http://127.0.0.1:{port}", work / "venv", wheel, imported)
     try:
         end = time.monotonic() + START_S

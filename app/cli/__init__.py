@@ -33,4 +33,3 @@ def main(argv: list[str] | None = None) -> int:
     except DeltaError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-

@@ -84,8 +84,10 @@ def run(args: argparse.Namespace) -> int:
     if server.scene:
         from app.scene.scene import scene_host
 
-        print(f"deltadash: 3D scene on http://{scene_host(server.host)}:{server.viser_port}/",
-              flush=True)  # fmt: skip
+        print(
+            f"deltadash: 3D scene on http://{scene_host(server.host)}:{server.viser_port}/",
+            flush=True,
+        )
     uvicorn.run(
         create_app(settings),
         host=server.host,

@@ -30,16 +30,24 @@ def section_map(cut: Section, path: Path, quantity: str = "dexterity", title: st
     fig, ax = plt.subplots(figsize=(6.0, 5.0), dpi=110)
     extent = (cut.u[0] * 1e3, cut.u[-1] * 1e3, cut.v[0] * 1e3, cut.v[-1] * 1e3)
     if quantity == "dexterity":
-        image = ax.imshow(cut.dexterity, origin="lower", extent=extent, cmap="viridis",
-                          vmin=0.0, vmax=1.0)  # fmt: skip
+        image = ax.imshow(
+            cut.dexterity, origin="lower", extent=extent, cmap="viridis", vmin=0.0, vmax=1.0
+        )
         label = "dexterity 1/cond(J)"
     else:
         with np.errstate(divide="ignore"):
-            image = ax.imshow(np.log10(cut.power_of_point), origin="lower", extent=extent,
-                              cmap="magma")  # fmt: skip
+            image = ax.imshow(
+                np.log10(cut.power_of_point), origin="lower", extent=extent, cmap="magma"
+            )
         label = "log10 power of point sum|h_i| [m^4]"
-    ax.contour(cut.u * 1e3, cut.v * 1e3, cut.reachable.astype(float), levels=[0.5],
-               colors="white", linewidths=1.0)  # fmt: skip
+    ax.contour(
+        cut.u * 1e3,
+        cut.v * 1e3,
+        cut.reachable.astype(float),
+        levels=[0.5],
+        colors="white",
+        linewidths=1.0,
+    )
     fig.colorbar(image, ax=ax, label=label)
     xlabel, ylabel, normal = _AXES[cut.plane]
     ax.set(xlabel=xlabel, ylabel=ylabel, aspect="equal")
@@ -54,8 +62,14 @@ def box_over_section(
     fig, ax = plt.subplots(figsize=(6.0, 5.0), dpi=110)
     extent = (cut.u[0] * 1e3, cut.u[-1] * 1e3, cut.v[0] * 1e3, cut.v[-1] * 1e3)
     ax.imshow(cut.dexterity, origin="lower", extent=extent, cmap="viridis", vmin=0, vmax=1)
-    ax.contour(cut.u * 1e3, cut.v * 1e3, cut.reachable.astype(float), levels=[0.5],
-               colors="black", linewidths=1.0)  # fmt: skip
+    ax.contour(
+        cut.u * 1e3,
+        cut.v * 1e3,
+        cut.reachable.astype(float),
+        levels=[0.5],
+        colors="black",
+        linewidths=1.0,
+    )
     u0, v0 = lower[0] * 1e3, lower[2] * 1e3
     width, height = (upper[0] - lower[0]) * 1e3, (upper[2] - lower[2]) * 1e3
     ax.add_patch(plt.Rectangle((u0, v0), width, height, fill=False, edgecolor="red", lw=1.5))

@@ -44,7 +44,7 @@ def design_check(problem: Problem, design: Design) -> dict[str, Any]:
                 "outside_mm": round(v.outside_m * 1e3, 2),
             }
             for v in found
-        ],  # fmt: skip
+        ],
     }
 
 
@@ -62,8 +62,14 @@ def thesis_readings() -> list[dict[str, Any]]:
             lower = np.array([-edge / 2, -edge / 2, top - edge])
             upper = np.array([edge / 2, edge / 2, top])
             verdict = certify_box(robot, lower, upper)
-            rows.append({"edge_m": edge, "reading": reading, "contains": bool(verdict.contains),
-                         "worst_mm": round(verdict.worst_m * 1e3, 1)})  # fmt: skip
+            rows.append(
+                {
+                    "edge_m": edge,
+                    "reading": reading,
+                    "contains": bool(verdict.contains),
+                    "worst_mm": round(verdict.worst_m * 1e3, 1),
+                }
+            )
     return rows
 
 
@@ -93,8 +99,9 @@ def synth_payload(
 def design_toml(design: Design, r: float) -> str:
     """The ``[robot]`` section ``deltadash serve --config`` loads (app/config.py)."""
     robot = {"type": "rotary", "L": design.L, "l": design.l, "R": design.Rbar + r, "r": r}
-    return tomli_w.dumps({"robot": {k: (round(v, 6) if k != "type" else v)
-                                    for k, v in robot.items()}})  # fmt: skip
+    return tomli_w.dumps(
+        {"robot": {k: (round(v, 6) if k != "type" else v) for k, v in robot.items()}}
+    )
 
 
 def synth_table(payload: dict[str, Any]) -> str:
@@ -103,21 +110,35 @@ def synth_table(payload: dict[str, Any]) -> str:
     lines = [f"{'':22}{'ours':>12}{'thesis 4.3':>12}"]
     for key in ("L", "l", "Rbar", "H"):
         lines.append(f"{key + ' [mm]':22}{payload[key] * 1e3:12.1f}{thesis[key] * 1e3:12.1f}")
-    lines.append(f"{'power of point [m^4]':22}{payload['power_of_point']:12.5f}"
-                 f"{thesis['power_of_point']:12.5f}")  # fmt: skip
-    lines.append(f"{'vertices out of reach':22}{payload['vertices_missed']:>12}"
-                 f"{thesis['vertices_missed']:>12}")  # fmt: skip
-    lines.append(f"{'contains the volume':22}{str(payload['contains']):>12}"
-                 f"{str(thesis['contains']):>12}")  # fmt: skip
-    lines.append(f"{'worst vertex [mm]':22}{payload['vertex_distance_mm']:12.1f}"
-                 f"{thesis['vertex_distance_mm']:12.1f}   (> 0: outside)")  # fmt: skip
-    lines.append(f"search: {payload['seconds']} s, {payload['evaluations']} designs, "
-                 f"{payload['rounds']} round(s)")  # fmt: skip
+    lines.append(
+        f"{'power of point [m^4]':22}{payload['power_of_point']:12.5f}"
+        f"{thesis['power_of_point']:12.5f}"
+    )
+    lines.append(
+        f"{'vertices out of reach':22}{payload['vertices_missed']:>12}"
+        f"{thesis['vertices_missed']:>12}"
+    )
+    lines.append(
+        f"{'contains the volume':22}{str(payload['contains']):>12}{str(thesis['contains']):>12}"
+    )
+    lines.append(
+        f"{'worst vertex [mm]':22}{payload['vertex_distance_mm']:12.1f}"
+        f"{thesis['vertex_distance_mm']:12.1f}   (> 0: outside)"
+    )
+    lines.append(
+        f"search: {payload['seconds']} s, {payload['evaluations']} designs, "
+        f"{payload['rounds']} round(s)"
+    )
     for reading in payload["thesis_readings"]:
-        verdict = ("contains (certified)" if reading["contains"]
-                   else f"misses (a point {reading['worst_mm']} mm outside)")  # fmt: skip
-        lines.append(f"thesis design, {reading['edge_m'] * 100:.0f} cm box with "
-                     f"{reading['reading']}: {verdict}")  # fmt: skip
+        verdict = (
+            "contains (certified)"
+            if reading["contains"]
+            else f"misses (a point {reading['worst_mm']} mm outside)"
+        )
+        lines.append(
+            f"thesis design, {reading['edge_m'] * 100:.0f} cm box with "
+            f"{reading['reading']}: {verdict}"
+        )
     return "\n".join(lines)
 
 
@@ -134,13 +155,13 @@ def sizing_payload(sized: Sizing, level: Sizing, link_only: Sizing) -> dict[str,
         "level_drone": {
             "static_nm": round(level.static_nm.value, 4),
             "peak_nm": round(level.peak_nm.value, 4),
-        },  # fmt: skip
+        },
         "peak_nm_link_inertia_only": round(link_only.peak_nm.value, 4),
         "servo": {
             "name": sized.servo.name,
             "stall_nm": sized.servo.stall_nm,
             "no_load_rpm": sized.servo.no_load_rpm,
-        },  # fmt: skip
+        },
         "available_nm_at_speed": round(sized.available_nm, 4),
         "torque_margin": round(sized.torque_margin, 3),
         "speed_margin": round(sized.speed_margin, 3),
@@ -152,23 +173,33 @@ def sizing_payload(sized: Sizing, level: Sizing, link_only: Sizing) -> dict[str,
 
 
 def sizing_table(payload: dict[str, Any]) -> str:
-    rows = [("static torque [N m]", payload["static_nm"], THESIS_SIZING["static_nm"]),
-            ("peak torque [N m]", payload["peak_nm"], THESIS_SIZING["peak_nm"]),
-            ("joint speed [rpm]", payload["speed_rpm"], THESIS_SIZING["speed_rpm"])]  # fmt: skip
+    rows = [
+        ("static torque [N m]", payload["static_nm"], THESIS_SIZING["static_nm"]),
+        ("peak torque [N m]", payload["peak_nm"], THESIS_SIZING["peak_nm"]),
+        ("joint speed [rpm]", payload["speed_rpm"], THESIS_SIZING["speed_rpm"]),
+    ]
     lines = [f"{'':22}{'ours':>9}{'thesis':>9}   worst at (mm), joint"]
     for name, ours, thesis in rows:
-        lines.append(f"{name:22}{ours['value']:9.3f}{thesis:9.3f}   "
-                     f"{tuple(ours['point_mm'])}, {ours['joint']}")  # fmt: skip
+        lines.append(
+            f"{name:22}{ours['value']:9.3f}{thesis:9.3f}   "
+            f"{tuple(ours['point_mm'])}, {ours['joint']}"
+        )
     level = payload["level_drone"]
-    lines.append(f"level drone: static {level['static_nm']:.3f} N m, peak {level['peak_nm']:.3f}"
-                 f" N m; peak with the link's inertia only (no rotor): "
-                 f"{payload['peak_nm_link_inertia_only']:.3f} N m")  # fmt: skip
+    lines.append(
+        f"level drone: static {level['static_nm']:.3f} N m, peak {level['peak_nm']:.3f}"
+        f" N m; peak with the link's inertia only (no rotor): "
+        f"{payload['peak_nm_link_inertia_only']:.3f} N m"
+    )
     servo = payload["servo"]
     verdict = "PASS" if payload["passes"] else "FAIL"
-    lines.append(f"{servo['name']}: {servo['stall_nm']} N m stall, {servo['no_load_rpm']} rpm "
-                 f"no load -> {payload['available_nm_at_speed']:.3f} N m at the top speed; "
-                 f"torque margin x{payload['torque_margin']}, speed margin "
-                 f"x{payload['speed_margin']}: {verdict}")  # fmt: skip
-    lines.append(f"grid points used {payload['points']}, skipped (out of reach or singular) "
-                 f"{payload['skipped']}")  # fmt: skip
+    lines.append(
+        f"{servo['name']}: {servo['stall_nm']} N m stall, {servo['no_load_rpm']} rpm "
+        f"no load -> {payload['available_nm_at_speed']:.3f} N m at the top speed; "
+        f"torque margin x{payload['torque_margin']}, speed margin "
+        f"x{payload['speed_margin']}: {verdict}"
+    )
+    lines.append(
+        f"grid points used {payload['points']}, skipped (out of reach or singular) "
+        f"{payload['skipped']}"
+    )
     return "\n".join(lines)

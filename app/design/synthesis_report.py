@@ -33,8 +33,10 @@ def write_synthesis_report(
     json_path = out / "report.json"
     json_path.write_text(json.dumps(payload, indent=2))
     text_path = out / "report.md"
-    text_path.write_text(f"# Synthesis report\n\n```\n{report.synth_table(payload)}\n```\n\n"
-                         "See docs/design.md for the problem and the certification.\n")  # fmt: skip
+    text_path.write_text(
+        f"# Synthesis report\n\n```\n{report.synth_table(payload)}\n```\n\n"
+        "See docs/design.md for the problem and the certification.\n"
+    )
     paths = [toml_path, json_path, text_path]
     for name, design in (("ours", result.design), ("thesis", report.THESIS_DESIGN)):
         lower, upper = problem.volume.box(design.H)

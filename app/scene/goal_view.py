@@ -76,13 +76,17 @@ class GoalView:
         scene = server.scene
         start = self._start_point(controller.snapshot())
         self.gizmo = scene.add_transform_controls(
-            "/goal/gizmo", scale=0.07, disable_rotations=True, position=start, depth_test=False)
-        self.marker = scene.add_icosphere("/goal/marker", radius=0.007, color=INSIDE_COLOUR,
-                                          position=start)  # fmt: skip
-        self.path = scene.add_line_segments("/goal/path", np.zeros((1, 2, 3)), PATH_COLOUR,
-                                            thickness=0.003, visible=False)  # fmt: skip
-        self.trail = scene.add_line_segments("/goal/trail", np.zeros((1, 2, 3)), TRAIL_COLOUR,
-                                             thickness=0.0025, visible=False)  # fmt: skip
+            "/goal/gizmo", scale=0.07, disable_rotations=True, position=start, depth_test=False
+        )
+        self.marker = scene.add_icosphere(
+            "/goal/marker", radius=0.007, color=INSIDE_COLOUR, position=start
+        )
+        self.path = scene.add_line_segments(
+            "/goal/path", np.zeros((1, 2, 3)), PATH_COLOUR, thickness=0.003, visible=False
+        )
+        self.trail = scene.add_line_segments(
+            "/goal/trail", np.zeros((1, 2, 3)), TRAIL_COLOUR, thickness=0.0025, visible=False
+        )
         self._saved_handles: list = []
         self.gizmo.on_update(self._on_gizmo)
         if store is not None:
@@ -199,10 +203,14 @@ class GoalView:
         scene = self.server.scene
         self._saved_handles = []
         for i, (name, point) in enumerate(self.saved.items()):
-            self._saved_handles.append(scene.add_icosphere(
-                f"/goal/saved/{i}", radius=0.005, color=SAVED_COLOUR, position=point))
-            self._saved_handles.append(scene.add_label(
-                f"/goal/saved_labels/{i}", name, position=point + [0.0, 0.0, 0.012]))  # fmt: skip
+            self._saved_handles.append(
+                scene.add_icosphere(
+                    f"/goal/saved/{i}", radius=0.005, color=SAVED_COLOUR, position=point
+                )
+            )
+            self._saved_handles.append(
+                scene.add_label(f"/goal/saved_labels/{i}", name, position=point + [0.0, 0.0, 0.012])
+            )
 
     # ---- display rate (the scene thread) ----
     def show_path(self, points: np.ndarray | None) -> None:

@@ -23,8 +23,14 @@ if TYPE_CHECKING:
     from app.scene.access import SceneAccess
     from app.scene.goal_view import GoalView
 
-JOG_AXES = {"+X": (1, 0, 0), "-X": (-1, 0, 0), "+Y": (0, 1, 0), "-Y": (0, -1, 0),
-            "+Z": (0, 0, 1), "-Z": (0, 0, -1)}  # fmt: skip
+JOG_AXES = {
+    "+X": (1, 0, 0),
+    "-X": (-1, 0, 0),
+    "+Y": (0, 1, 0),
+    "-Y": (0, -1, 0),
+    "+Z": (0, 0, 1),
+    "-Z": (0, 0, -1),
+}
 MODE_COLOURS = {"estop": "red", "fault": "red", "idle": "gray"}
 
 
@@ -43,9 +49,11 @@ def status_markdown(snap: Snapshot, backend: str, message: str) -> str:
     """The panel's status block for one snapshot (markdown)."""
     mode = snap.mode.upper()
     torque = "torque **on**" if snap.torque else "torque off"
-    lines = [f"**{mode}** · {torque} · {backend}",
-             f"measured [mm] {_mm(snap.point_measured_m)}",
-             f"goal [mm] {_mm(snap.goal_m)}"]  # fmt: skip
+    lines = [
+        f"**{mode}** · {torque} · {backend}",
+        f"measured [mm] {_mm(snap.point_measured_m)}",
+        f"goal [mm] {_mm(snap.goal_m)}",
+    ]
     for fault in snap.faults[:3]:
         servo = f" (servo {fault.servo_id})" if fault.servo_id is not None else ""
         times = f" (×{fault.count})" if fault.count > 1 else ""
@@ -79,12 +87,12 @@ class ControlPanel:
         self.gui_torque = gui.add_button_group("Torque", ("on", "off"))
         self.gui_estop.on_click(lambda _: self._call(self.controller.estop))
         self.gui_reset.on_click(guard(lambda _: self._call(self.controller.reset)))
-        self.gui_torque.on_click(guard(
-            lambda e: self._call(self.controller.set_torque, e.target.value == "on")))
+        self.gui_torque.on_click(
+            guard(lambda e: self._call(self.controller.set_torque, e.target.value == "on"))
+        )
         with gui.add_folder("Jog"):
             self.gui_jog_step = gui.add_number("Step [mm]", 5.0, min=0.1, max=50.0, step=0.5)
-            self.gui_jog_speed = gui.add_number("Speed [mm/s]", 50.0, min=1.0, max=500.0,
-                                                step=5.0)  # fmt: skip
+            self.gui_jog_speed = gui.add_number("Speed [mm/s]", 50.0, min=1.0, max=500.0, step=5.0)
             self.gui_jog = gui.add_button_group("Jog", tuple(JOG_AXES))
             self.gui_jog.on_click(guard(lambda e: self.jog(JOG_AXES[e.target.value])))
         self._add_goal_points(gui, guard)

@@ -61,44 +61,80 @@ class RobotView:
         colours = (GHOST_COLOUR,) * 3 if ghost else LEG_COLOURS
         nan = np.zeros((3, 2, 3))
         self.upper = scene.add_line_segments(
-            f"{root}/upper", nan, segment_colours(colours, False), thickness=0.006 if ghost
-            else 0.011)  # fmt: skip
+            f"{root}/upper",
+            nan,
+            segment_colours(colours, False),
+            thickness=0.006 if ghost else 0.011,
+        )
         light = tuple(tuple(int(0.7 * c + 0.3 * 255) for c in col) for col in colours)
         self.rods = scene.add_line_segments(
-            f"{root}/rods", np.zeros((6, 2, 3)), segment_colours(light, True),
-            thickness=0.003 if ghost else 0.006)  # fmt: skip
+            f"{root}/rods",
+            np.zeros((6, 2, 3)),
+            segment_colours(light, True),
+            thickness=0.003 if ghost else 0.006,
+        )
         disc = _disc(robot.r + 0.012, corners=3 if robot.r < 0.02 else 6)
         self.platform = scene.add_mesh_simple(
-            f"{root}/platform", disc[0], disc[1], color=GHOST_COLOUR if ghost else (70, 74, 84),
-            side="double", opacity=0.35 if ghost else None)  # fmt: skip
+            f"{root}/platform",
+            disc[0],
+            disc[1],
+            color=GHOST_COLOUR if ghost else (70, 74, 84),
+            side="double",
+            opacity=0.35 if ghost else None,
+        )
         self.joints = None
         self._static: list[Any] = []
         if not ghost:
             self.joints = scene.add_point_cloud(
-                f"{root}/joints", np.zeros((9, 3)), (40, 42, 48), point_size=0.012,
-                point_shape="circle", precision="float32")  # fmt: skip
+                f"{root}/joints",
+                np.zeros((9, 3)),
+                (40, 42, 48),
+                point_size=0.012,
+                point_shape="circle",
+                precision="float32",
+            )
             self._add_base(scene)
 
     def _add_base(self, scene: Any) -> None:
         """Base plate and servos (rotary) or rails (linear): static, drawn once."""
         robot = self.robot
         vertices, faces = _disc(robot.R + 0.03)
-        self._static.append(scene.add_mesh_simple(
-            f"{self.root}/base", vertices + [0, 0, 0.02], faces, color=(120, 126, 138),
-            side="double"))  # fmt: skip
+        self._static.append(
+            scene.add_mesh_simple(
+                f"{self.root}/base",
+                vertices + [0, 0, 0.02],
+                faces,
+                color=(120, 126, 138),
+                side="double",
+            )
+        )
         if isinstance(robot, RotaryDelta):
             for i, angle in enumerate(LEG_ANGLES_RAD):
                 # The shaft sits near the case's outer end, so the case reaches inwards.
                 centre = (robot.R - 0.012) * radial(i) + [0, 0, 0.003]
-                self._static.append(scene.add_box(
-                    f"{self.root}/servo_{i}", (45, 47, 52), SERVO_SIZE_M, position=centre,
-                    wxyz=_yaw_wxyz(angle)))  # fmt: skip
+                self._static.append(
+                    scene.add_box(
+                        f"{self.root}/servo_{i}",
+                        (45, 47, 52),
+                        SERVO_SIZE_M,
+                        position=centre,
+                        wxyz=_yaw_wxyz(angle),
+                    )
+                )
             return
         half = robot.l + robot.R
-        rails = [[robot.R * radial(i) - half * np.asarray(robot._rail(i)),
-                  robot.R * radial(i) + half * np.asarray(robot._rail(i))] for i in range(3)]
-        self._static.append(scene.add_line_segments(
-            f"{self.root}/rails", np.asarray(rails), (90, 94, 104), thickness=0.008))  # fmt: skip
+        rails = [
+            [
+                robot.R * radial(i) - half * np.asarray(robot._rail(i)),
+                robot.R * radial(i) + half * np.asarray(robot._rail(i)),
+            ]
+            for i in range(3)
+        ]
+        self._static.append(
+            scene.add_line_segments(
+                f"{self.root}/rails", np.asarray(rails), (90, 94, 104), thickness=0.008
+            )
+        )
 
     def update(self, joints: Any) -> bool:
         """Draw the pose for ``joints`` (3,) [rad or m]; False (and nothing sent) if it is
@@ -116,8 +152,9 @@ class RobotView:
         self.rods.points = lines.rods.reshape(6, 2, 3)
         self.platform.position = lines.rods[:, :, 1].mean(axis=(0, 1))
         if self.joints is not None:
-            self.joints.points = np.concatenate([lines.upper[:, 0], lines.upper[:, 1],
-                                                 lines.rods[:, :, 1].mean(axis=1)])  # fmt: skip
+            self.joints.points = np.concatenate(
+                [lines.upper[:, 0], lines.upper[:, 1], lines.rods[:, :, 1].mean(axis=1)]
+            )
         return True
 
     @property
@@ -140,4 +177,3 @@ class RobotView:
 def platform_centre(robot: RotaryDelta | LinearDelta, joints: Any) -> np.ndarray:
     """The platform centre [m] as drawn: mean of the rods' lower ends (= FK point)."""
     return robot_lines(robot, joints).rods[:, :, 1].mean(axis=(0, 1))
-

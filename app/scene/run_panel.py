@@ -41,8 +41,10 @@ def stats_markdown(run: Any) -> str:
     for axis in ("x", "y", "z"):
         values = tracking.get(axis)
         if values:
-            lines.append(f"{axis}: RMSE {1e3 * values['rmse_m']:.2f} mm, "
-                         f"max {1e3 * values['max_abs_m']:.2f} mm")  # fmt: skip
+            lines.append(
+                f"{axis}: RMSE {1e3 * values['rmse_m']:.2f} mm, "
+                f"max {1e3 * values['max_abs_m']:.2f} mm"
+            )
     return "  \n".join(lines)
 
 
@@ -81,19 +83,24 @@ class RunPanel:
             self.gui_result = gui.add_markdown("")
         with gui.add_folder("Tracking error [mm]"):
             self.gui_plot = gui.add_uplot(
-                self._plot_data(), self._series(), title="commanded − measured",
-                scales={"x": {"time": False, "auto": True}, "y": {"auto": True}}, aspect=1.6)
+                self._plot_data(),
+                self._series(),
+                title="commanded − measured",
+                scales={"x": {"time": False, "auto": True}, "y": {"auto": True}},
+                aspect=1.6,
+            )
 
     def _add_inputs(self, gui, defaults: Any) -> None:
         mm = lambda v: tuple(1e3 * x for x in v)  # noqa: E731
-        self.gui_amplitude = gui.add_vector3("Amplitude [mm]", mm(defaults.amplitude_m),
-                                             step=1.0)  # fmt: skip
+        self.gui_amplitude = gui.add_vector3("Amplitude [mm]", mm(defaults.amplitude_m), step=1.0)
         self.gui_frequency = gui.add_vector3("Frequency [Hz]", defaults.frequency_hz, step=0.1)
         self.gui_phase = gui.add_vector3(
-            "Phase [deg]", tuple(math.degrees(p) for p in defaults.phase_rad), step=5.0)
+            "Phase [deg]", tuple(math.degrees(p) for p in defaults.phase_rad), step=5.0
+        )
         self.gui_offset = gui.add_vector3("Offset [mm]", mm(defaults.offset_m), step=1.0)
-        self.gui_duration = gui.add_number("Duration [s]", defaults.duration_s, min=0.5,
-                                           max=600.0, step=0.5)  # fmt: skip
+        self.gui_duration = gui.add_number(
+            "Duration [s]", defaults.duration_s, min=0.5, max=600.0, step=0.5
+        )
         self.gui_feedforward = gui.add_checkbox("Feed-forward", defaults.feedforward)
         self.gui_preview = gui.add_button("Preview path", icon=viser.Icon.ROUTE)
         self.gui_start = gui.add_button("Start", color="green", icon=viser.Icon.PLAYER_PLAY)
@@ -199,6 +206,8 @@ class RunPanel:
 
     @staticmethod
     def _series() -> tuple[dict, ...]:
-        axis = [{"label": name, "stroke": colour, "width": 1.5}
-                for name, colour in zip("xyz", AXIS_COLOURS, strict=True)]  # fmt: skip
+        axis = [
+            {"label": name, "stroke": colour, "width": 1.5}
+            for name, colour in zip("xyz", AXIS_COLOURS, strict=True)
+        ]
         return ({"label": "t [s]"}, *axis)

@@ -51,8 +51,9 @@ class Scene:
     ) -> None:
         self.controller = controller
         # the app's Authority, shared with the HTTP API; alone, the scene keeps its own
-        self.authority = authority or Authority(None, getattr(
-            getattr(controller.settings, "server", None), "lease_timeout_s", 30.0))
+        self.authority = authority or Authority(
+            None, getattr(getattr(controller.settings, "server", None), "lease_timeout_s", 30.0)
+        )
         self.runs = runs
         self.host = host
         self.port = port
@@ -70,17 +71,18 @@ class Scene:
 
     def start(self) -> None:
         """Serve the scene and start the display thread (blocks ~0.5 s while meshing)."""
-        server = viser.ViserServer(host=self.host, port=self.port, label="deltadash",
-                                   verbose=False)  # fmt: skip
+        server = viser.ViserServer(host=self.host, port=self.port, label="deltadash", verbose=False)
         self.server = server
         settings, robot = self.controller.settings, self.controller.robot
         self._frame_camera(server)
         server.scene.add_frame("/base_frame", axes_length=0.05, axes_radius=0.002)
-        self.workspace = WorkspaceView(server, robot, settings.limits.workspace_margin_m,
-                                       settings.limits.z_max_m)  # fmt: skip
+        self.workspace = WorkspaceView(
+            server, robot, settings.limits.workspace_margin_m, settings.limits.z_max_m
+        )
         floor = float(self.workspace.mesh.vertices[:, 2].min()) - 0.02
-        server.scene.add_grid("/floor", 0.8, 0.8, cell_size=0.05, section_size=0.1,
-                              position=(0.0, 0.0, floor))  # fmt: skip
+        server.scene.add_grid(
+            "/floor", 0.8, 0.8, cell_size=0.05, section_size=0.1, position=(0.0, 0.0, floor)
+        )
         self.robot = RobotView(server, robot, "/robot")
         self.ghost = RobotView(server, robot, "/ghost", ghost=True)
         runs_settings = getattr(settings, "runs", None)
@@ -112,7 +114,8 @@ class Scene:
             self.gui_trail = gui.add_checkbox("Measured trail", True)
         self.gui_tori.on_update(lambda e: setattr(self.workspace, "tori_visible", e.target.value))
         self.gui_volume.on_update(
-            lambda e: setattr(self.workspace, "volume_visible", e.target.value))
+            lambda e: setattr(self.workspace, "volume_visible", e.target.value)
+        )
         self.gui_ghost.on_update(lambda e: setattr(self.ghost, "visible", e.target.value))
         self.gui_trail.on_update(lambda e: setattr(self.goals, "show_trail", e.target.value))
 
@@ -186,6 +189,5 @@ def start_scene(
     scene.start()
     wanted = settings.server.viser_port
     if scene.server is not None and wanted and scene.server.get_port() != wanted:
-        print(f"deltadash: port {wanted} is taken: 3D scene on {scene.url}",
-              flush=True)  # fmt: skip
+        print(f"deltadash: port {wanted} is taken: 3D scene on {scene.url}", flush=True)
     return scene

@@ -89,8 +89,10 @@ def _onto_surface(robot, vertices: np.ndarray, margin_m: float, z_max_m: float, 
     v = vertices.astype(np.float64)
     for _ in range(3):
         f = volume_field(robot, v, margin_m, z_max_m)
-        grad = np.stack([(volume_field(robot, v + h * e, margin_m, z_max_m) - f) / h
-                         for e in np.eye(3)], axis=-1)  # fmt: skip
+        grad = np.stack(
+            [(volume_field(robot, v + h * e, margin_m, z_max_m) - f) / h for e in np.eye(3)],
+            axis=-1,
+        )
         norm2 = np.maximum(np.sum(grad * grad, axis=-1), 1e-12)
         move = -(f / norm2)[:, None] * grad
         # Never further than a grid step: a bad gradient must not throw a vertex away.

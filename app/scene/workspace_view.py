@@ -34,13 +34,29 @@ class WorkspaceView:
         self.tori = []
         for leg in range(3):
             vertices, faces = torus_mesh(robot, leg)
-            self.tori.append(scene.add_mesh_simple(
-                f"{root}/torus_{leg}", vertices, faces, color=LEG_COLOURS[leg], opacity=0.08,
-                side="double", cast_shadow=False, receive_shadow=False))  # fmt: skip
+            self.tori.append(
+                scene.add_mesh_simple(
+                    f"{root}/torus_{leg}",
+                    vertices,
+                    faces,
+                    color=LEG_COLOURS[leg],
+                    opacity=0.08,
+                    side="double",
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
+            )
         self.mesh: VolumeMesh = reachable_volume(robot, margin_m, z_max_m)
         self.volume = scene.add_mesh_simple(
-            f"{root}/volume", self.mesh.vertices, self.mesh.faces, color=VOLUME_COLOUR,
-            opacity=0.3, side="double", cast_shadow=False, receive_shadow=False)  # fmt: skip
+            f"{root}/volume",
+            self.mesh.vertices,
+            self.mesh.faces,
+            color=VOLUME_COLOUR,
+            opacity=0.3,
+            side="double",
+            cast_shadow=False,
+            receive_shadow=False,
+        )
 
     @property
     def tori_visible(self) -> bool:

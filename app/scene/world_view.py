@@ -40,14 +40,20 @@ class WorldView:
         self.mount = mount
         body_in_base = mount.inverse()
         self.drone = scene.add_frame(
-            "/drone_frame", axes_length=0.08, axes_radius=0.0025, visible=False,
-            position=body_in_base.position, wxyz=body_in_base.quaternion)  # fmt: skip
-        self.drone_label = scene.add_label("/drone_frame/label", "drone body",
-                                           position=(0.0, 0.0, 0.02))  # fmt: skip
-        self.world = scene.add_frame("/world_frame", axes_length=0.15, axes_radius=0.004,
-                                     visible=False)  # fmt: skip
-        self.world_label = scene.add_label("/world_frame/label", "world",
-                                           position=(0.0, 0.0, 0.03))  # fmt: skip
+            "/drone_frame",
+            axes_length=0.08,
+            axes_radius=0.0025,
+            visible=False,
+            position=body_in_base.position,
+            wxyz=body_in_base.quaternion,
+        )
+        self.drone_label = scene.add_label(
+            "/drone_frame/label", "drone body", position=(0.0, 0.0, 0.02)
+        )
+        self.world = scene.add_frame(
+            "/world_frame", axes_length=0.15, axes_radius=0.004, visible=False
+        )
+        self.world_label = scene.add_label("/world_frame/label", "world", position=(0.0, 0.0, 0.03))
         self.active = False
 
     def update(self, source: Any) -> None:

@@ -156,10 +156,15 @@ class DeltaTwin:
         qpos, qvel, ctrl = data.qpos, data.qvel, data.ctrl
         # plain floats: NumPy's per-call overhead would dominate at three servos
         legs = [
-            (self.servos[k], int(self._motor_q[k]), int(self._motor_v[k]),
-             float(self._sign[k]), float(self._zero[k]))
+            (
+                self.servos[k],
+                int(self._motor_q[k]),
+                int(self._motor_v[k]),
+                float(self._sign[k]),
+                float(self._zero[k]),
+            )
             for k in range(3)
-        ]  # fmt: skip
+        ]
         commands = self.commands
         rotating = self.base_motion.rotating
         for _ in range(n):

@@ -106,8 +106,9 @@ def test_from_a_hanging_arm_the_refusal_says_to_move_it_in_first():
     times, points = plan_sinusoid(SinusoidParams(), start).sample(0.005)
     with pytest.raises(GoalRejected, match=r"at t = 0\.000 s.*move it into the workspace first"):
         check_path(gate, times, points, hanging)
-    times, points = plan_sinusoid(SinusoidParams(amplitude_m=(0.2, 0.05, 0.08)),
-                                  np.array([0.0, 0.0, -0.24])).sample(0.005)  # fmt: skip
+    times, points = plan_sinusoid(
+        SinusoidParams(amplitude_m=(0.2, 0.05, 0.08)), np.array([0.0, 0.0, -0.24])
+    ).sample(0.005)
     with pytest.raises(GoalRejected) as refused:  # later points: no such advice
         check_path(gate, times, points, THESIS_DELTA.ik([0.0, 0.0, -0.24]).joints)
     assert "first" not in str(refused.value)

@@ -38,8 +38,19 @@ class RawClient:
         self._reader = threading.Thread(target=self._drain, daemon=True)
         self._reader.start()
         # viser counts a client as connected from its first camera message
-        self.send(_messages.ViewerCameraMessage((1.0, 0.0, 0.0, 0.0), (0.5, -0.6, 0.1), 1.3,
-                  0.01, 100.0, 800, 1280, (0.0, 0.0, -0.2), (0.0, 0.0, 1.0)))  # fmt: skip
+        self.send(
+            _messages.ViewerCameraMessage(
+                (1.0, 0.0, 0.0, 0.0),
+                (0.5, -0.6, 0.1),
+                1.3,
+                0.01,
+                100.0,
+                800,
+                1280,
+                (0.0, 0.0, -0.2),
+                (0.0, 0.0, 1.0),
+            )
+        )
 
     def _drain(self) -> None:
         try:
@@ -68,8 +79,11 @@ class RawClient:
 @pytest.fixture(scope="module")
 def app_client(tmp_path_factory) -> Iterator[TestClient]:
     folder = tmp_path_factory.mktemp("runs")
-    settings = load_settings(hardware={"backend": "emulated"}, runs={"folder": str(folder)},
-                             server={"viser_port": 0, "token": TOKEN})  # fmt: skip
+    settings = load_settings(
+        hardware={"backend": "emulated"},
+        runs={"folder": str(folder)},
+        server={"viser_port": 0, "token": TOKEN},
+    )
     opener = functools.partial(open_backend, emulator_in_process=True)
     with TestClient(create_app(settings, backend_opener=opener)) as client:
         take_lease(client, "browser", token=TOKEN)  # a browser holds control
@@ -83,8 +97,11 @@ def scene(app_client):
     ok_json(app_client.post("/api/reset"))
     ok_json(app_client.post("/api/torque", json={"enabled": True}))
     ok_json(app_client.post("/api/goal", json={"position_m": GOAL}))
-    wait_for(lambda: np.allclose(robot(app_client)["commanded_m"], GOAL, atol=1e-6),
-             "the approach to the goal done", seen=lambda: robot(app_client))  # fmt: skip
+    wait_for(
+        lambda: np.allclose(robot(app_client)["commanded_m"], GOAL, atol=1e-6),
+        "the approach to the goal done",
+        seen=lambda: robot(app_client),
+    )
     return app_client.app.state.scene
 
 
@@ -96,8 +113,9 @@ def raw(scene) -> Iterator[tuple[RawClient, int]]:
     try:
         new = wait_for(lambda: set(scene.server.get_clients()) - before, "the client connected")
         client_id = next(iter(new))
-        wait_for(lambda: scene.access.handle(client_id, "take") is not None,
-                 "its Control folder built")  # fmt: skip
+        wait_for(
+            lambda: scene.access.handle(client_id, "take") is not None, "its Control folder built"
+        )
         yield client, client_id
     finally:
         client.close()
@@ -105,8 +123,12 @@ def raw(scene) -> Iterator[tuple[RawClient, int]]:
 
 def robot(client: TestClient) -> dict:
     status = ok_json(client.get("/api/status"))
-    return {"goal_m": status["goal"]["position_m"], "commanded_m": status["ee"]["commanded_m"],
-            "torque": status["torque"], "mode": status["mode"]}  # fmt: skip
+    return {
+        "goal_m": status["goal"]["position_m"],
+        "commanded_m": status["ee"]["commanded_m"],
+        "torque": status["torque"],
+        "mode": status["mode"],
+    }
 
 
 def refused_once_more(scene, client_id: int, act) -> None:

@@ -56,8 +56,13 @@ def _rendered(page, right_px: int) -> bytes:
         shots[0] = page.screenshot()
         return False
 
-    wait_for(robot_drawn, "leg 3's blue upper link drawn (over 30 pixels)", RENDER_WAIT_S,
-             poll_s=1.0, seen=lambda: f"{blue_pixels()} blue pixels")  # fmt: skip
+    wait_for(
+        robot_drawn,
+        "leg 3's blue upper link drawn (over 30 pixels)",
+        RENDER_WAIT_S,
+        poll_s=1.0,
+        seen=lambda: f"{blue_pixels()} blue pixels",
+    )
     return shots[0]
 
 
@@ -84,8 +89,11 @@ def _drag_and_watch(app_client, scene) -> None:
         page.set_default_timeout(PAGE_WAIT_S * 1e3)
         page.goto(scene.url, wait_until="domcontentloaded")
         page_condition(page, "() => document.querySelector('canvas') !== null", "the canvas")
-        page_condition(page, "() => document.body.innerText.includes('E-STOP')",
-                       "the control panel's E-STOP text")  # fmt: skip
+        page_condition(
+            page,
+            "() => document.body.innerText.includes('E-STOP')",
+            "the control panel's E-STOP text",
+        )
         wait_for(lambda: len(scene.server.get_clients()) == 1, "the browser as a viser client")
         right = _panel_left(page)
         before = _rendered(page, right)

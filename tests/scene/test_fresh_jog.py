@@ -47,9 +47,13 @@ def test_scene_jog_after_torque_off_and_on_moves_by_the_step_only(sim_client) ->
     controller.reset().result(timeout=WAIT_S)
     controller.set_torque(True).result(timeout=WAIT_S)
     ok_json(client.post("/api/goal", json={"position_m": [0.005, 0.01, -0.241]}))
-    wait_for(lambda: np.linalg.norm(np.subtract(status(client)["ee"]["position_m"],
-                                                [0.005, 0.01, -0.241])) < 3e-3,
-             "the arm at the old goal")  # fmt: skip
+    wait_for(
+        lambda: (
+            np.linalg.norm(np.subtract(status(client)["ee"]["position_m"], [0.005, 0.01, -0.241]))
+            < 3e-3
+        ),
+        "the arm at the old goal",
+    )
 
     controller.set_torque(False).result(timeout=WAIT_S)
     wait_for(lambda: status(client)["ee"]["position_m"][2] < -0.3, "the relaxed arm to fall")

@@ -39,8 +39,9 @@ def test_link_endpoints_are_the_kinematics_points(robot, fractions):
     np.testing.assert_allclose(lines.rods[:, :, 1].mean(axis=1), ankles, atol=1e-12)
     rods = lines.rods[:, :, 1] - lines.rods[:, :, 0]
     np.testing.assert_allclose(np.linalg.norm(rods, axis=-1), robot.l, rtol=1e-9)
-    np.testing.assert_allclose(lines.rods[:, :, 1].mean(axis=(0, 1)), robot.fk(joints).points,
-                               atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        lines.rods[:, :, 1].mean(axis=(0, 1)), robot.fk(joints).points, atol=1e-12
+    )
 
 
 @given(rotary_deltas())
@@ -48,10 +49,10 @@ def test_tori_follow_thesis_table_4_1(robot):
     for leg, alpha in enumerate(ALPHAS):
         spec = torus_spec(robot, leg)
         Rbar = robot.R - robot.r
-        np.testing.assert_allclose(spec.centre, [Rbar * math.cos(alpha), Rbar * math.sin(alpha),
-                                                 0.0], atol=1e-15)  # fmt: skip
-        np.testing.assert_allclose(spec.axis, [-math.sin(alpha), math.cos(alpha), 0.0],
-                                   atol=1e-15)  # fmt: skip
+        np.testing.assert_allclose(
+            spec.centre, [Rbar * math.cos(alpha), Rbar * math.sin(alpha), 0.0], atol=1e-15
+        )
+        np.testing.assert_allclose(spec.axis, [-math.sin(alpha), math.cos(alpha), 0.0], atol=1e-15)
         assert spec.major_radius == robot.L  # external radius
         assert spec.tube_radius == robot.l  # internal radius
 

@@ -67,8 +67,7 @@ def test_frame_draws_the_measured_pose(scene, app_client):
     drawn_joints = scene.robot._joints
     expected = robot_lines(scene.controller.robot, drawn_joints)
     np.testing.assert_allclose(scene.robot.upper.points, expected.upper, atol=1e-6)
-    np.testing.assert_allclose(scene.robot.rods.points, expected.rods.reshape(6, 2, 3),
-                               atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(scene.robot.rods.points, expected.rods.reshape(6, 2, 3), atol=1e-6)
     np.testing.assert_allclose(scene.robot.platform.position, [0.04, 0.02, -0.22], atol=3e-3)
 
 

@@ -140,8 +140,10 @@ def test_gamepad_jogs_only_with_the_deadman_held(page: Any, server: Server) -> N
     assert server.get("/api/status")["goal"]["position_m"] == goal
 
     page.evaluate(FAKE_PAD, {"x": 1.0, "held": True})
-    wait_for(lambda: server.get("/api/status")["goal"]["position_m"][0] > goal[0] + 0.002,
-             "+x goal from the stick with the deadman held")  # fmt: skip
+    wait_for(
+        lambda: server.get("/api/status")["goal"]["position_m"][0] > goal[0] + 0.002,
+        "+x goal from the stick with the deadman held",
+    )
     page.evaluate(FAKE_PAD, {"x": 1.0, "held": False})
     page.uncheck("#jog-pad")
 
@@ -157,8 +159,13 @@ def test_plot_buffer_keeps_a_fixed_window_in_order(page: Any) -> None:
         return { length: view.length, first: view[0], last: values[values.length - 1],
                  before: values[values.length - 2], stored: ring.data.length };
     }""")
-    assert result == {"length": 500, "first": 50 * 3600 - 499, "last": None,
-                      "before": 50 * 3600 - 1, "stored": 1000}  # fmt: skip
+    assert result == {
+        "length": 500,
+        "first": 50 * 3600 - 499,
+        "last": None,
+        "before": 50 * 3600 - 1,
+        "stored": 1000,
+    }
 
 
 def plotted_span_mm(page: Any) -> float:
@@ -177,22 +184,29 @@ def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -
     wait_for(lambda: server.get("/api/status")["torque"], "torque on")
     wait_for(lambda: commanded_still(server), "the arm at rest")
     page.fill("input[name=duration]", "2")
-    wait_for(lambda: text(page, "#sine-preview").rsplit(": ", 1)[-1] == "feasible",
-             "the preview to say feasible")  # fmt: skip
+    wait_for(
+        lambda: text(page, "#sine-preview").rsplit(": ", 1)[-1] == "feasible",
+        "the preview to say feasible",
+    )
     assert "peak joint speed" in text(page, "#sine-preview")
     before = page.evaluate("window.deltadashPlot.samples")
     page.click("#sine-start")
     toast = page.locator("#toast")
     # an earlier message (e.g. "Goal accepted") may still be showing: wait for this one
-    wait_for(lambda: toast.is_visible() and "Goal accepted" not in toast.inner_text(),
-             "the page to confirm the start or say why not")
+    wait_for(
+        lambda: toast.is_visible() and "Goal accepted" not in toast.inner_text(),
+        "the page to confirm the start or say why not",
+    )
     assert "started" in toast.inner_text(), toast.inner_text()
     wait_for(lambda: page.evaluate("window.deltadashPlot.samples") > before, "new plot samples")
     # the sinusoid's x amplitude is 50 mm: the plotted measured x must swing by tens of mm
     wait_for(lambda: plotted_span_mm(page) > 30, "the plotted x to show the sinusoid")
     shot(page, "running")
-    run = wait_for(lambda: [r for r in server.get("/api/runs") if r["state"] != "running"],
-                   "the run to end", timeout_s=60)[0]  # fmt: skip
+    run = wait_for(
+        lambda: [r for r in server.get("/api/runs") if r["state"] != "running"],
+        "the run to end",
+        timeout_s=60,
+    )[0]
     assert run["state"] == "done", run
     row = page.locator(f"tr[data-run='{run['run_id']}']")
     wait_for(lambda: row.count() == 1 and "done" in row.inner_text(), "the run's row")

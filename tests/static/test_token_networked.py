@@ -19,8 +19,11 @@ TOKEN = "networked-page-token"
 @pytest.fixture(scope="module")
 def networked(tmp_path_factory) -> Iterator[Server]:
     folder = tmp_path_factory.mktemp("dashboard-networked")
-    env = {"DELTADASH_SERVER__TOKEN": TOKEN, "DELTADASH_SERVER__HOST": "0.0.0.0",
-           "DELTADASH_SERVER__SCENE": "false"}  # fmt: skip
+    env = {
+        "DELTADASH_SERVER__TOKEN": TOKEN,
+        "DELTADASH_SERVER__HOST": "0.0.0.0",
+        "DELTADASH_SERVER__SCENE": "false",
+    }
     with serve(folder, **env) as server:
         yield server
 
@@ -38,7 +41,10 @@ def test_the_page_asks_for_the_token_once_then_reads_and_commands(networked: Ser
         wait_for(lambda: page.locator("#servo-rows tr").count() == 3, "status read with the token")
         wait_for(lambda: page.evaluate("window.deltadashPlot.connected"), "telemetry with token")
         page.click("#torque-on")
-        wait_for(lambda: page.evaluate("""fetch('/api/status', {headers: {Authorization:
+        wait_for(
+            lambda: page.evaluate("""fetch('/api/status', {headers: {Authorization:
                  'Bearer ' + sessionStorage.getItem('deltadash.token')}}).then(r => r.json())
-                 .then(s => s.torque)"""), "torque on from the page")  # fmt: skip
+                 .then(s => s.torque)"""),
+            "torque on from the page",
+        )
         assert len(prompts) == 1, prompts

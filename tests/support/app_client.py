@@ -59,8 +59,12 @@ def robot_seen(client: TestClient) -> dict:
     status = ok_json(client.get("/api/status"))
     keys = ("mode", "torque", "estopped", "faults", "warning")
     ee, joints = status["ee"], status["joints"]
-    return {"measured_m": ee["position_m"], "commanded_m": ee["commanded_m"],
-            "joints_rad": joints["position_rad"], **{k: status[k] for k in keys}}  # fmt: skip
+    return {
+        "measured_m": ee["position_m"],
+        "commanded_m": ee["commanded_m"],
+        "joints_rad": joints["position_rad"],
+        **{k: status[k] for k in keys},
+    }
 
 
 def wait_at(client: TestClient, point_m, what: str, within_m: float = 2e-3) -> None:
@@ -72,8 +76,11 @@ def wait_at(client: TestClient, point_m, what: str, within_m: float = 2e-3) -> N
         keys = ("mode", "torque", "warning", "faults")
         return {"measured_m": status["ee"]["position_m"], **{k: status[k] for k in keys}}
 
-    wait_for(lambda: np.linalg.norm(measured(client) - point_m) < within_m,
-             f"{what} ({within_m * 1e3:g} mm of {list(point_m)} m)", seen=seen)  # fmt: skip
+    wait_for(
+        lambda: np.linalg.norm(measured(client) - point_m) < within_m,
+        f"{what} ({within_m * 1e3:g} mm of {list(point_m)} m)",
+        seen=seen,
+    )
 
 
 def settle_at(client: TestClient, point_m, within_m: float = 0.003) -> None:
@@ -98,8 +105,15 @@ def settle_at(client: TestClient, point_m, within_m: float = 0.003) -> None:
 
     def seen() -> dict:
         now = status()
-        return {"commanded_m": now["ee"]["commanded_m"], "measured_m": now["ee"]["position_m"],
-                "velocity_rad_s": now["joints"]["velocity_rad_s"], "mode": now["mode"]}  # fmt: skip
+        return {
+            "commanded_m": now["ee"]["commanded_m"],
+            "measured_m": now["ee"]["position_m"],
+            "velocity_rad_s": now["joints"]["velocity_rad_s"],
+            "mode": now["mode"],
+        }
 
-    wait_for(settled, f"the robot settled at {list(point_m)} m (within {within_m * 1e3:g} mm, "
-             "joints still)", seen=seen)  # fmt: skip
+    wait_for(
+        settled,
+        f"the robot settled at {list(point_m)} m (within {within_m * 1e3:g} mm, joints still)",
+        seen=seen,
+    )

@@ -21,11 +21,18 @@ from tests.support.wait import wait_for
 CHROMIUM = os.environ.get("DELTADASH_CHROMIUM", "/usr/bin/chromium")
 ARTIFACTS = Path(__file__).resolve().parents[2] / "artifacts"
 CHROMIUM_ARGS = [
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
     # WebGL without a GPU: chromium's software rasteriser (SwiftShader) must be allowed.
-    "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-]  # fmt: skip
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+]
 # Software WebGL on a loaded 2-core machine can hold a page's main thread for tens of seconds
 # at a time: a generous bound on waiting for the page, not a timing assertion.
 PAGE_WAIT_S = 150.0
@@ -62,8 +69,12 @@ def chromium_page(width: int = 1280, height: int = 800) -> Iterator[Any]:
         sync_playwright() as playwright,
     ):
         context = playwright.chromium.launch_persistent_context(
-            profile, executable_path=executable, headless=True, args=CHROMIUM_ARGS,
-            viewport={"width": width, "height": height})  # fmt: skip
+            profile,
+            executable_path=executable,
+            headless=True,
+            args=CHROMIUM_ARGS,
+            viewport={"width": width, "height": height},
+        )
         try:
             yield context.pages[0] if context.pages else context.new_page()
         finally:
@@ -90,8 +101,9 @@ def box_of(locator: Any, what: str, timeout_s: float = PAGE_WAIT_S) -> dict[str,
         last = f"bounding box {box}"
         return box if box is not None and box["width"] > 0 and box["height"] > 0 else None
 
-    return wait_for(laid_out, f"{what} laid out on the page", timeout_s, poll_s=0.5,
-                    seen=lambda: last)  # fmt: skip
+    return wait_for(
+        laid_out, f"{what} laid out on the page", timeout_s, poll_s=0.5, seen=lambda: last
+    )
 
 
 def page_condition(page: Any, script: str, what: str, timeout_s: float = PAGE_WAIT_S) -> None:

@@ -51,8 +51,9 @@ class Server:
 
     def post(self, path: str, body: dict | None = None) -> Any:
         data = json.dumps(body or {}).encode()
-        request = urllib.request.Request(self.url + path, data=data, method="POST",
-                                         headers={"Content-Type": "application/json"})  # fmt: skip
+        request = urllib.request.Request(
+            self.url + path, data=data, method="POST", headers={"Content-Type": "application/json"}
+        )
         with urllib.request.urlopen(request, timeout=10) as response:
             return json.load(response)
 
@@ -69,10 +70,14 @@ def serve(folder: Path, scene: bool = False, **env: str) -> Iterator[Server]:
     """`deltadash serve` on free ports with runs under ``folder``, the 3D scene on if
     ``scene``; extra DELTADASH_* ``env``."""
     port = free_port()
-    env = {**os.environ, "DELTADASH_SERVER__HTTP_PORT": str(port),
-           "DELTADASH_SERVER__VISER_PORT": str(free_port()),
-           "DELTADASH_SERVER__SCENE": "true" if scene else "false",
-           "DELTADASH_RUNS__FOLDER": str(folder / "runs"), **env}  # fmt: skip
+    env = {
+        **os.environ,
+        "DELTADASH_SERVER__HTTP_PORT": str(port),
+        "DELTADASH_SERVER__VISER_PORT": str(free_port()),
+        "DELTADASH_SERVER__SCENE": "true" if scene else "false",
+        "DELTADASH_RUNS__FOLDER": str(folder / "runs"),
+        **env,
+    }
     log = folder / "serve.log"
     command = [sys.executable, "-c", "import sys; from app.cli import main; sys.exit(main())"]
     with log.open("wb") as out:

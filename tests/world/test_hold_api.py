@@ -103,6 +103,7 @@ def test_telemetry_carries_the_world_frame_during_a_hold(client):
                 break
     world = message["world"]
     assert world is not None
-    np.testing.assert_allclose(world["error_m"],
-                               np.subtract(world["goal_m"], world["measured_m"]), atol=1e-12)
+    np.testing.assert_allclose(
+        world["error_m"], np.subtract(world["goal_m"], world["measured_m"]), atol=1e-12
+    )
     wait_for(lambda: ok_json(client.get(f"/api/runs/{run_id}"))["state"] != "running", "run")

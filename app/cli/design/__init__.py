@@ -75,8 +75,11 @@ def _dynamics(args: argparse.Namespace) -> int:
         robot_from(args), mass, args.point, args.velocity, args.acceleration, args.gravity
     )
     ok = bool(np.isfinite(torque).all())
-    payload = {"torques_nm": [float(t) if math.isfinite(t) else None for t in torque],
-               "ok": ok, "point_m": args.point}  # fmt: skip
+    payload = {
+        "torques_nm": [float(t) if math.isfinite(t) else None for t in torque],
+        "ok": ok,
+        "point_m": args.point,
+    }
     text = (
         ("torques [N m]: " + "  ".join(f"{t:+.4f}" for t in torque))
         if ok
@@ -105,8 +108,12 @@ def _size_parser(commands: argparse._SubParsersAction) -> None:
         help="box corners [m] (default: 20 cm cube centred at z = -0.1903)",
     )
     p.add_argument("--grid", type=int, default=9, help="grid points per axis (9)")
-    p.add_argument("--margin", type=float, default=0.0,
-                   help="skip points nearer than this to the boundary [m] (0)")  # fmt: skip
+    p.add_argument(
+        "--margin",
+        type=float,
+        default=0.0,
+        help="skip points nearer than this to the boundary [m] (0)",
+    )
     p.add_argument("--acceleration", type=float, default=4.0, help="[m/s^2] (4)")
     p.add_argument("--speed", type=float, default=0.5, help="[m/s] (0.5)")
     p.add_argument("--tilt", type=float, default=90.0, help="drone tilt limit [deg] (90)")
@@ -130,8 +137,13 @@ def _size(args: argparse.Namespace) -> int:
         servo = Servo("custom", args.stall or servo.stall_nm, args.no_load or servo.no_load_rpm)
     robot, mass = robot_from(args), mass_from(args)
     grid = region_grid(args.region[:3], args.region[3:], args.grid)
-    options = {"payload_kg": args.payload, "acceleration_m_s2": args.acceleration,
-               "speed_m_s": args.speed, "servo": servo, "margin_m": args.margin}  # fmt: skip
+    options = {
+        "payload_kg": args.payload,
+        "acceleration_m_s2": args.acceleration,
+        "speed_m_s": args.speed,
+        "servo": servo,
+        "margin_m": args.margin,
+    }
     sized = size_motors(robot, mass, grid, tilt_deg=args.tilt, **options)
     level = size_motors(robot, mass, grid, tilt_deg=0.0, **options)
     link_only = MassModel(

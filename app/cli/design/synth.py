@@ -92,4 +92,3 @@ def _synth(args: argparse.Namespace) -> int:
         payload["files"] = [str(p) for p in files]
     emit(args, payload, report.synth_table(payload))
     return 0 if result.contains else 1
-

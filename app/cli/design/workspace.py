@@ -49,15 +49,20 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 def _workspace(args: argparse.Namespace) -> int:
     delta = robot_from(args)
     volume = workspace_volume(delta, cells_per_axis=args.cells)
-    fits = {shape: largest_region(delta, tuple(args.proportions), args.z, args.anchor, shape)
-            for shape in ("box", "cylinder")}  # fmt: skip
+    fits = {
+        shape: largest_region(delta, tuple(args.proportions), args.z, args.anchor, shape)
+        for shape in ("box", "cylinder")
+    }
     figures = _figures(delta, args.out, args.sections) if args.out else []
     payload = {
-        "volume_m3": volume.volume_m3, "volume_error_m3": volume.boundary_m3,
-        "box_m": list(fits["box"].size_m), "box_lower_m": list(fits["box"].lower),
+        "volume_m3": volume.volume_m3,
+        "volume_error_m3": volume.boundary_m3,
+        "box_m": list(fits["box"].size_m),
+        "box_lower_m": list(fits["box"].lower),
         "cylinder_diameter_m": fits["cylinder"].size_m[0],
-        "cylinder_height_m": fits["cylinder"].size_m[2], "figures": [str(f) for f in figures],
-    }  # fmt: skip
+        "cylinder_height_m": fits["cylinder"].size_m[2],
+        "figures": [str(f) for f in figures],
+    }
     box, cyl = fits["box"], fits["cylinder"]
     text = "\n".join(
         [
@@ -73,7 +78,6 @@ def _workspace(args: argparse.Namespace) -> int:
     )
     emit(args, payload, text)
     return 0
-
 
 
 def _figures(delta: RotaryDelta, out: Path, sections: list[float]) -> list[Path]:

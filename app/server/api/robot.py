@@ -92,9 +92,7 @@ def get_lease(authority: AuthorityDep) -> dict[str, Any]:
     return asdict(authority.view())
 
 
-@router.post(
-    "/lease", response_model=LeaseTaken, responses={**UNAUTHORISED, **CONFLICT, **INVALID}
-)
+@router.post("/lease", response_model=LeaseTaken, responses={**UNAUTHORISED, **CONFLICT, **INVALID})
 def post_lease(body: LeaseRequest, authority: AuthorityDep, _: TokenChecked) -> dict[str, Any]:
     """Take control: a new secret lease id to send as ``X-Lease`` with each command.
     Taking it from another client (one whose lease has not lapsed) needs take_over=true."""

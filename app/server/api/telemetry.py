@@ -26,9 +26,7 @@ def latest_telemetry(controller: ControllerDep) -> dict[str, Any]:
 
 
 @router.websocket("/telemetry")
-async def telemetry(
-    websocket: WebSocket, controller: ControllerDep, settings: SettingsDep
-) -> None:
+async def telemetry(websocket: WebSocket, controller: ControllerDep, settings: SettingsDep) -> None:
     """Stream snapshots as JSON; ``?hz=`` sets the rate (1-200, default from config)."""
     if not websocket_token_ok(websocket):
         await websocket.close(code=1008, reason="missing or wrong token (?token=)")

@@ -22,8 +22,10 @@ def _run(argv: list[str], capsys) -> tuple[int, str]:
 
 
 def test_synth_json_answers_the_thesis_problem(capsys, tmp_path):
-    code, out = _run(["design", "synth", "--json", "--popsize", "10", "--maxiter", "40",
-                      "--out", str(tmp_path)], capsys)  # fmt: skip
+    code, out = _run(
+        ["design", "synth", "--json", "--popsize", "10", "--maxiter", "40", "--out", str(tmp_path)],
+        capsys,
+    )
     payload = json.loads(out)
     for key in ("L", "l", "Rbar", "H", "objective", "contains"):
         assert key in payload
@@ -42,8 +44,23 @@ def test_synth_json_answers_the_thesis_problem(capsys, tmp_path):
 
 
 def test_size_json_puts_the_thesis_figures_beside_ours(capsys):
-    code, out = _run(["design", "size", "--json", "--grid", "4", "--region",
-                      "-0.05", "-0.05", "-0.28", "0.05", "0.05", "-0.2"], capsys)  # fmt: skip
+    code, out = _run(
+        [
+            "design",
+            "size",
+            "--json",
+            "--grid",
+            "4",
+            "--region",
+            "-0.05",
+            "-0.05",
+            "-0.28",
+            "0.05",
+            "0.05",
+            "-0.2",
+        ],
+        capsys,
+    )
     payload = json.loads(out)
     assert payload["thesis"] == {"static_nm": 0.656, "peak_nm": 0.905, "speed_rpm": 48.0}
     assert 0.2 < payload["static_nm"]["value"] < payload["peak_nm"]["value"]
@@ -51,8 +68,20 @@ def test_size_json_puts_the_thesis_figures_beside_ours(capsys):
 
 
 def test_workspace_writes_figures(capsys, tmp_path):
-    code, out = _run(["design", "workspace", "--json", "--cells", "30", "--sections", "-0.25",
-                      "--out", str(tmp_path)], capsys)  # fmt: skip
+    code, out = _run(
+        [
+            "design",
+            "workspace",
+            "--json",
+            "--cells",
+            "30",
+            "--sections",
+            "-0.25",
+            "--out",
+            str(tmp_path),
+        ],
+        capsys,
+    )
     payload = json.loads(out)
     assert code == 0 and 0.01 < payload["volume_m3"] < 0.2
     assert len(payload["figures"]) == 3

@@ -23,8 +23,10 @@ def hold_at_centre(client: TestClient) -> None:
     client.post("/api/reset")
     client.post("/api/torque", json={"enabled": True})
     client.post("/api/goal", json={"position_m": [0.0, 0.0, -0.24]})
-    wait_for(lambda: abs(ok_json(client.get("/api/status"))["ee"]["position_m"][2] + 0.24) < 0.003,
-             "arrival at the sinusoid's centre")  # fmt: skip
+    wait_for(
+        lambda: abs(ok_json(client.get("/api/status"))["ee"]["position_m"][2] + 0.24) < 0.003,
+        "arrival at the sinusoid's centre",
+    )
 
 
 @pytest.fixture(scope="module")

@@ -41,8 +41,11 @@ NO_LEASE = {"/api/estop", "/api/lease", "/api/mav/pose", "/api/tests/sinusoid/ch
 
 def _app(tmp_path_factory, **server) -> TestClient:
     folder = tmp_path_factory.mktemp("runs")
-    settings = load_settings(hardware={"backend": "emulated"}, runs={"folder": str(folder)},
-                             server={"viser_port": 0, "token": TOKEN, **server})  # fmt: skip
+    settings = load_settings(
+        hardware={"backend": "emulated"},
+        runs={"folder": str(folder)},
+        server={"viser_port": 0, "token": TOKEN, **server},
+    )
     opener = functools.partial(open_backend, emulator_in_process=True)
     return TestClient(create_app(settings, backend_opener=opener))
 
@@ -63,8 +66,12 @@ def local(tmp_path_factory) -> Iterator[TestClient]:
 
 def robot(client: TestClient) -> dict:
     status = ok_json(client.get("/api/status", headers=AUTH))
-    return {"goal_m": status["goal"]["position_m"], "commanded_m": status["ee"]["commanded_m"],
-            "torque": status["torque"], "mode": status["mode"]}  # fmt: skip
+    return {
+        "goal_m": status["goal"]["position_m"],
+        "commanded_m": status["ee"]["commanded_m"],
+        "torque": status["torque"],
+        "mode": status["mode"],
+    }
 
 
 def holding_at_goal(client: TestClient) -> dict[str, str]:
@@ -90,8 +97,11 @@ def test_every_command_route_checks_the_lease():
     for path, item in schema["paths"].items():
         for method, operation in item.items():
             if method in ("post", "put", "patch", "delete"):
-                headers = {p["name"].lower() for p in operation.get("parameters", [])
-                           if p["in"] == "header"}  # fmt: skip
+                headers = {
+                    p["name"].lower()
+                    for p in operation.get("parameters", [])
+                    if p["in"] == "header"
+                }
                 commands[(method, path)] = "x-lease" in headers
     named = {("post", path) for path, _ in COMMANDS if "nope" not in path}
     assert named <= set(commands)

@@ -38,8 +38,10 @@ def at_rest(client: TestClient, point_m: list[float]) -> None:
     ok_json(client.post("/api/reset"))
     ok_json(client.post("/api/torque", json={"enabled": True}))
     ok_json(client.post("/api/goal", json={"position_m": point_m}))
-    wait_for(lambda: np.allclose(status(client)["ee"]["commanded_m"], point_m, atol=1e-6),
-             "the commanded point at the start")  # fmt: skip
+    wait_for(
+        lambda: np.allclose(status(client)["ee"]["commanded_m"], point_m, atol=1e-6),
+        "the commanded point at the start",
+    )
 
 
 def wait_still(client: TestClient, quiet_s: float = 0.3) -> tuple[float, np.ndarray]:
@@ -68,8 +70,10 @@ def test_a_held_jog_stops_by_itself_when_the_client_stops_sending(client) -> Non
     assert last["hold_s"] == pytest.approx(0.2)
     # the client is "killed": no more heartbeats
     stop_s, end = wait_still(client)
-    print(f"held jog stopped within {1e3 * (stop_s - last['time_s']):.0f} ms of the last "
-          "heartbeat (status polling resolution; see benchmarks/jog_deadman.py)")  # fmt: skip
+    print(
+        f"held jog stopped within {1e3 * (stop_s - last['time_s']):.0f} ms of the last "
+        "heartbeat (status polling resolution; see benchmarks/jog_deadman.py)"
+    )
     assert end[0] - start[0] > 0.005  # it did move while held
     assert np.abs(end[1:] - start[1:]).max() < 1e-6  # along +x only
     snap = status(client)

@@ -114,8 +114,9 @@ def test_planning_does_not_block_other_requests(settled, slow_planning):
         poster.join(timeout=60)
     assert answers and answers[0].status_code == 200, answers and answers[0].text
     run_id = answers[0].json()["run_id"]
-    wait_for(lambda: ok_json(settled.get(f"/api/runs/{run_id}"))["state"] != "running",
-             "the run to end")  # fmt: skip
+    wait_for(
+        lambda: ok_json(settled.get(f"/api/runs/{run_id}"))["state"] != "running", "the run to end"
+    )
 
 
 def _post_then_disconnect(client, path: str, body: dict) -> tuple[int, dict]:
@@ -123,13 +124,23 @@ def _post_then_disconnect(client, path: str, body: dict) -> tuple[int, dict]:
     sent: every later receive says http.disconnect. Returns the answer's status and JSON."""
     payload = json.dumps(body).encode()
     scope = {
-        "type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST",
-        "scheme": "http", "path": path, "raw_path": path.encode(), "query_string": b"",
-        "root_path": "", "client": ("test", 1), "server": ("testserver", 80),
-        "headers": [(b"content-type", b"application/json"),
-                    (b"content-length", str(len(payload)).encode()),
-                    (b"x-lease", client.headers["x-lease"].encode())],
-    }  # fmt: skip
+        "type": "http",
+        "asgi": {"version": "3.0"},
+        "http_version": "1.1",
+        "method": "POST",
+        "scheme": "http",
+        "path": path,
+        "raw_path": path.encode(),
+        "query_string": b"",
+        "root_path": "",
+        "client": ("test", 1),
+        "server": ("testserver", 80),
+        "headers": [
+            (b"content-type", b"application/json"),
+            (b"content-length", str(len(payload)).encode()),
+            (b"x-lease", client.headers["x-lease"].encode()),
+        ],
+    }
     messages = [{"type": "http.request", "body": payload, "more_body": False}]
     sent: list[dict] = []
 

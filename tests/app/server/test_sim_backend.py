@@ -19,8 +19,10 @@ def test_default_backend_is_the_twin_and_reaches_a_goal(tmp_path):
         status = ok_json(client.get("/api/status"))
         assert status["backend"] == "sim" and status["mode"] == "idle"
         # torque off: the arm falls and hangs under gravity
-        wait_for(lambda: ok_json(client.get("/api/status"))["ee"]["position_m"][2] < -0.3,
-                 "the relaxed arm to hang")
+        wait_for(
+            lambda: ok_json(client.get("/api/status"))["ee"]["position_m"][2] < -0.3,
+            "the relaxed arm to hang",
+        )
         assert client.post("/api/torque", json={"enabled": True}).status_code == 200
         goal = [0.02, -0.01, -0.23]
         response = client.post("/api/goal", json={"position_m": goal})

@@ -52,8 +52,17 @@ def test_fifty_hertz_with_ten_millisecond_sends_gives_fifty_sends_a_second():
 
 @pytest.mark.parametrize(
     ("asked", "rate"),
-    [(None, 50.0), ("20", 20.0), ("0", 1.0), ("1e9", 200.0), ("inf", 200.0), ("-inf", 1.0),
-     ("nan", 50.0), ("fast", 50.0), ("", 50.0)],
-)  # fmt: skip
+    [
+        (None, 50.0),
+        ("20", 20.0),
+        ("0", 1.0),
+        ("1e9", 200.0),
+        ("inf", 200.0),
+        ("-inf", 1.0),
+        ("nan", 50.0),
+        ("fast", 50.0),
+        ("", 50.0),
+    ],
+)
 def test_the_asked_rate_is_clamped_and_nan_is_the_default(asked, rate):
     assert stream_rate_hz(asked, 50.0) == rate

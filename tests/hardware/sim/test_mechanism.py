@@ -138,8 +138,9 @@ def test_frame_forces_use_each_body_s_own_velocity():
     with each centre of mass's velocity from mj_objectVelocity, on a moving arm."""
     from hardware.sim.base_frame import apply_frame_forces
 
-    motion = BaseMotion(angular_velocity_rad_s=(0.4, -0.7, 1.1),
-                        angular_acceleration_rad_s2=(2.0, 0.5, -1.5))  # fmt: skip
+    motion = BaseMotion(
+        angular_velocity_rad_s=(0.4, -0.7, 1.1), angular_acceleration_rad_s2=(2.0, 0.5, -1.5)
+    )
     twin = frictionless(0.1)
     twin.reset((0.2, 0.7, 1.0))
     twin.advance(0.05)  # falling: every body moves
@@ -152,5 +153,6 @@ def test_frame_forces_use_each_body_s_own_velocity():
         mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, body, velocity, 0)
         assert np.linalg.norm(velocity[3:]) > 1e-3
         accel = np.cross(w_dot, r) + np.cross(w, np.cross(w, r)) + 2 * np.cross(w, velocity[3:])
-        np.testing.assert_allclose(data.xfrc_applied[body, :3], -model.body_mass[body] * accel,
-                                   rtol=1e-9, atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(
+            data.xfrc_applied[body, :3], -model.body_mass[body] * accel, rtol=1e-9, atol=1e-12
+        )

@@ -113,8 +113,13 @@ def test_realtime_bus_moves_simulated_time_by_itself() -> None:
     sim = SimBus(SimBusConfig(realtime=True, torque_on_at_start=True))
     sim.connect()
     try:
-        wait_for(lambda: sim.twin.time_s >= 0.05, "simulated time to reach 0.05 s by itself",
-                 10.0, poll_s=0.01, seen=lambda: f"{sim.twin.time_s} s")  # fmt: skip
+        wait_for(
+            lambda: sim.twin.time_s >= 0.05,
+            "simulated time to reach 0.05 s by itself",
+            10.0,
+            poll_s=0.01,
+            seen=lambda: f"{sim.twin.time_s} s",
+        )
         with pytest.raises(RuntimeError):
             sim.advance(0.1)  # the thread owns the clock
     finally:
