@@ -3,7 +3,7 @@
 On the simulator with torque on and the arm settled, whatever is sent: never a 5xx, and a
 refused request (4xx) leaves the commanded point where it was. After an accepted request
 that moved anything, the arm is brought back to rest before the next example. The number of
-examples is bounded so the test stays in the fast suite.
+examples is bounded (make test runs it; it is marked slow, out of the inner loop).
 """
 
 from __future__ import annotations
@@ -97,6 +97,7 @@ def requests(draw, routes):
     return path, json.dumps(body, allow_nan=True)
 
 
+@pytest.mark.slow  # ~20 s for 200 examples: in make test, not in the inner loop
 def test_no_generated_body_gives_a_5xx_or_moves_the_robot_when_refused(sim):
     routes = post_routes(sim)
     assert len(routes) >= 15  # every POST route of the API is in the draw
