@@ -98,6 +98,8 @@ def main() -> None:
         f"heartbeat every {HEARTBEAT_S * 1e3:.0f} ms; load {os.getloadavg()[0]:.2f}"
     )
     with TestClient(create_app(settings)) as client:
+        lease = ok(client.post("/api/lease", json={"client": "jog_deadman", "take_over": True}))
+        client.headers["X-Lease"] = lease["lease_id"]
         controller = client.app.state.controller
         for speed in args.speeds:
             results = [trial(client, controller, speed) for _ in range(args.trials)]

@@ -31,6 +31,7 @@ import urllib.request
 PORT = 8767
 VISER_PORT = 8768
 TOKEN = "benchmark-token-123"
+LEASE: dict[str, str] = {}  # X-Lease once taken: commands need the control lease
 
 
 def _http(method: str, path: str, body: dict | None = None, timeout: float = 60) -> dict:
@@ -38,7 +39,11 @@ def _http(method: str, path: str, body: dict | None = None, timeout: float = 60)
         f"http://127.0.0.1:{PORT}{path}",
         data=None if body is None else json.dumps(body).encode(),
         method=method,
-        headers={"content-type": "application/json", "authorization": f"Bearer {TOKEN}"},
+        headers={
+            "content-type": "application/json",
+            "authorization": f"Bearer {TOKEN}",
+            **LEASE,
+        },
     )
     with urllib.request.urlopen(request, timeout=timeout) as response:
         return json.load(response)
@@ -93,6 +98,9 @@ def waypoints_body() -> dict:
 
 
 def settle() -> None:
+    if not LEASE:
+        lease = _http("POST", "/api/lease", {"client": "benchmarks/limits.py", "take_over": True})
+        LEASE["x-lease"] = lease["lease_id"]
     _http("POST", "/api/torque", {"enabled": True})
     _http("POST", "/api/goal", {"position_m": [0.0, 0.0, -0.24]})
     end = time.monotonic() + 30
