@@ -131,6 +131,19 @@ def robot(client: TestClient) -> dict:
     }
 
 
+def unmoved(before: dict, after: dict) -> bool:
+    """Same torque, mode, goal and commanded point (to 1 nm: a holding jog's ruckig output
+    can differ in the last bits between ticks)."""
+    same = all(before[k] == after[k] for k in ("torque", "mode"))
+
+    def close(a, b) -> bool:  # null (unknown, e.g. no goal with torque off) only equals null
+        if a is None or b is None:
+            return a is b
+        return np.allclose(np.array(a, float), np.array(b, float), rtol=0, atol=1e-9)
+
+    return same and all(close(before[k], after[k]) for k in ("goal_m", "commanded_m"))
+
+
 def refused_once_more(scene, client_id: int, act) -> None:
     count = scene.access.refused(client_id)
     act()
@@ -146,7 +159,7 @@ def test_a_websocket_client_without_the_token_cannot_move_the_robot(scene, raw, 
     refused_once_more(scene, client_id, lambda: client.set(panel.gui_reset, True))
     refused_once_more(scene, client_id, lambda: client.drag_goal([0.03, 0.0, -0.26]))
     refused_once_more(scene, client_id, lambda: client.set(scene.tests.gui_start, True))
-    assert robot(app_client) == before
+    assert unmoved(before, robot(app_client)), (before, robot(app_client))
     assert ok_json(app_client.get("/api/runs")) == []
     assert ok_json(app_client.get("/api/lease"))["holder"] == "browser"
 
@@ -171,7 +184,7 @@ def test_the_token_unlocks_but_taking_control_from_a_holder_is_explicit(scene, r
     before = robot(app_client)
     refused_once_more(scene, client_id, lambda: client.set(scene.panel.gui_jog, "+Z"))
     assert "held by 'browser'" in scene.access.message(client_id)
-    assert robot(app_client) == before
+    assert unmoved(before, robot(app_client)), (before, robot(app_client))
     client.set(scene.access.handle(client_id, "take"), True)
     wait_for(lambda: scene.access.holds(client_id), "the scene client to take control")
     client.set(scene.panel.gui_jog, "-Z")
@@ -193,7 +206,7 @@ def test_a_second_scene_client_cannot_command_while_another_holds_control(scene,
     scene.panel.gui_torque.value = "off"
     callback(viser.GuiEvent(None, 9002, scene.panel.gui_torque))
     assert access.refused(9002) == 1 and "held by 'scene client 9001'" in second.message
-    assert robot(app_client) == before
+    assert unmoved(before, robot(app_client)), (before, robot(app_client))
     access.disconnect(9001)  # a closed tab gives control back
     assert not ok_json(app_client.get("/api/lease"))["held"]
     access.disconnect(9002)
