@@ -21,6 +21,7 @@ from app.config import load_settings
 from app.scene.access import LOCKED
 from app.server import create_app
 from app.server.backends import open_backend
+from tests.support.app_client import unmoved
 from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
@@ -129,19 +130,6 @@ def robot(client: TestClient) -> dict:
         "torque": status["torque"],
         "mode": status["mode"],
     }
-
-
-def unmoved(before: dict, after: dict) -> bool:
-    """Same torque, mode, goal and commanded point (to 1 nm: a holding jog's ruckig output
-    can differ in the last bits between ticks)."""
-    same = all(before[k] == after[k] for k in ("torque", "mode"))
-
-    def close(a, b) -> bool:  # null (unknown, e.g. no goal with torque off) only equals null
-        if a is None or b is None:
-            return a is b
-        return np.allclose(np.array(a, float), np.array(b, float), rtol=0, atol=1e-9)
-
-    return same and all(close(before[k], after[k]) for k in ("goal_m", "commanded_m"))
 
 
 def refused_once_more(scene, client_id: int, act) -> None:

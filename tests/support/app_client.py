@@ -117,3 +117,16 @@ def settle_at(client: TestClient, point_m, within_m: float = 0.003) -> None:
         f"the robot settled at {list(point_m)} m (within {within_m * 1e3:g} mm, joints still)",
         seen=seen,
     )
+
+
+def unmoved(before: dict, after: dict) -> bool:
+    """Same torque, mode, goal and commanded point (to 1 nm: a holding jog's ruckig output
+    can differ in the last bits between ticks)."""
+    same = all(before[k] == after[k] for k in ("torque", "mode"))
+
+    def close(a, b) -> bool:  # null (unknown, e.g. no goal with torque off) only equals null
+        if a is None or b is None:
+            return a is b
+        return np.allclose(np.array(a, float), np.array(b, float), rtol=0, atol=1e-9)
+
+    return same and all(close(before[k], after[k]) for k in ("goal_m", "commanded_m"))
