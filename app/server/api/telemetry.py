@@ -69,6 +69,6 @@ class Pacer:
         """The next send time [s] after the one just done, at ``now_s`` [s]."""
         self.slot += 1
         behind = now_s - (self.start_s + self.slot * self.period_s)
-        if behind > 0:
-            self.slot += math.ceil(behind / self.period_s)
+        if behind > 1e-6 * self.period_s:  # a slot due now (to rounding) is not missed
+            self.slot += math.ceil(behind / self.period_s - 1e-6)
         return self.start_s + self.slot * self.period_s
