@@ -41,6 +41,7 @@ def still(client: TestClient, within_m: float = 2e-4) -> list[float] | None:
     return b.tolist() if np.linalg.norm(b - a) < within_m else None
 
 
+@pytest.mark.slow  # end to end on the twin
 def test_scene_jog_after_torque_off_and_on_moves_by_the_step_only(sim_client) -> None:
     client, app = sim_client, sim_client.app
     controller, panel = app.state.controller, app.state.scene.panel

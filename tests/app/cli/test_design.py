@@ -67,6 +67,7 @@ def test_size_json_puts_the_thesis_figures_beside_ours(capsys):
     assert payload["passes"] is True and code == 0
 
 
+@pytest.mark.slow  # renders figures
 def test_workspace_writes_figures(capsys, tmp_path):
     code, out = _run(
         [

@@ -60,6 +60,7 @@ def wait_still(client: TestClient, quiet_s: float = 0.3) -> tuple[float, np.ndar
     return next(t for t, p in seen if np.array_equal(p, final)), final
 
 
+@pytest.mark.slow  # end to end on the twin
 def test_a_held_jog_stops_by_itself_when_the_client_stops_sending(client) -> None:
     at_rest(client, [0.0, 0.0, -0.24])
     start = np.array(status(client)["ee"]["commanded_m"])
@@ -81,6 +82,7 @@ def test_a_held_jog_stops_by_itself_when_the_client_stops_sending(client) -> Non
     assert snap["goal"]["position_m"] == pytest.approx(list(end), abs=1e-9)
 
 
+@pytest.mark.slow  # end to end on the twin
 def test_a_zero_velocity_stops_at_once_and_a_step_still_works(client) -> None:
     at_rest(client, [0.0, 0.0, -0.24])
     ok_json(client.post("/api/jog", json={"velocity_m_s": VELOCITY_M_S}))

@@ -82,6 +82,7 @@ def runs(tmp_path_factory):
     return resting_manager(tmp_path_factory.mktemp("runs"))
 
 
+@pytest.mark.slow  # hypothesis over planned runs
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(RUN_BODIES)
 def test_an_accepted_run_body_plans_or_is_rejected_never_errs(runs, case):

@@ -63,6 +63,7 @@ def test_input_that_cannot_run_is_a_422_naming_the_field(settled, path, body, fi
     assert unmoved(before, commanded(settled))
 
 
+@pytest.mark.slow  # end to end: plans and waits on the loop
 def test_waypoints_too_fast_from_near_the_start_are_refused(settled):
     """5 cm in a microsecond, the robot within 1 mm of the first point."""
     before = commanded(settled)
@@ -98,6 +99,7 @@ def _run_count(client) -> int:
     return len(ok_json(client.get("/api/runs")))
 
 
+@pytest.mark.slow  # end to end: plans and waits on the loop
 def test_planning_does_not_block_other_requests(settled, slow_planning):
     answers: list = []
     poster = threading.Thread(

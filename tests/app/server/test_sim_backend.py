@@ -12,6 +12,7 @@ from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
 
+@pytest.mark.slow  # end to end on the twin
 def test_default_backend_is_the_twin_and_reaches_a_goal(tmp_path):
     assert load_settings().hardware.backend == "sim"
     with make_client(tmp_path, backend="sim") as client:

@@ -28,6 +28,7 @@ def test_one_bad_reply_is_retried_and_counted(bus: DynamixelBus, emulator, fault
     assert (stats.failed_tries, stats.retries, stats.failures) == (1, 1, 0)
 
 
+@pytest.mark.slow  # three tries of a 0.3 s reply timeout per case
 @pytest.mark.parametrize(
     ("fault", "reason"),
     [
@@ -51,6 +52,7 @@ def test_persistent_bad_replies_raise_naming_the_servo(
     assert bus.read_state().position_rad.shape == (3,)  # fault spent: the bus works again
 
 
+@pytest.mark.slow  # reply timeouts of a silent servo
 def test_unplugged_servo_fails_reads_and_writes_then_recovers(patient_bus, emulator) -> None:
     bus = patient_bus
     emulator.inject(3, unplugged=True)
