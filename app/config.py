@@ -141,7 +141,7 @@ class JogSettings(_Section):
     max_jerk_m_s3: float = Field(100.0, gt=0, description="per axis [m/s^3]")
     step_m: float = Field(0.005, gt=0, le=0.1, description="default jog step [m]")
     hold_timeout_s: float = Field(
-        0.2, gt=0, le=2.0, description="a held jog stops this long after its last heartbeat [s]"
+        0.15, gt=0, le=2.0, description="a held jog stops this long after its last heartbeat [s]"
     )
 
 

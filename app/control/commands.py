@@ -48,7 +48,7 @@ class CommandContext:
     jog_limits: Limits
     joint_speed_rad_s: float
     estop_action: Literal["hold", "release"]
-    hold_timeout_s: float = 0.2
+    hold_timeout_s: float = 0.15
 
     @classmethod
     def from_settings(cls, settings: Settings) -> CommandContext:

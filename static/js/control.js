@@ -8,7 +8,7 @@ const KEY_AXES = {
   ArrowRight: [0, 1], ArrowLeft: [0, -1], ArrowUp: [1, 1], ArrowDown: [1, -1],
   PageUp: [2, 1], PageDown: [2, -1],
 };
-const HEARTBEAT_MS = 50; // a held jog's heartbeat; the server stops it 200 ms after the last
+const HEARTBEAT_MS = 50; // a held jog's heartbeat; the server brakes 150 ms after the last
 const GAMEPAD_PERIOD_MS = 50;
 const DEADZONE = 0.15;
 const DEADMAN_BUTTON = 4; // LB on standard-mapping pads
@@ -39,7 +39,7 @@ function speedMS() {
 }
 
 // Hold-to-move: while a key, pad button or the gamepad's deadman is held, the jog's
-// velocity is posted every HEARTBEAT_MS; the server stops the jog 0.2 s after the last
+// velocity is posted every HEARTBEAT_MS; the server brakes 0.15 s after the last
 // one (a frozen tab or a lost link stops the robot). Release sends a zero velocity.
 // One hold at a time (the latest press wins); one request in flight at most.
 const hold = { owner: null, velocity: null, timer: null, inflight: Promise.resolve(), busy: false };

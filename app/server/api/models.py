@@ -34,7 +34,7 @@ class JogRequest(_Body):
     velocity_m_s: Vector3 | None = Field(
         None,
         description="held jog [m/s]: moves only while repeated (every ~50 ms); stops "
-        "jog.hold_timeout_s (0.2 s) after the last; zero stops at once; capped at the jog speed",
+        "jog.hold_timeout_s (0.15 s) after the last; zero stops at once; capped at the jog speed",
     )
 
     @model_validator(mode="after")

@@ -48,7 +48,7 @@ async def post_goal(body: GoalRequest, controller: ControllerDep, _: ControlClie
 @router.post("/jog", response_model=Accepted, responses=CONTROL)
 async def post_jog(body: JogRequest, controller: ControllerDep, _: ControlClient):
     """A relative step [m] (``delta_m``), clamped onto the workspace; or hold-to-move
-    (``velocity_m_s``): the jog moves only while this is repeated, stopping 0.2 s after the
+    (``velocity_m_s``): the jog moves only while this is repeated, braking 0.15 s after the
     last one (a dead man's switch for browsers), and a zero velocity stops it."""
     if body.velocity_m_s is not None:
         return await _outcome(controller.hold_jog(body.velocity_m_s))
