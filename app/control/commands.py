@@ -258,11 +258,13 @@ def stop_source(state: LoopState, source: GoalSource) -> bool:
 
 
 # ---- torque, e-stop, reset ----
-def torque_to(state: LoopState, bus: ServoBus, enabled: bool) -> bool:
+def torque_to(state: LoopState, ctx: CommandContext, bus: ServoBus, enabled: bool) -> bool:
     """Torque on (holding where the robot is, so nothing moves) or off (stopping any source).
 
     Torque on while it is on keeps holding the commanded joints (not the sagged measured
-    ones); from off it holds the measured joints, where the relaxed arm is.
+    ones); from off it holds the measured joints, where the relaxed arm is. MotionRefused
+    when those are outside the joint limits (a relaxed arm still swinging, or pushed past
+    them): holding there would command the servos beyond their limits.
     """
     if enabled:
         if state.estopped or state.faults:
@@ -270,6 +272,7 @@ def torque_to(state: LoopState, bus: ServoBus, enabled: bool) -> bool:
         if state.joints is None:
             raise MotionRefused("no joint state read yet: check the bus")
         hold, point = held(state)
+        _require_within_limits(ctx, hold)
         bus.write_goal(hold)  # where it is, so enabling torque moves nothing
         bus.torque(True)
         state.commanded_rad, state.commanded_point_m, state.goal_m = hold, point, point.copy()
@@ -279,6 +282,17 @@ def torque_to(state: LoopState, bus: ServoBus, enabled: bool) -> bool:
     if not enabled:
         stop_motion(state)
     return enabled
+
+
+def _require_within_limits(ctx: CommandContext, joints_rad: np.ndarray) -> None:
+    low, high = ctx.gate.joint_min_rad, ctx.gate.joint_max_rad
+    for i, (value, lo, hi) in enumerate(zip(joints_rad, low, high, strict=True)):
+        if not lo <= value <= hi:
+            raise MotionRefused(
+                f"joint {i + 1} is at {math.degrees(value):.1f} deg, outside its limits "
+                f"[{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg: torque on would hold it "
+                "there; wait for the arm to come to rest inside them (or move it by hand)"
+            )
 
 
 def held(state: LoopState) -> tuple[np.ndarray, np.ndarray]:

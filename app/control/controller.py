@@ -174,7 +174,7 @@ class Controller:
         return self.submit(lambda: commands.stop_source(self.state, source))
 
     def set_torque(self, enabled: bool) -> Future:
-        return self.submit(lambda: commands.torque_to(self.state, self.bus, enabled))
+        return self.submit(lambda: commands.torque_to(self.state, self.ctx, self.bus, enabled))
 
     def estop(self) -> Future:
         """Stop at once and hold or release per config; nothing moves until reset."""

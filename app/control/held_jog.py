@@ -15,6 +15,8 @@ the control thread only, with ``now_s`` its loop clock.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from app.control.commands import CommandContext, jog_source
@@ -30,7 +32,7 @@ def hold_jog(state: LoopState, ctx: CommandContext, velocity_m_s: np.ndarray, no
     zero stops it. GoalRejected if the robot cannot move from where it is. Returns the
     velocity used, how long it holds without another heartbeat [s] and the loop time [s]."""
     velocity = np.asarray(velocity_m_s, dtype=np.float64)
-    speed = float(np.linalg.norm(velocity))
+    speed = math.hypot(*velocity)  # no overflow: |[1e200, 0, 0]| is 1e200, not inf
     if speed == 0.0:
         release(state, None)
         return {"velocity_m_s": [0.0, 0.0, 0.0], "hold_s": 0.0, "time_s": now_s}

@@ -35,7 +35,7 @@ def held(velocity=(SPEED_M_S, 0.0, 0.0)) -> tuple[Controller, FakeClock, FakeBus
     clock, bus = FakeClock(), FakeBus()
     loop = Controller(SETTINGS, bus, "fake", clock=clock)
     loop.step()
-    commands.torque_to(loop.state, bus, True)
+    commands.torque_to(loop.state, loop.ctx, bus, True)
     held_jog.hold_jog(loop.state, loop.ctx, np.array(velocity), loop._now())
     return loop, clock, bus
 
@@ -129,3 +129,11 @@ def test_the_speed_is_capped_at_the_jog_limit() -> None:
     loop, _, _ = held((10.0 * limit, 10.0 * limit, 0.0))
     velocity = loop.state.hold_velocity_m_s
     assert np.linalg.norm(velocity) == pytest.approx(limit)
+
+
+@pytest.mark.parametrize("asked", [1e200, 1e10, 10.0])
+def test_an_absurd_speed_is_capped_at_the_jog_speed_in_its_direction(asked: float) -> None:
+    loop, _, _ = held()
+    used = held_jog.hold_jog(loop.state, loop.ctx, np.array([asked, 0.0, 0.0]), loop._now())
+    cap = loop.ctx.jog_limits.velocity
+    assert used["velocity_m_s"] == pytest.approx([cap, 0.0, 0.0])  # not a stop, not a sprint

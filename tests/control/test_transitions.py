@@ -116,11 +116,17 @@ reset: Command = commands.reset_now
 
 
 def torque_on(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
-    return commands.torque_to(state, bus, True)
+    return commands.torque_to(state, ctx, bus, True)
+
+
+def torque_on_swung_past_the_limits(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
+    bus.position = np.full(3, 2.128)  # 122 deg: a relaxed arm swinging past its limits
+    state.joints = bus.read_state()
+    return commands.torque_to(state, ctx, bus, True)
 
 
 def torque_off(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
-    return commands.torque_to(state, bus, False)
+    return commands.torque_to(state, ctx, bus, False)
 
 
 def jog(state: LoopState, ctx: CommandContext, bus: FakeBus) -> list[float]:
@@ -182,9 +188,9 @@ def estop_reset_x4(state: LoopState, ctx: CommandContext, bus: FakeBus) -> tuple
 
 
 def jog_after_torque_cycle(state: LoopState, ctx: CommandContext, bus: FakeBus) -> list:
-    commands.torque_to(state, bus, False)
+    commands.torque_to(state, ctx, bus, False)
     settle(state, bus, HANG_RAD)  # relaxed, the arm falls and hangs
-    commands.torque_to(state, bus, True)
+    commands.torque_to(state, ctx, bus, True)
     return commands.jog_by(state, ctx, np.array([0.005, 0.0, 0.0]))
 
 
@@ -205,6 +211,11 @@ TABLE = [  # given, command, then: one row per transition
     pytest.param(
         Given(), torque_on, Then("idle", True, HOLD + (("torque", True),), True),
         id="torque on: holds where it is, then enables",
+    ),
+    pytest.param(
+        Given(), torque_on_swung_past_the_limits,
+        Then("idle", False, (), refused="joint 1 is at 121.9 deg, outside its limits"),
+        id="torque on refused while the relaxed arm is past its joint limits",
     ),
     pytest.param(
         Given(**ON, source="jog"), torque_off, Then("idle", False, RELEASE, False),
@@ -434,7 +445,7 @@ def test_reset_clears_the_safety_detectors() -> None:
 
 def test_torque_on_commands_the_measured_pose() -> None:
     state, ctx, bus = arrange(Given())
-    commands.torque_to(state, bus, True)
+    commands.torque_to(state, ctx, bus, True)
     np.testing.assert_array_equal(state.commanded_rad, HOME_RAD)
     np.testing.assert_allclose(state.commanded_point_m, HOME_M, atol=1e-9)
 
@@ -477,7 +488,7 @@ def test_a_jog_is_ticked_towards_its_goal_and_a_servo_error_stops_it() -> None:
     bus = FakeBus()
     loop = controller(bus)
     loop.step()
-    commands.torque_to(loop.state, bus, True)
+    commands.torque_to(loop.state, loop.ctx, bus, True)
     commands.jog_to(loop.state, loop.ctx, GOAL)
     for _ in range(10):
         loop.step()
@@ -501,7 +512,7 @@ def test_the_tick_writes_nothing_unless_motion_is_allowed(stopped: str) -> None:
     bus = FakeBus()
     loop = controller(bus)
     loop.step()
-    commands.torque_to(loop.state, bus, True)
+    commands.torque_to(loop.state, loop.ctx, bus, True)
     commands.jog_to(loop.state, loop.ctx, GOAL)
     setattr(loop.state, stopped, {"torque": False, "estopped": True, "faults": [FAULT]}[stopped])
     before = writes(bus)
@@ -514,7 +525,7 @@ def test_a_move_runs_to_its_end_and_the_loop_goes_idle() -> None:
     bus = FakeBus()
     loop = controller(bus)
     loop.step()
-    commands.torque_to(loop.state, bus, True)
+    commands.torque_to(loop.state, loop.ctx, bus, True)
     result = commands.move(loop.state, loop.ctx, GOAL, None, False)
     ticks = int(np.ceil(result["duration_s"] / loop.period_s)) + 1
     for _ in range(ticks):
@@ -527,7 +538,7 @@ def test_a_run_that_reports_a_fault_stops_with_a_source_fault() -> None:
     bus = FakeBus()
     loop = controller(bus)
     loop.step()
-    commands.torque_to(loop.state, bus, True)
+    commands.torque_to(loop.state, loop.ctx, bus, True)
     commands.run_source(loop.state, RunSource(fault="the drone link dropped"), HOME_M, 2e-3)
     loop.step()
     snap = loop.snapshot()
@@ -553,7 +564,7 @@ def test_a_stuck_servo_trips_the_following_error() -> None:
     bus = FakeBus()
     loop = controller(bus, safety={"following_error_rad": 0.05, "following_error_time_s": 0.0})
     loop.step()
-    commands.torque_to(loop.state, bus, True)
+    commands.torque_to(loop.state, loop.ctx, bus, True)
     commands.move(loop.state, loop.ctx, np.array(HOME_RAD) + 0.3, None, True)
     bus.stuck = True
     for _ in range(200):

@@ -103,12 +103,14 @@ def post_lease(body: LeaseRequest, authority: AuthorityDep, _: TokenChecked) -> 
     return {"lease_id": lease_id, "holder": body.client, "timeout_s": authority.timeout_s}
 
 
-@router.delete("/lease", response_model=LeaseOut, responses={**UNAUTHORISED, **INVALID})
+@router.delete("/lease", response_model=LeaseOut, responses={**UNAUTHORISED, **CONFLICT, **INVALID})
 def delete_lease(
     authority: AuthorityDep,
     _: TokenChecked,
     x_lease: Annotated[str | None, Header(description="the lease id to give back")] = None,
 ) -> dict[str, Any]:
-    """Give control back (the holder's lease id in ``X-Lease``); anything else changes nothing."""
-    authority.release(x_lease)
+    """Give control back (the holder's lease id in ``X-Lease``); 409 for any other id (the
+    lease stays with its holder)."""
+    if not authority.release(x_lease):
+        raise HTTPException(409, "X-Lease is not the current lease: control did not change")
     return asdict(authority.view())

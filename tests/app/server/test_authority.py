@@ -209,3 +209,12 @@ def test_only_a_bearer_token_is_accepted(networked, authorization):
     scheme_any_case = {"Authorization": f"bearer {TOKEN}"}
     body = {"client": "x", "take_over": True}
     assert networked.post("/api/lease", json=body, headers=scheme_any_case).status_code == 200
+
+
+def test_giving_back_someone_elses_lease_is_refused_and_changes_nothing(local):
+    holder = take_lease(local, "alice", token=TOKEN, sticky=False)
+    for wrong in ({**AUTH, "X-Lease": "alice"}, {**AUTH}):
+        response = local.delete("/api/lease", headers=wrong)
+        assert response.status_code == 409, response.text
+    assert ok_json(local.get("/api/lease"))["holder"] == "alice"
+    assert local.delete("/api/lease", headers=holder).status_code == 200

@@ -138,3 +138,7 @@ def test_a_16_mb_body_without_the_token_is_a_401_from_the_server(tmp_path):
             headers={"content-type": "application/json", "authorization": f"Bearer {TOKEN}"},
         )
         assert response.status_code == 413, response.text
+        # the e-stop is never refused at the door, whatever comes with it
+        response = client.post("/api/estop", content=body, headers={"content-type": "text/plain"})
+        assert response.status_code == 200, response.text
+        assert client.get("/api/status").json()["estopped"] is True
