@@ -83,6 +83,21 @@ def wait_at(client: TestClient, point_m, what: str, within_m: float = 2e-3) -> N
     )
 
 
+def torque_on(client: TestClient) -> None:
+    """Torque on, waiting while it is refused because a relaxed arm is still swinging past
+    its joint limits (it is accepted once the arm is back inside them)."""
+    answers: list = []
+
+    def accepted() -> bool:
+        answers.append(client.post("/api/torque", json={"enabled": True}))
+        if answers[-1].status_code == 409 and "outside its limits" in answers[-1].text:
+            return False
+        ok_json(answers[-1])
+        return True
+
+    wait_for(accepted, "torque on to be accepted", seen=lambda: answers[-1].text)
+
+
 def settle_at(client: TestClient, point_m, within_m: float = 0.003) -> None:
     """Torque on, a goal at ``point_m`` [m], and wait for a defined pose: the approach done
     (commanded there), the platform measured within ``within_m`` of it and the joints still.
@@ -90,7 +105,7 @@ def settle_at(client: TestClient, point_m, within_m: float = 0.003) -> None:
     Runs plan from the commanded point and refuse to start from a robot still moving (after
     torque on the arm may still be falling), so a test that starts one settles here first.
     """
-    ok_json(client.post("/api/torque", json={"enabled": True}))
+    torque_on(client)
     ok_json(client.post("/api/goal", json={"position_m": list(point_m)}))
 
     def status() -> dict:

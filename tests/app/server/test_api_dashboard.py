@@ -13,7 +13,7 @@ from fastapi.testclient import TestClient
 from app.config import load_settings
 from app.runs.trajectories import SinusoidParams
 from app.server.api.dashboard import peak_joint_speed
-from tests.support.app_client import make_client
+from tests.support.app_client import make_client, torque_on
 from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
@@ -21,7 +21,7 @@ from tests.support.wait import ok_json, wait_for
 def hold_at_centre(client: TestClient) -> None:
     """Torque on and the platform at the thesis sinusoid's centre, (0, 0, -0.24) m."""
     client.post("/api/reset")
-    client.post("/api/torque", json={"enabled": True})
+    torque_on(client)
     client.post("/api/goal", json={"position_m": [0.0, 0.0, -0.24]})
     wait_for(
         lambda: abs(ok_json(client.get("/api/status"))["ee"]["position_m"][2] + 0.24) < 0.003,

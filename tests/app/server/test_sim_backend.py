@@ -7,7 +7,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.config import load_settings
-from tests.support.app_client import make_client, settle_at
+from tests.support.app_client import make_client, settle_at, torque_on
 from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
@@ -24,7 +24,7 @@ def test_default_backend_is_the_twin_and_reaches_a_goal(tmp_path):
             lambda: ok_json(client.get("/api/status"))["ee"]["position_m"][2] < -0.3,
             "the relaxed arm to hang",
         )
-        assert client.post("/api/torque", json={"enabled": True}).status_code == 200
+        torque_on(client)  # accepted once the arm is back inside its joint limits
         goal = [0.02, -0.01, -0.23]
         response = client.post("/api/goal", json={"position_m": goal})
         assert response.status_code == 200, response.text
