@@ -46,7 +46,7 @@ def test_scene_jog_after_torque_off_and_on_moves_by_the_step_only(sim_client) ->
     client, app = sim_client, sim_client.app
     controller, panel = app.state.controller, app.state.scene.panel
     controller.reset().result(timeout=WAIT_S)
-    controller.set_torque(True).result(timeout=WAIT_S)
+    torque_on(client)  # the twin's arm may still be swinging from its start
     ok_json(client.post("/api/goal", json={"position_m": [0.005, 0.01, -0.241]}))
     wait_for(
         lambda: (
