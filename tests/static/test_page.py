@@ -190,14 +190,20 @@ def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -
     )
     assert "peak joint speed" in text(page, "#sine-preview")
     before = page.evaluate("window.deltadashPlot.samples")
+    runs_before = len(server.get("/api/runs"))
     page.click("#sine-start")
     toast = page.locator("#toast")
-    # an earlier message (e.g. "Goal accepted") may still be showing: wait for this one
-    wait_for(
-        lambda: toast.is_visible() and "Goal accepted" not in toast.inner_text(),
-        "the page to confirm the start or say why not",
-    )
-    assert "started" in toast.inner_text(), toast.inner_text()
+
+    def started() -> bool:
+        text = toast.inner_text() if toast.is_visible() else ""
+        if len(server.get("/api/runs")) > runs_before:
+            return True
+        if "Failed to fetch" in text:  # a starved machine dropped the request; no run started
+            page.evaluate("document.getElementById('toast').textContent = ''")
+            page.click("#sine-start")
+        return False
+
+    wait_for(started, "the run to start (a refusal shows in the toast)")
     wait_for(lambda: page.evaluate("window.deltadashPlot.samples") > before, "new plot samples")
     # the sinusoid's x amplitude is 50 mm: the plotted measured x must swing by tens of mm
     wait_for(lambda: plotted_span_mm(page) > 30, "the plotted x to show the sinusoid")
