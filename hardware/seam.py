@@ -138,11 +138,9 @@ def check_joint(cal: JointCalibration, setup: ServoSetup, joint: int) -> None:
         else f"is outside what Homing Offset {offset} leaves reachable"
     )
     fixes = []
-    if not crosses:
-        best = _homing_offset_fix(physical)
+    if not crosses:  # within one turn: Homing Offset 0 leaves all of 0 .. 4095 reachable
         fixes.append(
-            f"write Homing Offset (20) = {best} on servo {cal.servo_id} (torque off), then "
-            "home again"
+            f"write Homing Offset (20) = 0 on servo {cal.servo_id} (torque off), then home again"
         )
     fixes.append(_remount_fix(cal, setup, window))
     fixes.append(
@@ -154,13 +152,6 @@ def check_joint(cal: JointCalibration, setup: ServoSetup, joint: int) -> None:
         f"{name}: {span} is Present Position {low} .. {high} ticks, but Position Control "
         f"Mode reaches only {window[0]} .. {window[1]}: the range {where}. Fix: " + "; ".join(fixes)
     )
-
-
-def _homing_offset_fix(physical: tuple[int, int]) -> int:
-    """The Homing Offset nearest 0 that leaves a one-turn range `physical` reachable."""
-    low = max(physical[1] - (TICKS_PER_REV - 1), -POSITION_MODE_HOMING_OFFSET_LIMIT)
-    high = min(physical[0], POSITION_MODE_HOMING_OFFSET_LIMIT)
-    return min(max(0, low), high)
 
 
 def _remount_fix(cal: JointCalibration, setup: ServoSetup, window: tuple[int, int]) -> str:

@@ -52,6 +52,7 @@ from hardware.seam import (
     SeamError,
     ServoSetup,
     check_joint,
+    single_turn,
     turn_correction,
 )
 
@@ -150,7 +151,12 @@ class DynamixelBus:
     def torque(self, enabled: bool) -> None:
         if enabled:
             # Hold where the links are: a stale Goal Position would jump the arm on enable.
-            self._sync_write_goal_ticks(list(self.read_ticks().values()))
+            # In Position Control Mode the count restarts at one turn as torque comes on.
+            hold = self.read_ticks()
+            for servo_id, setup in self._setups.items():
+                if setup.mode == OperatingMode.POSITION:
+                    hold[servo_id] = single_turn(hold[servo_id], setup.offset_in_force)
+            self._sync_write_goal_ticks([hold[i] for i in self.ids])
         for servo_id in self.ids:
             error = self.link.write(servo_id, Reg.TORQUE_ENABLE, int(enabled))
             if enabled and error & ALERT_BIT:

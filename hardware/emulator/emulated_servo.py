@@ -152,10 +152,10 @@ class EmulatedServo:
     def finish(self, instruction: int, params: bytes) -> None:
         """Effects the servo applies after its status packet has gone out."""
         if instruction == Instruction.REBOOT:
+            self.restart_count()  # from Present Position, before the RAM is cleared
             self.table.reset_ram()
             self.registered = None
             self.reboots += 1
-            self.restart_count()
         elif instruction == Instruction.FACTORY_RESET and params:
             offset = self.present_offset
             self.table.factory_reset(keep_id=params[0] != 0xFF, keep_baud=params[0] == 0x02)
