@@ -47,6 +47,11 @@ class JointCalibration:
                 f"joint {self.servo_id}: min_angle_rad {self.min_angle_rad} must be below "
                 f"max_angle_rad {self.max_angle_rad}"
             )
+        if self.max_angle_rad - self.min_angle_rad >= 2 * math.pi:
+            raise CalibrationError(
+                f"joint {self.servo_id}: range {self.min_angle_rad} .. {self.max_angle_rad} rad "
+                "spans a turn or more (a servo's encoder tells positions apart within one turn)"
+            )
 
     def to_ticks(self, theta_rad: float) -> int:
         """Joint angle [rad] -> raw servo position [ticks], rounded to the nearest tick."""
@@ -61,7 +66,10 @@ class JointCalibration:
         return min(max(theta_rad, self.min_angle_rad), self.max_angle_rad)
 
     def tick_limits(self) -> tuple[int, int]:
-        """The angle limits as (min, max) raw ticks, e.g. for the servo's position limits."""
+        """The angle limits as (min, max) raw ticks, e.g. for the servo's position limits.
+
+        Not wrapped into 0 .. 4095: a range past either end crosses the encoder's seam
+        (hardware/seam.py says where each operating mode can go)."""
         ends = sorted((self.to_ticks(self.min_angle_rad), self.to_ticks(self.max_angle_rad)))
         return ends[0], ends[1]
 

@@ -4,6 +4,10 @@ Torque goes off; the operator places the upper links at a known pose (a horizont
 0 deg for every joint; hard stops give a known angle) and presses Enter; the tool reads the
 raw positions, computes each joint's zero offset and writes ``[[hardware.joints]]`` into the
 config file (other sections are kept). ``--yes`` skips the prompt (scripts, tests).
+
+A joint range the servo cannot reach in its operating mode (one that crosses the
+encoder's 0/4095 seam in Position Control Mode) is refused and nothing is saved; the
+message names the servo and the fix (docs/hardware.md, "How homing avoids the seam").
 """
 
 from __future__ import annotations
@@ -38,7 +42,7 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from app.server.backends import _calibrations
     from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig
-    from hardware.errors import BusError
+    from hardware.errors import BusError, CalibrationError
     from hardware.homing import home_bus
 
     try:
@@ -48,14 +52,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     hw = settings.hardware
-    bus = DynamixelBus(
-        DynamixelConfig(joints=_calibrations(settings), port=hw.port, baudrate=hw.baud)
-    )
+    try:
+        joints = _calibrations(settings)
+    except CalibrationError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    bus = DynamixelBus(DynamixelConfig(joints=joints, port=hw.port, baudrate=hw.baud))
     confirm = (lambda prompt: print(prompt)) if args.yes else input
     try:
-        bus.connect()
+        bus.connect(verify_calibration=False)  # the calibration is what homing replaces
         homed = home_bus(bus, args.config, [math.radians(a) for a in args.angles_deg], confirm)
-    except BusError as exc:
+    except (BusError, CalibrationError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     finally:

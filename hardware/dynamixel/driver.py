@@ -9,6 +9,13 @@ taken one per servo with readRx, so each servo's error byte is seen: when its al
 any servo is missing, late, corrupt or answers as another id is retried whole (up to
 `max_tries`) and otherwise raises CommError naming the servos; no state is ever assembled
 from a partial reply. Configuration writes go one servo at a time and wait for each status.
+
+At connect each servo's Operating Mode, Homing Offset and Min/Max Position Limit are read:
+a joint range the servo cannot reach in its mode (the encoder's seam, hardware/seam.py) is
+refused with the fix, a multi-turn servo that came up a turn away from its calibration is
+put back by its Homing Offset, and every goal is checked against the limits the servo
+enforces before it is sent (a sync write has no status packet: a refused goal would
+otherwise leave the joint where it was, silently).
 """
 
 from __future__ import annotations
@@ -36,8 +43,22 @@ from hardware.dynamixel.control_table import (
     voltage_to_volt,
 )
 from hardware.dynamixel.link import SdkLink, comm_reason, status_reason
-from hardware.dynamixel.protocol import ALERT_BIT
-from hardware.errors import BusError, CommError, HardwareError
+from hardware.dynamixel.protocol import ALERT_BIT, StatusError
+from hardware.encoder import TICKS_PER_REV
+from hardware.errors import BusError, CalibrationError, CommError, HardwareError, ServoStatusError
+from hardware.seam import (
+    MULTI_TURN_MODES,
+    POSITION_LIMIT_RANGE,
+    SeamError,
+    ServoSetup,
+    check_joint,
+    single_turn,
+    turn_correction,
+)
+
+_SETUP_REGISTERS = frozenset(
+    {Reg.OPERATING_MODE, Reg.HOMING_OFFSET, Reg.MIN_POSITION_LIMIT, Reg.MAX_POSITION_LIMIT}
+)
 
 
 @dataclass(frozen=True)
@@ -72,9 +93,17 @@ class DynamixelBus:
         self.link = SdkLink(config.port, config.baudrate, config.max_tries)
         self._goal_writer: sdk.GroupSyncWrite | None = None
         self._state_reader: sdk.GroupSyncRead | None = None
+        self._setups: dict[int, ServoSetup] = {}  # per servo id, read at connect
 
     # -- ServoBus ------------------------------------------------------------------------
-    def connect(self) -> None:
+    def connect(self, verify_calibration: bool = True) -> None:
+        """Open the port, ping every joint's servo, check its model and read its setup.
+
+        verify_calibration: also refuse joint ranges the servos cannot reach in their
+        operating mode and put multi-turn servos on their calibrated turn
+        (`check_calibration`); homing turns it off, since it replaces the calibration.
+        Raises CommError / BusError (servos missing, wrong model), SeamError.
+        """
         self.disconnect()  # reconnecting must not leak the previous port
         self.link.open()
         port = self.link.port
@@ -96,13 +125,17 @@ class DynamixelBus:
                 models = ", ".join(str(found[i].model_number) for i in wrong)
                 expected = self.config.expected_model
                 raise BusError(wrong, "ping", f"model {models}, expected {expected}")
-        except BusError:
+            self.read_setups(self.ids)
+            if verify_calibration:
+                self.check_calibration()
+        except (BusError, CalibrationError):
             self.disconnect()
             raise
 
     def disconnect(self) -> None:
         self.link.close()
         self._goal_writer = self._state_reader = None
+        self._setups = {}
 
     def scan(self, ids: Sequence[int] | None = None) -> list[ServoInfo]:
         found = []
@@ -118,7 +151,12 @@ class DynamixelBus:
     def torque(self, enabled: bool) -> None:
         if enabled:
             # Hold where the links are: a stale Goal Position would jump the arm on enable.
-            self._sync_write_goal_ticks(list(self.read_ticks().values()))
+            # In Position Control Mode the count restarts at one turn as torque comes on.
+            hold = self.read_ticks()
+            for servo_id, setup in self._setups.items():
+                if setup.mode == OperatingMode.POSITION:
+                    hold[servo_id] = single_turn(hold[servo_id], setup.offset_in_force)
+            self._sync_write_goal_ticks([hold[i] for i in self.ids])
         for servo_id in self.ids:
             error = self.link.write(servo_id, Reg.TORQUE_ENABLE, int(enabled))
             if enabled and error & ALERT_BIT:
@@ -127,6 +165,8 @@ class DynamixelBus:
 
     def set_operating_mode(self, mode: OperatingMode) -> None:
         self._write_all(Reg.OPERATING_MODE, [int(mode)] * len(self.ids))
+        self.read_setups(self.ids)
+        self._align_turns(self.ids)  # a mode change resets the count to one turn
 
     def write_goal(self, positions_rad: Sequence[float]) -> None:
         ticks = goal_ticks(self.config.joints, positions_rad)
@@ -162,6 +202,7 @@ class DynamixelBus:
             pending = {i for i in pending if not self.scan([i])}
             if pending and time.monotonic() > deadline:
                 raise CommError(sorted(pending), "reboot", "servo did not come back")
+        self._align_turns(targets)  # a reboot resets the count to one turn
 
     def _send_reboot(self, port: sdk.PortHandler, servo_id: int) -> None:
         """One Reboot instruction with the link's bounded retries (reboot() waits for it)."""
@@ -187,13 +228,55 @@ class DynamixelBus:
     def write_register(self, servo_id: int, reg: Reg, value: int) -> None:
         """Any writable item of one servo, raw; EEPROM items need torque off."""
         self.link.write(servo_id, reg, value)
+        if reg in _SETUP_REGISTERS and servo_id in self.ids:
+            self.read_setups([servo_id])
 
     def write_position_limits(self) -> None:
-        """Copy each joint's calibrated angle limits into Min/Max Position Limit (EEPROM)."""
+        """Copy each joint's calibrated angle limits into Min/Max Position Limit (EEPROM,
+        torque off), so the servo itself refuses goals outside them in Position Control Mode.
+
+        Raises SeamError (nothing written) if a joint's tick range is not inside 0 .. 4095,
+        the registers' range: its range crosses the encoder's seam (hardware/seam.py).
+        """
+        first, last = POSITION_LIMIT_RANGE
+        for joint, cal in enumerate(self.config.joints, start=1):
+            low, high = cal.tick_limits()
+            if low < first or high > last:
+                raise SeamError(
+                    f"servo {cal.servo_id} (joint {joint}): joint range {cal.min_angle_rad} .. "
+                    f"{cal.max_angle_rad} rad is {low} .. {high} ticks; Min/Max Position "
+                    f"Limit take {first} .. {last}: the range crosses the encoder's seam "
+                    "(connect() and homing say how to fix it); no limit was written"
+                )
         for cal in self.config.joints:
             low, high = cal.tick_limits()
-            self.link.write(cal.servo_id, Reg.MIN_POSITION_LIMIT, max(0, low))
-            self.link.write(cal.servo_id, Reg.MAX_POSITION_LIMIT, min(4095, high))
+            self.link.write(cal.servo_id, Reg.MIN_POSITION_LIMIT, low)
+            self.link.write(cal.servo_id, Reg.MAX_POSITION_LIMIT, high)
+        self.read_setups(self.ids)
+
+    def check_calibration(self) -> None:
+        """Refuse joint ranges the servos cannot reach in their operating mode, and put each
+        multi-turn servo that came up a turn away from its calibration back on its turn.
+
+        Raises SeamError naming the servo, the joint, the ticks and the fix; ServoStatusError
+        if a Homing Offset cannot be written (torque on).
+        """
+        for joint, cal in enumerate(self.config.joints, start=1):
+            check_joint(cal, self._setups[cal.servo_id], joint)
+        self._align_turns(self.ids)
+
+    def read_setups(self, ids: Sequence[int] | None = None) -> dict[int, ServoSetup]:
+        """Read Operating Mode, Homing Offset and Min/Max Position Limit of `ids` (default:
+        every joint) afresh; the goal checks use what was read last."""
+        for servo_id in self.ids if ids is None else ids:
+            read = self.link.read
+            self._setups[servo_id] = ServoSetup(
+                mode=read(servo_id, Reg.OPERATING_MODE),
+                homing_offset=read(servo_id, Reg.HOMING_OFFSET),
+                min_position=read(servo_id, Reg.MIN_POSITION_LIMIT),
+                max_position=read(servo_id, Reg.MAX_POSITION_LIMIT),
+            )
+        return dict(self._setups)
 
     # -- internals -----------------------------------------------------------------------
     def _wrong_model(self, model: int) -> bool:
@@ -203,11 +286,50 @@ class DynamixelBus:
         for servo_id, value in zip(self.ids, values, strict=True):
             self.link.write(servo_id, reg, value)
 
+    def _align_turns(self, ids: Sequence[int]) -> None:
+        """Homing Offset += 4096 k on each multi-turn servo in `ids` that reads k turns away
+        from the middle of its joint's range (its count restarts at one turn at power-on,
+        reboot and mode change; hardware/seam.py)."""
+        joints = {cal.servo_id: cal for cal in self.config.joints}
+        multi = [i for i in ids if self._setups[i].mode in MULTI_TURN_MODES]
+        if not multi:
+            return
+        present = self.read_ticks()
+        for servo_id in multi:
+            turns = turn_correction(present[servo_id], joints[servo_id])
+            if turns:
+                offset = self._setups[servo_id].homing_offset + turns * TICKS_PER_REV
+                self.write_register(servo_id, Reg.HOMING_OFFSET, offset)
+
+    def _check_goals(self, ticks: Sequence[int]) -> None:
+        """Refuse goals a servo would refuse (outside its Min/Max Position Limit in Position
+        Control Mode), naming each servo: a sync write gets no status to say so."""
+        refused = []
+        for servo_id, value in zip(self.ids, ticks, strict=True):
+            setup = self._setups.get(servo_id)
+            if setup is None:
+                continue
+            low, high = setup.goal_bounds()
+            if not low <= value <= high:
+                refused.append((servo_id, int(value), low, high))
+        if refused:
+            reason = "; ".join(
+                f"servo {i}: goal {value} ticks outside its limits {low} .. {high}"
+                for i, value, low, high in refused
+            )
+            raise ServoStatusError(
+                [i for i, *_ in refused],
+                "sync write GOAL_POSITION",
+                f"{reason} (data limit error: the servo would ignore it; nothing was sent)",
+                int(StatusError.DATA_LIMIT),
+            )
+
     def _sync_write_goal_ticks(self, ticks: Sequence[int]) -> None:
         writer = self._goal_writer
         if writer is None:
             self.link.require_port("sync write GOAL_POSITION")
             return
+        self._check_goals(ticks)
         with self.link.lock:  # the parameters and the packet they build belong together
             for servo_id, value in zip(self.ids, ticks, strict=True):
                 writer.changeParam(servo_id, list(int(value).to_bytes(4, "little", signed=True)))

@@ -104,7 +104,7 @@ class EmulatedBus:
             present[i] = ticks.get(servo.servo_id, present[i])
             servo.table.set(Reg.PRESENT_POSITION, present[i])
             servo.table.set(Reg.GOAL_POSITION, present[i])
-        offsets = [s.table.get(Reg.HOMING_OFFSET) for s in self.servos]
+        offsets = [s.present_offset for s in self.servos]
         self.model.reset([(p - o) * RAD_PER_TICK for p, o in zip(present, offsets, strict=True)])
         self._last_step = self.clock()
 

@@ -3,6 +3,12 @@
 The servo answers the instructions addressed to it alone (ping, read, write, reg write,
 action, factory reset, reboot, clear) with a status packet's parameters and error number;
 framing, broadcast and group instructions are the bus's (hardware/emulator/emulated_bus.py).
+
+Present Position = shaft + Homing Offset - a whole number of turns (`turn_ticks`): like the
+servo, the count runs on across the encoder's seam while powered and restarts at one turn
+(shaft 0 .. 4095) when torque comes on in Position Control Mode, when the Operating Mode
+changes and at reboot; Position Control Mode ignores a Homing Offset outside -1024 .. 1024
+(hardware/seam.py).
 """
 
 from __future__ import annotations
@@ -10,9 +16,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from hardware.bus import OperatingMode
 from hardware.dynamixel.control_table import Reg
 from hardware.dynamixel.protocol import ALERT_BIT, Instruction, StatusError
 from hardware.emulator.memory import ServoMemory
+from hardware.encoder import TICKS_PER_REV
+from hardware.seam import effective_homing_offset
 
 _READ_INSTRUCTIONS = {
     Instruction.READ,
@@ -56,9 +65,10 @@ class EmulatedServo:
         self.faults = Faults()
         self.registered: tuple[int, bytes] | None = None
         self.reboots = 0
-        # (command bytes, MotionCommand) of hardware.emulator.stepping, so unchanged tables
-        # are not decoded again on every packet.
-        self.command_cache: tuple[bytes, object] | None = None
+        self.turn_ticks = 0  # whole turns [ticks] the count is behind the shaft
+        # ((command bytes, turn_ticks), MotionCommand) of hardware.emulator.stepping, so
+        # unchanged tables are not decoded again on every packet.
+        self.command_cache: tuple[tuple[bytes, int], object] | None = None
 
     @property
     def servo_id(self) -> int:
@@ -95,12 +105,42 @@ class EmulatedServo:
         """A latched hardware error is one the Shutdown (63) item turns torque off for."""
         return bool(self.table.get(Reg.HARDWARE_ERROR_STATUS) & self.table.get(Reg.SHUTDOWN))
 
+    @property
+    def present_offset(self) -> int:
+        """Present Position - shaft position [ticks]: the Homing Offset in force less the
+        turns the count has restarted by."""
+        t = self.table
+        offset = effective_homing_offset(t.get(Reg.OPERATING_MODE), t.get(Reg.HOMING_OFFSET))
+        return offset - self.turn_ticks
+
+    def restart_count(self) -> None:
+        """Count from the shaft's one-turn position again (Present Position then lies in
+        H .. 4095 + H), as the servo does at torque-on in Position Control Mode, on a mode
+        change and at power-on."""
+        shaft = self.table.get(Reg.PRESENT_POSITION) - self.present_offset
+        self.turn_ticks = shaft // TICKS_PER_REV * TICKS_PER_REV
+        self.table.set(Reg.PRESENT_POSITION, shaft + self.present_offset)
+
     def write(self, address: int, data: bytes) -> StatusError:
         """A checked write; torque stays off while a shutdown hardware error is latched."""
-        error = self.table.write(address, data)
+        t = self.table
+        before = (t.get(Reg.TORQUE_ENABLE), t.get(Reg.OPERATING_MODE), self.present_offset)
+        error = t.write(address, data)
         if error is StatusError.NONE and self.shut_down:
-            self.table.set(Reg.TORQUE_ENABLE, 0)
+            t.set(Reg.TORQUE_ENABLE, 0)
+        if error is StatusError.NONE:
+            self._after_write(*before)
         return error
+
+    def _after_write(self, torque: int, mode: int, offset: int) -> None:
+        t = self.table
+        # a new Homing Offset shifts Present Position at once (stepping keeps it so)
+        shaft = t.get(Reg.PRESENT_POSITION) - offset
+        t.set(Reg.PRESENT_POSITION, shaft + self.present_offset)
+        torque_on = not torque and t.get(Reg.TORQUE_ENABLE)
+        in_position = t.get(Reg.OPERATING_MODE) == OperatingMode.POSITION
+        if t.get(Reg.OPERATING_MODE) != mode or (torque_on and in_position):
+            self.restart_count()
 
     def handle(self, instruction: int, params: bytes) -> Reply:
         """Execute a unicast instruction (after-effects of reboot/reset: see `finish`)."""
@@ -112,12 +152,15 @@ class EmulatedServo:
     def finish(self, instruction: int, params: bytes) -> None:
         """Effects the servo applies after its status packet has gone out."""
         if instruction == Instruction.REBOOT:
+            self.restart_count()  # from Present Position, before the RAM is cleared
             self.table.reset_ram()
             self.registered = None
             self.reboots += 1
         elif instruction == Instruction.FACTORY_RESET and params:
+            offset = self.present_offset
             self.table.factory_reset(keep_id=params[0] != 0xFF, keep_baud=params[0] == 0x02)
             self.registered = None
+            self._after_write(0, -1, offset)
 
     def _ping(self, params: bytes) -> Reply:
         model = self.table.get(Reg.MODEL_NUMBER).to_bytes(2, "little")

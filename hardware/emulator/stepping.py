@@ -28,13 +28,14 @@ TEMPERATURE_C = 30
 
 
 # Bytes 11 .. 119 hold every item a MotionCommand depends on (mode, limits, torque, gains,
-# goals, profiles); rebuilding the command only when they change keeps the emulator fast.
+# goals, profiles) but the servo's turn count; rebuilding the command only when they change
+# keeps the emulator fast.
 _COMMAND_BYTES = slice(Reg.OPERATING_MODE.address, Reg.GOAL_POSITION.address + 4)
 
 
 def command_of(servo: EmulatedServo) -> MotionCommand:
     """The MotionCommand one servo's control table expresses (cached per table contents)."""
-    key = bytes(servo.table.memory[_COMMAND_BYTES])
+    key = (bytes(servo.table.memory[_COMMAND_BYTES]), servo.turn_ticks)
     cached = servo.command_cache
     if cached is not None and cached[0] == key:
         return cached[1]  # type: ignore[return-value]
@@ -49,8 +50,8 @@ def _build_command(servo: EmulatedServo) -> MotionCommand:
     return MotionCommand(
         torque_enabled=t.get(Reg.TORQUE_ENABLE) == 1,
         mode=OperatingMode(mode) if mode in OperatingMode._value2member_map_ else OperatingMode.PWM,
-        # Present Position = shaft + Homing Offset, so the shaft's goal is the goal minus it.
-        goal_position_rad=(t.get(Reg.GOAL_POSITION) - t.get(Reg.HOMING_OFFSET)) * RAD_PER_TICK,
+        # Present Position = shaft + the offset in force, so the shaft's goal is the goal minus it.
+        goal_position_rad=(t.get(Reg.GOAL_POSITION) - servo.present_offset) * RAD_PER_TICK,
         goal_velocity_rad_s=velocity_to_rad_s(t.get(Reg.GOAL_VELOCITY)),
         goal_current_a=current_to_ampere(t.get(Reg.GOAL_CURRENT)),
         profile_velocity_rad_s=velocity_to_rad_s(t.get(Reg.PROFILE_VELOCITY)),
@@ -80,7 +81,7 @@ def store_state(servo: EmulatedServo, state: MotionState, now_s: float) -> None:
     moving = int(abs(velocity) > t.get(Reg.MOVING_THRESHOLD))
     # Clamped to the register's int32 so a runaway model cannot crash the emulator thread.
     shaft = round(state.position_rad / RAD_PER_TICK)
-    position = max(-(2**31), min(2**31 - 1, shaft + t.get(Reg.HOMING_OFFSET)))
+    position = max(-(2**31), min(2**31 - 1, shaft + servo.present_offset))
     goal = t.get(Reg.GOAL_POSITION)
     _PRESENT.pack_into(
         t.memory,

@@ -113,9 +113,10 @@ def test_load_refuses_a_config_without_joints(tmp_path: Path) -> None:
 
 
 def test_home_bus_saves_offsets_that_read_zero(bus, emulator, tmp_path: Path) -> None:
-    emulator.place({1: 1000, 2: 2000, 3: 3000})
+    # default limits +-pi/2 rad = +-1024 ticks: each range lies inside 0 .. 4095
+    emulator.place({1: 1100, 2: 2000, 3: 3000})
     path = tmp_path / "deltadash.toml"
     homed = home_bus(bus, path, 0.0, confirm=lambda prompt: None)
-    assert [c.zero_offset_ticks for c in homed] == [1000, 2000, 3000]
+    assert [c.zero_offset_ticks for c in homed] == [1100, 2000, 3000]
     assert load(path) == homed
     assert bus.read_state().position_rad.tolist() == [0.0, 0.0, 0.0]

@@ -43,3 +43,21 @@ def test_home_reports_a_missing_bus(tmp_path, capsys):
         ["home", "--config", str(tmp_path / "x.toml"), "--port", "/dev/nonexistent", "--yes"]
     )
     assert code != 0 and "error" in capsys.readouterr().err
+
+
+def test_home_refuses_a_range_across_the_seam_and_saves_nothing(tmp_path, capsys):
+    # Servo 2 rests at raw 4000 with direction +1 and limits -0.6 .. 1.4 rad: its range
+    # would be 4000 - 391 .. 4000 + 913 = 3609 .. 4913 ticks, past 4095.
+    config = tmp_path / "robot.toml"
+    joints = "".join(
+        f"[[hardware.joints]]\nservo_id = {i}\nmin_angle_rad = -0.6\nmax_angle_rad = 1.4\n\n"
+        for i in (1, 2, 3)
+    )
+    config.write_text(joints)
+    with fast(ServoEmulator((1, 2, 3))) as emulator:
+        emulator.place({1: 2048, 2: 4000, 3: 2048})
+        code = main(["home", "--config", str(config), "--port", emulator.port, "--yes"])
+    err = capsys.readouterr().err
+    assert code == 1 and "servo 2 (joint 2)" in err and "3609 .. 4913 ticks" in err
+    assert "391 .. 3182" in err  # where theta = 0 must read after turning the link
+    assert config.read_text() == joints

@@ -68,7 +68,7 @@ def test_read_state_converts_every_field_to_si() -> None:
     )
     with fast(ServoEmulator(IDS, model=FixedModel(shafts))) as emulator:
         bus = DynamixelBus(make_config(emulator.port, joints=joints))
-        bus.connect()
+        bus.connect(verify_calibration=False)  # joints 2 and 3 reach past the seam: unchecked
         try:
             state = bus.read_state()
         finally:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from hardware.dynamixel.control_table import Reg
+from hardware.dynamixel.control_table import Reg, encode
 from hardware.dynamixel.protocol import BROADCAST_ID, Instruction, instruction_packet
 from hardware.emulator import EmulatedBus
 from tests.support.emanual import EMANUAL
@@ -68,3 +68,60 @@ def test_injected_faults_shape_the_replies() -> None:
     assert again.packet == clean.packet
     bus.inject(1, unplugged=True)
     assert bus.feed(packet("ping")) == []
+
+
+def write(bus: EmulatedBus, servo_id: int, reg: Reg, value: int) -> None:
+    params = reg.address.to_bytes(2, "little") + encode(reg, value)
+    (reply,) = bus.feed(instruction_packet(servo_id, Instruction.WRITE, params))
+    assert reply.packet[8] == 0, f"write {reg.name} = {value} refused"
+
+
+def present(bus: EmulatedBus, servo_id: int = 1) -> int:
+    bus.feed(instruction_packet(servo_id, Instruction.PING))  # a packet steps the shafts
+    return bus.servo(servo_id).table.get(Reg.PRESENT_POSITION)
+
+
+def test_torque_on_in_position_mode_restarts_the_count_at_one_turn() -> None:
+    bus = still_bus((1,))
+    bus.place({1: 5000})  # torque off: the count ran on past the seam (shaft at 904)
+    assert present(bus) == 5000
+    write(bus, 1, Reg.TORQUE_ENABLE, 1)
+    assert present(bus) == 904
+
+
+def test_a_homing_offset_does_not_move_the_seam_in_position_mode() -> None:
+    # The ROBOTIS forum's report (firmware 49): Homing Offset -512, a shaft held at 3700
+    # reads -396 after torque off and on: the shaft is at 3700 + 512 = 4212, one turn
+    # restarts it at 4212 - 4096 = 116, and 116 - 512 = -396.
+    bus = still_bus((1,))
+    write(bus, 1, Reg.HOMING_OFFSET, -512)
+    write(bus, 1, Reg.TORQUE_ENABLE, 1)
+    bus.place({1: 3700})
+    assert present(bus) == 3700
+    write(bus, 1, Reg.TORQUE_ENABLE, 0)
+    write(bus, 1, Reg.TORQUE_ENABLE, 1)
+    assert present(bus) == -396
+
+
+def test_extended_mode_counts_on_through_torque_and_restarts_at_reboot() -> None:
+    bus = still_bus((1,))
+    write(bus, 1, Reg.OPERATING_MODE, 4)
+    bus.place({1: 5000})
+    write(bus, 1, Reg.TORQUE_ENABLE, 1)
+    assert present(bus) == 5000
+    write(bus, 1, Reg.TORQUE_ENABLE, 0)
+    write(bus, 1, Reg.HOMING_OFFSET, 4096)  # shifts Present Position at once
+    assert present(bus) == 9096
+    bus.feed(instruction_packet(1, Instruction.REBOOT))
+    assert present(bus) == 904 + 4096  # one turn again (904), plus the offset
+
+
+def test_position_mode_ignores_a_homing_offset_beyond_1024() -> None:
+    bus = still_bus((1,))
+    bus.place({1: 1000})
+    write(bus, 1, Reg.HOMING_OFFSET, 1024)
+    assert present(bus) == 2024
+    write(bus, 1, Reg.HOMING_OFFSET, 2000)
+    assert present(bus) == 1000  # ignored: the shaft alone
+    write(bus, 1, Reg.OPERATING_MODE, 4)
+    assert present(bus) == 3000  # Extended Position Control Mode applies it
