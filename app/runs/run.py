@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass, field, fields
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +54,8 @@ class Run:
     done: threading.Event = field(default_factory=threading.Event, repr=False)
     _saved_at: float = field(default=float("-inf"), repr=False)
 
-    HIDDEN = frozenset({"folder", "done", "abort_reason", "_saved_at"})
+    # not in run.json: where it is, the waiters' event, internals
+    HIDDEN: ClassVar[frozenset[str]] = frozenset({"folder", "done", "abort_reason", "_saved_at"})
 
     def __post_init__(self) -> None:
         if not self.started_at_utc:
