@@ -1,8 +1,14 @@
-"""Runs: start a planned test, record it, abort it, find it again after a restart."""
+"""Runs: start a planned test, record it, abort it, find it again after a restart.
+
+A run's record is saved when it starts and as it goes (app/runs/run.py); a run that a
+crash left ``running`` is finished as ``interrupted`` from its logs when the manager next
+loads the folder (app/runs/recovery.py).
+"""
 
 from __future__ import annotations
 
 import json
+import logging
 import math
 import threading
 import time
@@ -17,6 +23,7 @@ from app.control.errors import GoalRejected, MotionRefused
 from app.runs.feasibility import check_path
 from app.runs.logs import RunLog
 from app.runs.recorder import Recorder
+from app.runs.recovery import abandoned, recover
 from app.runs.run import Run
 from app.runs.source import TrajectorySource
 from app.runs.trajectories import SinusoidParams, TimedPath, plan_sinusoid
@@ -24,6 +31,7 @@ from app.runs.trajectories import SinusoidParams, TimedPath, plan_sinusoid
 if TYPE_CHECKING:
     from app.control.controller import Controller
 
+log = logging.getLogger(__name__)
 START_TIMEOUT_S = 2.0
 
 
@@ -50,15 +58,26 @@ class RunManager:
         self._load_saved()
 
     def _load_saved(self) -> None:
+        """Every saved run; one that a crash left running is finished as interrupted."""
         for path in sorted(self.folder.glob("*/run.json")):
             try:
-                data = json.loads(path.read_text())
-            except (OSError, json.JSONDecodeError):
+                run = Run.load(path)
+            except (OSError, ValueError, TypeError) as exc:
+                log.warning("%s: not a run record, left out: %s", path, exc)
                 continue
-            data.pop("done", None)
-            run = Run(**{**data, "folder": path.parent})
+            if abandoned(run):
+                self._recover(run)
             run.done.set()
             self._runs[run.run_id] = run
+
+    def _recover(self, run: Run) -> None:
+        rate_hz = run.conditions.get("loop_rate_hz")
+        period_s = 1.0 / rate_hz if rate_hz else self.controller.period_s
+        try:
+            recover(run, self.controller.settings.runs.stats_skip_s, period_s)
+        except OSError as exc:  # listed as interrupted all the same
+            log.warning("run %s: could not save its record: %s", run.run_id, exc)
+        log.warning("run %s was interrupted: %s", run.run_id, run.reason)
 
     def list(self) -> list[Run]:
         return sorted(self._runs.values(), key=lambda r: r.started_at, reverse=True)
@@ -129,11 +148,17 @@ class RunManager:
         self, kind: str, params: dict[str, Any], lead: float, source: Any, start: np.ndarray
     ) -> Run:
         run = self._new_run(kind, params, lead)
-        log = RunLog(run.folder, {"run_id": run.run_id, "params": json.dumps(run.params)})
+        metadata = {
+            "run_id": run.run_id,
+            "params": json.dumps(run.params),
+            "started_at_utc": run.started_at_utc,
+        }
+        run_log = RunLog(run.folder, metadata, on_flush=run.progress)
         skip = self.controller.settings.runs.stats_skip_s
-        recorder = Recorder(run, self.controller, source, log, skip)
+        recorder = Recorder(run, self.controller, source, run_log, skip)
         self.controller.add_listener(recorder.on_tick)
         try:
+            run.write()  # the record exists from the start: a crash leaves it "running"
             tolerance = math.inf if start is None else 0.002
             expected = np.zeros(3) if start is None else start
             self.controller.run_source(source, expected, tolerance).result(timeout=START_TIMEOUT_S)

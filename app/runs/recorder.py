@@ -11,6 +11,7 @@ import math
 import queue
 import shutil
 import threading
+import time
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -114,6 +115,7 @@ class Recorder:
             return
         if self._t0 is None:
             self._t0 = snap.time_s
+            self.log.start_ns = time.time_ns()  # log times: UTC wall clock of this tick
         self._queue.put(row_of(snap, snap.time_s - self._t0))
 
     def _why_stopped(self, snap: Snapshot) -> str:

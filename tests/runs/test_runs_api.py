@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 
 import numpy as np
 import pytest
@@ -70,8 +71,6 @@ def test_bad_sinusoid_bodies_are_422(fresh):
         {"offset_m": [0, 0, float("nan")]},
         {"wobble": 1},
     ):
-        import json
-
         response = fresh.post(
             "/api/tests/sinusoid",
             content=json.dumps(body),
@@ -86,6 +85,14 @@ def test_aborted_run_leaves_a_readable_log(client, fresh):
     run_id = ok_json(fresh.post("/api/tests/sinusoid", json={"duration_s": 20}))["run_id"]
     wait_for(lambda: ok_json(fresh.get("/api/status"))["mode"] == "test", "the run to start")
     wait_for(lambda: fresh.get(f"/api/runs/{run_id}/log.csv").text.count("\n") > 50, "samples")
+
+    def listed() -> dict:
+        return next(r for r in ok_json(fresh.get("/api/runs")) if r["run_id"] == run_id)
+
+    wait_for(lambda: listed()["samples"] > 50, "the live sample count in the run list")
+    assert listed()["state"] == "running"
+    saved = json.loads((client.app.state.runs.get(run_id).folder / "run.json").read_text())
+    assert saved["state"] == "running"  # the record is on disk from the start
     assert fresh.post(f"/api/runs/{run_id}/abort").status_code == 200
     wait_for(
         lambda: _state(fresh, run_id) == "aborted",

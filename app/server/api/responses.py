@@ -205,11 +205,17 @@ class RunOut(_Out):
     kind: str = Field(description="sinusoid | chirp | step | waypoints | hold")
     params: dict[str, Any]
     conditions: dict[str, Any] = Field(description="robot, backend, loop rate, joints")
-    state: str = Field(description="running | done | aborted")
+    state: str = Field(
+        description="running | done | aborted | interrupted (the server stopped during the "
+        "run: its stats are from the ticks logged until then)"
+    )
     reason: str | None
     started_at: float = Field(description="Unix time [s]")
-    ended_at: float | None
-    samples: int
+    started_at_utc: str = Field(description="started_at in UTC, ISO 8601")
+    ended_at: float | None = Field(
+        description="Unix time [s]; for an interrupted run, when its logs were last written"
+    )
+    samples: int = Field(description="ticks logged; while the run goes, the live count")
     stats: RunStats
     has_report: bool
 

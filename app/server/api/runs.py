@@ -14,6 +14,7 @@ from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from app.control.errors import GoalRejected, MotionRefused
+from app.runs.logs import MEDIA_TYPE as MCAP_MEDIA_TYPE
 from app.runs.logs import read_messages
 from app.runs.manager import Run, RunManager
 from app.runs.paths import ChirpParams, StepParams, WaypointParams
@@ -28,7 +29,13 @@ log = logging.getLogger(__name__)
 router = APIRouter(tags=["runs"])
 _DEFAULT = SinusoidParams()
 MAX_WAYPOINTS = 1000
-FILES = {"log.mcap": "application/octet-stream", "log.csv": "text/csv", "report.png": "image/png"}
+FILES = {  # a run's files and their media types
+    "log.mcap": MCAP_MEDIA_TYPE,
+    "log.cut.mcap": MCAP_MEDIA_TYPE,  # an interrupted run's log as the crash left it
+    "log.csv": "text/csv",
+    "report.png": "image/png",
+    "report.pdf": "application/pdf",
+}
 
 
 Seconds = Annotated[float, Field(gt=0, le=600, allow_inf_nan=False, strict=True)]
@@ -226,13 +233,25 @@ def window_stats(
 @router.get(
     "/runs/{run_id}/{name}",
     response_class=FileResponse,
-    responses={200: {"content": {t: {} for t in FILES.values()}}, **NOT_FOUND, **INVALID},
+    responses={200: {"content": {t: {} for t in set(FILES.values())}}, **NOT_FOUND, **INVALID},
 )
 def run_file(run_id: str, name: str, runs: RunsDep) -> FileResponse:
-    """log.mcap, log.csv (written as the run goes) or report.png (when it has ended)."""
+    """log.mcap, log.csv (written as the run goes), report.png and report.pdf (when it has
+    ended), log.cut.mcap (an interrupted run's log as the crash left it). Served inline
+    with the file's media type (a browser shows the report, a download keeps the name);
+    HEAD answers the same headers without the body."""
     if name not in FILES:
         raise HTTPException(404, f"no file {name!r}; files are {', '.join(FILES)}")
     path = _run(runs, run_id).folder / name
     if not path.exists():
         raise HTTPException(404, f"{name} is not written yet")
-    return FileResponse(path, media_type=FILES[name], filename=f"{run_id}-{name}")
+    return FileResponse(
+        path,
+        media_type=FILES[name],
+        filename=f"{run_id}-{name}",
+        content_disposition_type="inline",
+    )
+
+
+# HEAD on a file: the same answer without its body (not a second operation in the schema)
+router.add_api_route("/runs/{run_id}/{name}", run_file, methods=["HEAD"], include_in_schema=False)
