@@ -125,12 +125,14 @@ class _CommittedFile:
         """The writer's flush: nothing; bytes reach the file at ``commit``."""
 
     def commit(self, tail: bytes = b"") -> None:
-        if self._tail:
-            self._file.truncate(self._end)  # the file is a prefix of the stream meanwhile
+        # The new bytes overwrite the last tail in place (no truncate first): a kill at any
+        # moment leaves either the old complete file or the new one, never a bare prefix.
         data = memoryview(bytes(self._pending) + tail)
         self._file.seek(self._end)
         while data:
             data = data[self._file.write(data) :]
+        if len(self._pending) + len(tail) < self._tail:
+            self._file.truncate(self._end + len(self._pending) + len(tail))
         self._end += len(self._pending)
         self._tail = len(tail)
         self._pending.clear()
