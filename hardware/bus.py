@@ -90,12 +90,14 @@ class PositionGains:
 
 @dataclass(frozen=True)
 class BusStats:
-    """Counters since connect: transactions, failed tries, retries, and give-ups."""
+    """Counters since connect: transactions, failed tries, retries, and give-ups; and
+    status packets discarded as answers to another request (late, duplicated, foreign)."""
 
     transactions: int = 0
     failed_tries: int = 0
     retries: int = 0
     failures: int = 0
+    discarded: int = 0
 
 
 @runtime_checkable
@@ -165,7 +167,8 @@ class ServoBus(Protocol):
         """
 
     def reboot(self, ids: Sequence[int] | None = None) -> None:
-        """Reboot servos (default all joints) to clear a latched hardware error.
+        """Reboot servos (default all joints) to clear a latched hardware error; returns
+        once they answer again (with torque off), so nothing reaches a servo still booting.
 
         Raises NotConnectedError; CommError if a servo does not answer or does not come back.
         """

@@ -4,11 +4,13 @@ Per control tick: one GroupSyncWrite of Goal Position (116) for all joints, and 
 GroupSyncRead of the block Moving (122) .. Present Temperature (146): the issue's Present
 Current (126) .. Present Temperature block, widened by four bytes so the Moving flag comes
 in the same packet. The sync read is sent with the SDK's GroupSyncRead and its replies
-taken one per servo with readRx, so each servo's error byte is seen: when its alert bit
-(0x80) is set, Hardware Error Status (70) is read and reported by name. A read in which
-any servo is missing, late, corrupt or answers as another id is retried whole (up to
-`max_tries`) and otherwise raises CommError naming the servos; no state is ever assembled
-from a partial reply. Configuration writes go one servo at a time and wait for each status.
+taken one per servo, each matched to the request by id and length (SdkLink.receive: a
+late or duplicated reply to another request is discarded), so each servo's error byte is
+seen: when its alert bit (0x80) is set, Hardware Error Status (70) is read and reported by
+name. A read in which any servo is missing, late, corrupt or answers as another id is
+retried whole (up to `max_tries`) and otherwise raises CommError naming the servos; no
+state is ever assembled from a partial reply. Configuration writes go one servo at a time
+and wait for each status.
 
 At connect each servo's Operating Mode, Homing Offset and Min/Max Position Limit are read:
 a joint range the servo cannot reach in its mode (the encoder's seam, hardware/seam.py) is
@@ -68,6 +70,10 @@ class DynamixelConfig:
     rx_timeout_s: status timeout [s] of the per-tick sync read (None: the SDK's own, about
     34 ms plus wire time, sized for a 16 ms USB latency timer); the read's worst case is
     max_tries * rx_timeout_s. expected_model: refuse other servos at connect (None: any).
+    connect_timeout_s: how long connect keeps pinging a servo that has not answered yet
+    [s] (a servo still booting, an emulator not yet scheduled on a loaded machine).
+    reboot_timeout_s: how long a rebooted servo may stay silent before reboot() gives up
+    [s] (per round of Reboot instructions, at most max_tries rounds).
     """
 
     joints: tuple[JointCalibration, ...]
@@ -77,6 +83,7 @@ class DynamixelConfig:
     rx_timeout_s: float | None = None
     expected_model: int | None = MODEL_NUMBER_XM430_W210
     reboot_timeout_s: float = 2.0
+    connect_timeout_s: float = 1.0
 
     def __post_init__(self) -> None:
         ids = [joint.servo_id for joint in self.joints]
@@ -116,7 +123,7 @@ class DynamixelBus:
             self._goal_writer.addParam(servo_id, [0, 0, 0, 0])
             self._state_reader.addParam(servo_id)
         try:
-            found = {info.servo_id: info for info in self.scan()}
+            found = self._wait_for_servos()
             missing = [i for i in self.ids if i not in found]
             if missing:
                 raise CommError(missing, "ping", "servo not found on the bus")
@@ -131,6 +138,24 @@ class DynamixelBus:
         except (BusError, CalibrationError):
             self.disconnect()
             raise
+
+    def _wait_for_servos(self) -> dict[int, ServoInfo]:
+        """Ping every joint until it answers or connect_timeout_s has passed; who answered.
+
+        One round of pings (each with the link's retries) always runs; the servos still
+        silent are asked again until the deadline, so a servo that is slow to answer at
+        first (booting, or an emulator not yet scheduled) does not fail the connect.
+        """
+        deadline = time.monotonic() + self.config.connect_timeout_s
+        found: dict[int, ServoInfo] = {}
+        while True:
+            for servo_id in [i for i in self.ids if i not in found]:
+                try:
+                    found.update((info.servo_id, info) for info in self.scan([servo_id]))
+                except CommError:
+                    continue  # answered the ping, then missed the firmware read: ask again
+            if len(found) == len(self.ids) or time.monotonic() >= deadline:
+                return found
 
     def disconnect(self) -> None:
         self.link.close()
@@ -160,8 +185,11 @@ class DynamixelBus:
         for servo_id in self.ids:
             error = self.link.write(servo_id, Reg.TORQUE_ENABLE, int(enabled))
             if enabled and error & ALERT_BIT:
-                flags = {servo_id: self.link.hardware_errors(servo_id)}
-                raise HardwareError([servo_id], "write TORQUE_ENABLE", flags)
+                # The names come from this servo's Hardware Error Status, never the alert
+                # bit alone: a servo whose register reads 0 has nothing latched.
+                names = self.link.hardware_errors(servo_id)
+                if names:
+                    raise HardwareError([servo_id], "write TORQUE_ENABLE", {servo_id: names})
 
     def set_operating_mode(self, mode: OperatingMode) -> None:
         self._write_all(Reg.OPERATING_MODE, [int(mode)] * len(self.ids))
@@ -192,23 +220,51 @@ class DynamixelBus:
         self._write_all(Reg.FEEDFORWARD_2ND_GAIN, [gains.feedforward_2nd] * n)
 
     def reboot(self, ids: Sequence[int] | None = None) -> None:
-        targets = list(self.ids if ids is None else ids)
-        port = self.link.require_port("reboot")
-        for servo_id in targets:
-            self._send_reboot(port, servo_id)
-        deadline = time.monotonic() + self.config.reboot_timeout_s
-        pending = set(targets)
-        while pending:  # the servo is deaf for a few hundred ms while it boots
-            pending = {i for i in pending if not self.scan([i])}
-            if pending and time.monotonic() > deadline:
-                raise CommError(sorted(pending), "reboot", "servo did not come back")
-        self._align_turns(targets)  # a reboot resets the count to one turn
+        """Reboot servos (default all joints); returns once each answers pings again.
 
-    def _send_reboot(self, port: sdk.PortHandler, servo_id: int) -> None:
-        """One Reboot instruction with the link's bounded retries (reboot() waits for it)."""
-        self.link.transact(
-            [servo_id], "reboot", lambda: (None, *self.link.packets.reboot(port, servo_id))
-        )
+        Each servo gets one Reboot instruction, whose status it sends before it restarts;
+        a lost status is not resent at once (a second Reboot would meet a booting servo).
+        Then each is pinged until it answers, for at most `reboot_timeout_s` [s], so that
+        nothing (torque on, a read) reaches a servo that is still booting. A servo whose
+        status was lost and whose Hardware Error Status is still non-zero once it answers
+        may not have rebooted: it is sent Reboot again, for at most `max_tries` rounds.
+
+        Raises NotConnectedError; CommError naming the servos that did not answer within
+        `reboot_timeout_s`, or that never confirmed a Reboot while their error stayed
+        latched; ServoStatusError if a servo refuses the instruction.
+        """
+        targets = list(self.ids if ids is None else ids)
+        unconfirmed = list(targets)
+        self.link.require_port("reboot")
+        rounds = self.link.max_tries
+        for _ in range(rounds):
+            lost = []
+            for servo_id in unconfirmed:
+                try:
+                    self.link.reboot(servo_id, max_tries=1)
+                except CommError:
+                    lost.append(servo_id)  # it may have rebooted: the register will tell
+            deadline = time.monotonic() + self.config.reboot_timeout_s
+            for servo_id in unconfirmed:
+                self._wait_back(servo_id, deadline)
+            unconfirmed = [i for i in lost if self.link.read(i, Reg.HARDWARE_ERROR_STATUS) != 0]
+            if not unconfirmed:
+                self._align_turns(targets)  # a reboot resets the count to one turn
+                return
+        reason = "no status to a Reboot instruction and Hardware Error Status still set"
+        raise CommError(unconfirmed, "reboot", reason, rounds)
+
+    def _wait_back(self, servo_id: int, deadline: float) -> None:
+        """Ping `servo_id` until it answers (CommError once `deadline` has passed)."""
+        while True:
+            try:
+                self.link.ping(servo_id)
+                return
+            except CommError as exc:
+                if time.monotonic() >= deadline:
+                    timeout = self.config.reboot_timeout_s
+                    reason = f"did not answer a ping within {timeout} s of its Reboot"
+                    raise CommError([servo_id], "reboot", reason) from exc
 
     @property
     def stats(self) -> BusStats:
@@ -334,7 +390,7 @@ class DynamixelBus:
             for servo_id, value in zip(self.ids, ticks, strict=True):
                 writer.changeParam(servo_id, list(int(value).to_bytes(4, "little", signed=True)))
             self.link.transact(
-                self.ids, "sync write GOAL_POSITION", lambda: (None, writer.txPacket(), 0)
+                self.ids, "sync write GOAL_POSITION", lambda: (None, writer.txPacket(), 0, "")
             )
 
     def _read_block(self) -> tuple[dict[int, bytes], dict[int, tuple[str, ...]]]:
@@ -363,7 +419,9 @@ class DynamixelBus:
     def _read_block_once(
         self, reader: sdk.GroupSyncRead, port: sdk.PortHandler
     ) -> tuple[dict[int, tuple[bytes, int]], dict[int, str]]:
-        packets = self.link.packets
+        """One try of the sync read: each servo's (state block, error byte), and why the
+        others failed. Replies are taken in any order, each from a servo still awaited and
+        with the block's length; anything else is discarded (SdkLink.receive)."""
         try:
             result = reader.txPacket()
         except (OSError, IndexError, ValueError) as exc:
@@ -373,23 +431,27 @@ class DynamixelBus:
             return {}, {i: comm_reason(result) for i in self.ids}
         replies: dict[int, tuple[bytes, int]] = {}
         failed: dict[int, str] = {}
-        for servo_id in self.ids:
-            if self.config.rx_timeout_s is not None:
+        discarded: list[str] = []  # what this try threw away, to say why it failed
+        pending = list(self.ids)
+        while pending:
+            if self.config.rx_timeout_s is not None:  # else the SDK's, for the whole read
                 port.setPacketTimeoutMillis(self.config.rx_timeout_s * 1000.0)
             try:
-                data, result, error = packets.readRx(port, servo_id, STATE_BLOCK_SIZE)
+                status, result, note = self.link.receive(port, pending, STATE_BLOCK_SIZE)
             except (OSError, IndexError, ValueError) as exc:
                 self.link.release_port()
-                failed[servo_id] = repr(exc)
-                continue
-            if result != sdk.COMM_SUCCESS:
-                failed[servo_id] = comm_reason(result)
-            elif error & ~ALERT_BIT:
-                failed[servo_id] = status_reason(error)
-            elif len(data) != STATE_BLOCK_SIZE:
-                failed[servo_id] = f"{len(data)} data bytes, expected {STATE_BLOCK_SIZE}"
+                failed.update((i, repr(exc)) for i in pending)
+                break
+            discarded += [note] if note else []
+            if status is None:
+                reason = "; ".join([comm_reason(result), *discarded])
+                failed.update((i, reason) for i in pending)
+                break
+            pending.remove(status.servo_id)
+            if status.error & ~ALERT_BIT:
+                failed[status.servo_id] = status_reason(status.error)
             else:
-                replies[servo_id] = (bytes(data), error)
+                replies[status.servo_id] = (status.data, status.error)
         return replies, failed
 
     def _state_from(self, raw: dict[int, bytes], alerts: dict[int, tuple[str, ...]]) -> JointState:

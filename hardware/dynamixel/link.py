@@ -5,13 +5,26 @@ raises a hardware.errors exception naming the servo ids, the instruction, the re
 number of tries; nothing the SDK or the serial port throws escapes as anything else.
 Communication failures (timeout, corrupt packet, reply from the wrong id) are retried up to
 `max_tries`; a servo's refusal (range, limit, access error) is not, as a retry cannot help.
+
+Matching a status packet to its request. The SDK builds, sends and frames packets (header,
+stuffing, CRC, the status instruction 0x55), and its sending discards what is waiting in
+the port (stale bytes). Its own receive functions take the first packet with the right id
+as the answer, whatever its length: a status packet that came too late for an earlier
+request (or came twice) was then read as the answer to the next one. Here every packet is
+checked against its request by `receive`: the servo id, and the number of data bytes the
+request draws (ping 3, read n, write/reboot 0); a packet that does not match is discarded
+and counted (`BusStats.discarded`) and the wait goes on until the request's timeout. A
+status with an error number is taken whatever its length (a refused read carries no data).
+Protocol 2.0 carries no sequence number, so a late answer to the same question (same
+servo, instruction and length) cannot be told from the answer; it is never a value of
+another request.
 """
 
 from __future__ import annotations
 
 import contextlib
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -19,7 +32,7 @@ import dynamixel_sdk as sdk
 
 from hardware.bus import BusStats
 from hardware.dynamixel.control_table import Reg, decode, hardware_error_names, to_unsigned
-from hardware.dynamixel.protocol import ALERT_BIT, StatusError
+from hardware.dynamixel.protocol import ALERT_BIT, Instruction, StatusError
 from hardware.errors import CommError, NotConnectedError, ServoStatusError
 
 T = TypeVar("T")
@@ -29,6 +42,10 @@ READ_BLOCK_S = 1e-3  # longest wait in one read of the port; the packet timeout 
 # What can escape the SDK on a bad packet or a vanished port: serial errors are OSErrors,
 # malformed packets surface as IndexError/ValueError deep in its parsing.
 _SDK_FAULTS = (OSError, IndexError, ValueError, TypeError)
+# The SDK's packet buffer (unstuffed): FF FF FD 00 | ID | LEN_L LEN_H | INST | ERR | DATA | CRC
+_ID, _LEN_L, _LEN_H, _INST, _ERROR, _DATA = 4, 5, 6, 7, 8, 9
+_STATUS_OVERHEAD = 4  # LEN counts INST + ERR + CRC (2) besides the data
+PING_DATA_BYTES = 3  # model number (2), firmware version (1)
 
 
 def comm_reason(result: int) -> str:
@@ -46,12 +63,27 @@ def status_reason(error: int) -> str:
         return f"unknown error number {number}"
 
 
+def data_bytes(count: int) -> str:
+    """'1 data byte', '25 data bytes'."""
+    return f"{count} data byte{'' if count == 1 else 's'}"
+
+
+@dataclass(frozen=True)
+class Status:
+    """A status packet taken as an answer: the servo, its error byte, its data bytes."""
+
+    servo_id: int
+    error: int
+    data: bytes
+
+
 @dataclass
 class _Counters:
     transactions: int = 0
     failed_tries: int = 0
     retries: int = 0
     failures: int = 0
+    discarded: int = 0
 
 
 class SdkLink:
@@ -103,7 +135,7 @@ class SdkLink:
     @property
     def stats(self) -> BusStats:
         c = self._counters
-        return BusStats(c.transactions, c.failed_tries, c.retries, c.failures)
+        return BusStats(c.transactions, c.failed_tries, c.retries, c.failures, c.discarded)
 
     def require_port(self, instruction: str) -> sdk.PortHandler:
         if self.port is None:
@@ -111,21 +143,27 @@ class SdkLink:
         return self.port
 
     def transact(
-        self, ids: Sequence[int], instruction: str, attempt: Callable[[], tuple[T, int, int]]
+        self,
+        ids: Sequence[int],
+        instruction: str,
+        attempt: Callable[[], tuple[T, int, int, str]],
+        max_tries: int | None = None,
     ) -> T:
-        """Run `attempt` (-> value, COMM result, status error byte) with bounded retries."""
+        """Run `attempt` (-> value, COMM result, status error byte, note on discarded
+        packets) with bounded retries (`max_tries`, default the link's)."""
+        max_tries = self.max_tries if max_tries is None else max_tries
         with self.lock:
             self.require_port(instruction)
             self._counters.transactions += 1
             reason = ""
-            for tries in range(1, self.max_tries + 1):
+            for tries in range(1, max_tries + 1):
                 try:
-                    value, result, error = attempt()
+                    value, result, error, note = attempt()
                 except _SDK_FAULTS as exc:
                     value, result, error, reason = None, sdk.COMM_RX_CORRUPT, 0, repr(exc)
                     self.release_port()
                 else:
-                    reason = comm_reason(result)
+                    reason = comm_reason(result) + (f"; {note}" if note else "")
                 if result == sdk.COMM_SUCCESS:
                     if error & ~ALERT_BIT:
                         self._counters.failures += 1
@@ -134,10 +172,10 @@ class SdkLink:
                         )
                     return value  # type: ignore[return-value]
                 self._counters.failed_tries += 1
-                if tries < self.max_tries:
+                if tries < max_tries:
                     self._counters.retries += 1
             self._counters.failures += 1
-            raise CommError(ids, instruction, reason, self.max_tries)
+            raise CommError(ids, instruction, reason, max_tries)
 
     def release_port(self) -> None:
         """Clear the SDK's busy flag, which an exception mid-packet leaves set for good."""
@@ -158,35 +196,101 @@ class SdkLink:
     def count_transaction(self) -> None:
         self._counters.transactions += 1
 
+    # -- status packets matched to their request -----------------------------------------
+    def receive(
+        self, port: sdk.PortHandler, ids: Collection[int], size: int
+    ) -> tuple[Status | None, int, str]:
+        """The next status packet from one of `ids` carrying `size` data bytes.
+
+        Waits until the port's packet timeout (set by the caller or the SDK's send). A
+        packet from another servo, or with another number of data bytes, answers some
+        other request (a late, duplicated or foreign reply): it is discarded, counted, and
+        the wait goes on. A status with an error number is taken whatever its length.
+        Returns (status or None, COMM result, a note on what was discarded, '' if nothing).
+        Raises what the SDK or the port raises (the caller's retry loop handles it).
+        """
+        note = ""
+        while True:
+            rx, result = self.packets.rxPacket(port, False)
+            if result != sdk.COMM_SUCCESS:
+                return None, result, note
+            length = sdk.DXL_MAKEWORD(rx[_LEN_L], rx[_LEN_H]) - _STATUS_OVERHEAD
+            status = Status(rx[_ID], rx[_ERROR], bytes(rx[_DATA : _DATA + max(0, length)]))
+            answers = length == size or bool(status.error & ~ALERT_BIT)
+            if status.servo_id in ids and answers:
+                return status, result, note
+            self._counters.discarded += 1
+            note = (
+                f"discarded a status packet from servo {status.servo_id} with "
+                f"{data_bytes(length)} (expected {data_bytes(size)})"
+            )
+
+    def exchange(
+        self, servo_id: int, instruction: int, params: Sequence[int], size: int
+    ) -> tuple[Status | None, int, str]:
+        """One try: send `instruction` with `params` to `servo_id`, take its answer.
+
+        `size` is the number of data bytes the answer carries. Sending discards what is
+        waiting in the port first (the SDK's txPacket clears the input buffer); the wait
+        is the SDK's packet timeout for an answer of that size. Returns as `receive`.
+        """
+        port = self.require_port(Instruction(instruction).name.lower())
+        packet = [0] * (10 + len(params))
+        packet[_ID] = servo_id
+        length = len(params) + 3  # INST + PARAM + CRC
+        packet[_LEN_L], packet[_LEN_H] = sdk.DXL_LOBYTE(length), sdk.DXL_HIBYTE(length)
+        packet[_INST] = instruction
+        packet[8 : 8 + len(params)] = params
+        result = self.packets.txPacket(port, packet)
+        if result != sdk.COMM_SUCCESS:
+            return None, result, ""
+        port.setPacketTimeout(size + 11)  # the SDK's timeout for a status of that size
+        return self.receive(port, (servo_id,), size)
+
     # -- single-servo helpers ------------------------------------------------------------
+    def ask(
+        self,
+        servo_id: int,
+        name: str,
+        instruction: int,
+        params: Sequence[int] = (),
+        size: int = 0,
+        max_tries: int | None = None,
+    ) -> Status:
+        """Send `instruction` to `servo_id` and return its matching status (see `receive`).
+
+        Retries as `transact`; raises CommError (no matching status), ServoStatusError
+        (the servo refused), NotConnectedError.
+        """
+
+        def attempt() -> tuple[Status | None, int, int, str]:
+            status, result, note = self.exchange(servo_id, instruction, params, size)
+            return status, result, status.error if status is not None else 0, note
+
+        status = self.transact([servo_id], name, attempt, max_tries)
+        assert status is not None  # transact returns only on COMM_SUCCESS
+        return status
+
     def ping(self, servo_id: int) -> int:
         """Model number of `servo_id` (CommError if it does not answer)."""
-        port = self.require_port("ping")
-        return self.transact([servo_id], "ping", lambda: self.packets.ping(port, servo_id))
+        status = self.ask(servo_id, "ping", Instruction.PING, size=PING_DATA_BYTES)
+        return int.from_bytes(status.data[0:2], "little")
 
     def read(self, servo_id: int, reg: Reg) -> int:
         """The value of `reg` on `servo_id`, signed if the item is."""
-        port = self.require_port(f"read {reg.name}")
-
-        def attempt() -> tuple[int, int, int]:
-            data, result, error = self.packets.readTxRx(port, servo_id, reg.address, reg.size)
-            if result == sdk.COMM_SUCCESS and len(data) != reg.size:
-                return 0, sdk.COMM_RX_CORRUPT, 0
-            value = decode(reg, bytes(data)) if result == sdk.COMM_SUCCESS else 0
-            return value, result, error
-
-        return self.transact([servo_id], f"read {reg.name}", attempt)
+        params = [*reg.address.to_bytes(2, "little"), *reg.size.to_bytes(2, "little")]
+        status = self.ask(servo_id, f"read {reg.name}", Instruction.READ, params, reg.size)
+        return decode(reg, status.data)
 
     def write(self, servo_id: int, reg: Reg, value: int) -> int:
         """Write `reg` on `servo_id` and wait for its status; returns the error byte."""
-        port = self.require_port(f"write {reg.name}")
-        data = list(to_unsigned(int(value), reg.size).to_bytes(reg.size, "little"))
+        data = to_unsigned(int(value), reg.size).to_bytes(reg.size, "little")
+        params = [*reg.address.to_bytes(2, "little"), *data]
+        return self.ask(servo_id, f"write {reg.name}", Instruction.WRITE, params).error
 
-        def attempt() -> tuple[int, int, int]:
-            result, error = self.packets.writeTxRx(port, servo_id, reg.address, reg.size, data)
-            return error, result, error
-
-        return self.transact([servo_id], f"write {reg.name}", attempt)
+    def reboot(self, servo_id: int, max_tries: int | None = None) -> None:
+        """Send Reboot to `servo_id` and take its status (sent before the servo restarts)."""
+        self.ask(servo_id, "reboot", Instruction.REBOOT, max_tries=max_tries)
 
     def hardware_errors(self, servo_id: int) -> tuple[str, ...]:
         """Names of the Hardware Error Status (70) bits latched on `servo_id`."""

@@ -2,7 +2,8 @@
 
 No pty and no thread: `EmulatedBus.handle` takes one decoded instruction packet and returns
 the status packets, in wire order, each with the delay its servo waits before sending
-(Return Delay Time plus any injected delay). `feed` does the same from raw bytes. The pty
+(Return Delay Time plus any injected delay), led by any status packets an injected fault
+held back from an earlier request (late replies). `feed` does the same from raw bytes. The pty
 transport (hardware/emulator/pty_transport.py) puts these on the wire; a test can call them
 directly. Servo motion comes from a pluggable hardware.shaft_motion.MotionModel,
 stepped by the clock's time between packets.
@@ -69,6 +70,8 @@ class EmulatedBus:
         self.crc_errors = 0
         self.internal_errors = 0
         self._reader = PacketReader()
+        self._late: list[Outgoing] = []  # held by late_replies until the next request
+        self._reordered: list[Outgoing] = []  # held by reorder_replies until the next reply
         self._last_step = clock()
         self._reset_model({s.servo_id: initial_ticks for s in self.servos})
 
@@ -89,7 +92,8 @@ class EmulatedBus:
             setattr(target, name, value)
 
     def clear_faults(self) -> None:
-        """Remove every injected fault (latched hardware errors stay: reboot clears those)."""
+        """Remove every injected fault (latched hardware errors stay: reboot clears those;
+        replies already held back by late_replies or reorder_replies still go out)."""
         for servo in self.servos:
             servo.faults = Faults()
 
@@ -121,7 +125,12 @@ class EmulatedBus:
         return out
 
     def handle(self, packet: Packet) -> list[Outgoing]:
-        """Answer one instruction packet as the bus of servos would, in wire order."""
+        """Answer one instruction packet as the bus of servos would, in wire order; status
+        packets held back from earlier requests by late_replies go out first."""
+        late, self._late = self._late, []
+        return late + self._answer(packet)
+
+    def _answer(self, packet: Packet) -> list[Outgoing]:
         self.packets_received += 1
         self._advance()
         if not packet.crc_ok:
@@ -135,13 +144,16 @@ class EmulatedBus:
         servo = self._listening(packet.packet_id)
         if servo is None:
             return []
+        if servo.faults.ignore_requests > 0:
+            servo.faults.ignore_requests -= 1
+            return []
         # The status goes out under the id and Status Return Level the packet arrived under,
         # so a write that changes either still gets its answer.
         servo_id, answers = servo.servo_id, servo.answers(packet.instruction)
         reply = servo.handle(packet.instruction, packet.params)
         error = servo.error_byte(reply.error)
         out = self._send([(servo, status_packet(servo_id, error, reply.params))] if answers else [])
-        servo.finish(packet.instruction, packet.params)
+        self._finish(servo, packet)
         return out
 
     def _broadcast(self, packet: Packet) -> list[tuple[EmulatedServo, bytes]]:
@@ -155,11 +167,19 @@ class EmulatedBus:
         # write, reg write, action, reboot, factory reset: every servo acts, none answer
         for servo in self._alive():
             servo.handle(packet.instruction, packet.params)
-            servo.finish(packet.instruction, packet.params)
+            self._finish(servo, packet)
         return []
 
+    def _finish(self, servo: EmulatedServo, packet: Packet) -> None:
+        """The servo's after-effects; a Reboot leaves it deaf for its boot time."""
+        servo.finish(packet.instruction, packet.params)
+        if packet.instruction == Instruction.REBOOT:
+            servo.deaf_until = self.clock() + servo.faults.boot_s
+
     def _alive(self) -> list[EmulatedServo]:
-        return [s for s in self.servos if not s.faults.unplugged]
+        """The servos that hear the bus now: plugged in and not booting."""
+        now = self.clock()
+        return [s for s in self.servos if not s.faults.unplugged and now >= s.deaf_until]
 
     def _listening(self, servo_id: int) -> EmulatedServo | None:
         for servo in self._alive():
@@ -176,12 +196,28 @@ class EmulatedBus:
         return [(servo, status_packet(servo.servo_id, servo.error_byte(reply.error), reply.params))]
 
     def _send(self, sent: list[tuple[EmulatedServo, bytes]]) -> list[Outgoing]:
-        """Each servo's status packet through that servo's faults (some are swallowed)."""
-        out = []
+        """Each servo's status packet through that servo's faults (some are swallowed,
+        some sent twice, some held back for later)."""
+        out: list[Outgoing] = []
         for servo, packet in sent:
-            faulted = _through_faults(servo.faults, packet)
-            if faulted is not None:
-                out.append(Outgoing(faulted, servo.return_delay_s + servo.faults.delay_s))
+            faults = servo.faults
+            faulted = _through_faults(faults, packet)
+            if faulted is None:
+                continue
+            outgoing = Outgoing(faulted, servo.return_delay_s + faults.delay_s)
+            copies = [outgoing]
+            if faults.duplicate_replies > 0:
+                faults.duplicate_replies -= 1
+                copies.append(Outgoing(faulted, 0.0))
+            if faults.late_replies > 0:
+                faults.late_replies -= 1
+                self._late += copies
+            elif faults.reorder_replies > 0:
+                faults.reorder_replies -= 1
+                self._reordered += copies
+            else:
+                reordered, self._reordered = self._reordered, []
+                out += copies + reordered
         return out
 
     def _advance(self) -> None:

@@ -38,15 +38,27 @@ class Faults:
     """Faults injected into one servo (mutable; the emulator reads them under its lock).
 
     drop_replies / corrupt_replies / wrong_id_replies: how many of the next status packets
-    to swallow, send with a broken CRC, or send from another id; delay_s: extra delay [s]
-    before every reply; unplugged: the servo neither hears nor answers anything.
+    to swallow, send with a broken CRC, or send from another id; duplicate_replies: how
+    many to send twice; late_replies: how many to hold back until the bus gets its next
+    instruction packet, then send first (a reply so late that it meets the next request,
+    whatever the client's timeout); reorder_replies: how many to hold back until the bus
+    has sent its next status packet (out of order: in a sync read, after the next servo's).
+    delay_s: extra delay [s] before every reply; boot_s: how long [s] the servo is deaf
+    after a Reboot (the real one restarts its firmware); unplugged: the servo neither
+    hears nor answers anything; ignore_requests: how many of the next instruction packets
+    addressed to this servo alone it does not hear (noise at its receiver).
     """
 
     drop_replies: int = 0
     corrupt_replies: int = 0
     wrong_id_replies: int = 0
+    duplicate_replies: int = 0
+    late_replies: int = 0
+    reorder_replies: int = 0
     delay_s: float = 0.0
+    boot_s: float = 0.0
     unplugged: bool = False
+    ignore_requests: int = 0
 
 
 @dataclass(frozen=True)
@@ -66,6 +78,7 @@ class EmulatedServo:
         self.registered: tuple[int, bytes] | None = None
         self.reboots = 0
         self.turn_ticks = 0  # whole turns [ticks] the count is behind the shaft
+        self.deaf_until = float("-inf")  # the bus clock's time a Reboot's boot ends
         # ((command bytes, turn_ticks), MotionCommand) of hardware.emulator.stepping, so
         # unchanged tables are not decoded again on every packet.
         self.command_cache: tuple[tuple[bytes, int], object] | None = None

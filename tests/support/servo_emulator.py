@@ -40,8 +40,12 @@ class RawPort:
 
     def exchange(self, packet: bytes, expect: int, timeout_s: float = 1.0) -> bytes:
         """Send `packet`, then read until `expect` bytes arrived or `timeout_s` passed."""
-        os.write(self.fd, packet)
+        self.write(packet)
         return self.read(expect, timeout_s)
+
+    def write(self, packet: bytes) -> None:
+        """Send `packet` and read nothing."""
+        os.write(self.fd, packet)
 
     def read(self, expect: int, timeout_s: float = 1.0) -> bytes:
         data = b""

@@ -94,6 +94,9 @@ class BusStatusOut(_Out):
     failed_tries: int
     retries: int
     failures: int
+    discarded: int = Field(
+        description="status packets discarded as answers to another request (late, duplicated)"
+    )
 
 
 class PoseInputStatus(_Out):

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from tests.support.app_client import robot_seen
+from hardware.dynamixel.control_table import Reg
+from tests.support.app_client import robot_seen, ticks, torque_on
 from tests.support.wait import ok_json, wait_for
 
 
@@ -103,18 +105,38 @@ def test_estop_stops_and_nothing_moves_until_reset(fresh):
     assert _status(fresh)["joints"]["commanded_rad"] == held  # reset moves nothing
 
 
-def test_hardware_error_faults_with_servo_and_reason_and_reset_reboots(client, fresh):
+HARDWARE_ERROR_BITS = {  # Hardware Error Status (70) bit -> its name
+    0: "input_voltage",
+    2: "overheating",
+    3: "motor_encoder",
+    4: "electrical_shock",
+    5: "overload",
+}
+
+
+@pytest.mark.parametrize("bit", HARDWARE_ERROR_BITS, ids=HARDWARE_ERROR_BITS.values())
+def test_hardware_error_faults_with_servo_and_reason_and_reset_reboots(client, fresh, bit):
     emulator = client.app.state.backend.emulator
-    fresh.post("/api/torque", json={"enabled": True})
-    emulator.raise_hardware_error(2, 0x04)  # overheating
-    wait_for(lambda: _status(fresh)["mode"] == "fault", "the hardware error fault")
-    fault = _status(fresh)["faults"][0]
-    assert fault["servo_id"] == 2 and "overheat" in fault["reason"].lower()
-    assert fresh.post("/api/goal", json={"position_m": [0, 0, -0.22]}).status_code == 409
-    result = ok_json(fresh.post("/api/reset"))["result"]
-    assert result["rebooted"] == [2]
-    wait_for(lambda: _status(fresh)["faults"] == [], "the fault to clear")
-    assert _status(fresh)["mode"] == "idle" and not _status(fresh)["torque"]
+    name = HARDWARE_ERROR_BITS[bit]
+    torque_on(fresh)
+    emulator.inject(1, boot_s=0.2)  # the servo is deaf while it boots
+    try:
+        emulator.raise_hardware_error(1, 1 << bit)
+        wait_for(lambda: _status(fresh)["mode"] == "fault", "the hardware error fault")
+        (fault,) = _status(fresh)["faults"]  # that error alone, named from its register
+        assert fault["servo_id"] == 1 and fault["reason"] == f"servo 1: hardware error {name}"
+        assert fresh.post("/api/goal", json={"position_m": [0, 0, -0.22]}).status_code == 409
+        result = ok_json(fresh.post("/api/reset"))["result"]
+        assert result["rebooted"] == [1]
+        wait_for(lambda: _status(fresh)["faults"] == [], "the fault to clear")
+        assert _status(fresh)["mode"] == "idle" and not _status(fresh)["torque"]
+        after = ticks(fresh)
+        wait_for(lambda: ticks(fresh) > after + 20, "more ticks after the reset")
+        assert _status(fresh)["faults"] == []  # no fault made of a stale reply follows
+        torque_on(fresh)
+        assert emulator.servo(1).table.get(Reg.TORQUE_ENABLE) == 1
+    finally:
+        emulator.clear_faults()
 
 
 def test_missed_reads_fault_after_the_limit(client, fresh):

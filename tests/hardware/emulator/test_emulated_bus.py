@@ -125,3 +125,59 @@ def test_position_mode_ignores_a_homing_offset_beyond_1024() -> None:
     assert present(bus) == 1000  # ignored: the shaft alone
     write(bus, 1, Reg.OPERATING_MODE, 4)
     assert present(bus) == 3000  # Extended Position Control Mode applies it
+
+
+def test_a_duplicated_reply_goes_out_twice_back_to_back() -> None:
+    bus = still_bus()
+    bus.servo(1).table.set(Reg.FIRMWARE_VERSION, 0x26)
+    bus.inject(1, duplicate_replies=1)
+    replies = bus.feed(packet("ping"))
+    assert [r.packet for r in replies] == [packet("ping status (XM430-W210 1030, fw 38)")] * 2
+    assert len(bus.feed(packet("ping"))) == 1  # one duplicate was asked for
+
+
+def test_a_late_reply_goes_out_first_in_the_answer_to_the_next_request() -> None:
+    bus = still_bus()
+    bus.place({1: 166, 2: 2079})
+    bus.inject(1, late_replies=1)
+    assert bus.feed(packet("read present position")) == []  # held back
+    replies = bus.feed(packet("ping"))
+    assert [r.packet[7:9] for r in replies] == [b"\x55\x00"] * 2
+    assert replies[0].packet == packet("read status (166)")  # the earlier request's answer
+    assert replies[1].packet[5:7] == (7).to_bytes(2, "little")  # then the ping's (3 data bytes)
+    # a request that draws no answer still lets a held reply out
+    bus.inject(1, late_replies=1)
+    bus.feed(packet("ping"))
+    (held,) = bus.feed(packet("sync write 150, 170"))
+    assert held.packet[4] == 1 and held.packet[5:7] == (7).to_bytes(2, "little")
+
+
+def test_a_reordered_reply_goes_out_after_the_next_status_packet() -> None:
+    bus = still_bus()
+    bus.place({1: 166, 2: 2079})
+    bus.inject(1, reorder_replies=1)
+    replies = bus.feed(packet("sync read ids 1, 2"))
+    assert [r.packet for r in replies] == [
+        packet("sync read status id 2 (2079)"),
+        packet("read status (166)"),
+    ]
+
+
+def test_a_rebooted_servo_is_deaf_for_its_boot_time() -> None:
+    now = [0.0]
+    bus = EmulatedBus((1, 2), clock=lambda: now[0])
+    bus.inject(1, boot_s=0.3)
+    (status,) = bus.feed(packet("reboot"))  # the status goes out before the restart
+    assert status.packet[4] == 1 and bus.servo(1).reboots == 1
+    now[0] = 0.29
+    assert bus.feed(packet("ping")) == []
+    now[0] = 0.3
+    assert len(bus.feed(packet("ping"))) == 1
+
+
+def test_an_ignored_request_is_not_executed_nor_answered() -> None:
+    bus = still_bus()
+    bus.inject(1, ignore_requests=1)
+    assert bus.feed(packet("reboot")) == []
+    assert bus.servo(1).reboots == 0
+    assert len(bus.feed(packet("reboot"))) == 1 and bus.servo(1).reboots == 1
