@@ -150,6 +150,11 @@ class SafetySettings(_Section):
 
     following_error_rad: float = Field(0.35, gt=0, description="trip above this |cmd - meas|")
     following_error_time_s: float = Field(0.5, ge=0, description="... held this long [s]")
+    stale_feedback_s: float = Field(
+        0.5,
+        gt=0,
+        description="fault a motion when the simulator's time stood still this long [s]",
+    )
     max_missed_reads: int = Field(10, ge=1, description="fault after this many failed reads")
     estop_action: Literal["hold", "release"] = Field("hold", description="torque on e-stop")
     torque_off_on_exit: bool = Field(True, description="relax the servos on shutdown")

@@ -54,7 +54,12 @@ class JointState:
     velocity_rad_s: joint velocity [rad/s]; current_a: motor current [A] (signed, in the
     joint's direction); voltage_v: input voltage [V]; temperature_c: [degC];
     hardware_errors: per joint, the names of the Hardware Error Status bits set (empty if
-    none); moving: per joint, the servo's Moving flag; stamp_s: time.monotonic() at read [s].
+    none); moving: per joint, the servo's Moving flag; stamp_s: time.monotonic() at read [s]
+    (a simulator's state: when the simulator produced it).
+    sim_time_s: a simulated robot's simulated time at this state [s], None for real servos:
+    two reads with the same simulated time are the same state, the second one stale (the
+    simulator did not step in between). A real bus's state is fresh by construction: a read
+    either gets every servo's reply or raises.
     """
 
     position_rad: np.ndarray
@@ -65,6 +70,7 @@ class JointState:
     moving: np.ndarray
     hardware_errors: tuple[tuple[str, ...], ...]
     stamp_s: float
+    sim_time_s: float | None = None
 
     @property
     def faulted(self) -> bool:

@@ -16,6 +16,7 @@ import urllib.error
 import urllib.request
 from typing import Any
 
+from app.runs.health import summary
 from app.runs.trajectories import SinusoidParams
 
 _D = SinusoidParams()
@@ -140,6 +141,8 @@ def print_stats(run: dict[str, Any]) -> None:
                 f"{s['std_m'] * 1e3:9.3f} {s['max_abs_m'] * 1e3:9.3f} "
                 f"{s['share_under_1mm']:6.1%}"
             )
+    if run.get("stats"):
+        print(summary(run["stats"].get("health")))
     for name, where in run["files"].items():
         print(f"{name:>10}: {where}")
 

@@ -339,5 +339,6 @@ def reset_now(state: LoopState, ctx: CommandContext, bus: ServoBus) -> dict:
     state.estopped = False
     state.warning = None
     state.following.reset()
+    state.freshness.reset()
     state.misses.ok()
     return {"rebooted": failing}

@@ -51,6 +51,7 @@ class Controller:
         backend: str,
         backend_description: str = "",
         clock: Callable[[], float] = time.monotonic,
+        tick_clock: TickClock | None = None,
     ) -> None:
         self.settings = settings
         self.ctx = CommandContext.from_settings(settings)
@@ -67,6 +68,8 @@ class Controller:
         # the simulator's "motion capture" of the platform; real buses have none
         self._external = bus.measure_platform if isinstance(bus, SimulatedBus) else None
         self._clock = clock  # loop time [s]; tests step a controller on a fake one
+        # paces the thread; None: real time at loop.rate_hz (tests may give a virtual one)
+        self._tick_clock = tick_clock
         self._t0 = clock()
         self._snapshot = Snapshot()
         self.pose_status: Callable[[], dict] | None = None  # set by the world service
@@ -194,14 +197,16 @@ class Controller:
 
     # ---- the loop (control thread) ----
     def _run(self) -> None:
-        clock = TickClock(self.settings.loop.rate_hz, self.settings.loop.spin_s)
+        loop = self.settings.loop
+        clock = self._tick_clock or TickClock(loop.rate_hz, loop.spin_s)
         previous: float | None = None
         while not self._stop.is_set():
             deadline, lateness = clock.wait_next()
             # sources advance by the scheduled time elapsed, which includes skipped slots
             self.state.dt_s = self.period_s if previous is None else deadline - previous
             previous, self.state.lateness_s = deadline, lateness
-            started = time.perf_counter()
+            self.state.timing = clock.last
+            started = clock.now()
             try:
                 self.step()
             except Exception as exc:  # a bug must stop motion, not the loop
@@ -210,7 +215,8 @@ class Controller:
                     "loop", f"internal error: {exc!r}", time_s=self._now(), kind=type(exc).__name__
                 )
                 record_fault(self.state, fault)
-            self.timing.record(deadline, lateness, time.perf_counter() - started)
+            clock.end_tick()
+            self.timing.record(deadline, lateness, clock.now() - started)
 
     def step(self) -> None:
         """One tick (the thread calls it each period; tests may call it on an unstarted one)."""
@@ -255,6 +261,7 @@ class Controller:
                 record_fault(state, Fault("bus", reason, time_s=self._now(), kind="reads failed"))
             return False
         state.misses.ok()
+        state.freshness.update(self._now(), joints, state.commanded_rad)
         state.joints = joints
         state.point_m = self.robot.fk(joints.position_rad).points
         if self._external is not None:  # the simulator's "motion capture" of the platform,
@@ -286,8 +293,11 @@ class Controller:
         if (joints := self._setpoint_joints(setpoint)) is None:
             return
         self._write(joints)
-        state = self.state
-        fault = state.following.check(self._now(), state.commanded_rad, state.joints.position_rad)
+        state, now = self.state, self._now()
+        if state.freshness.certain:  # an old state: it says nothing of how the joints follow
+            fault = state.freshness.fault(now)
+        else:
+            fault = state.following.check(now, state.commanded_rad, state.joints.position_rad)
         if fault is not None:
             record_fault(state, fault)
 

@@ -12,9 +12,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from app.config import SafetySettings
-from app.control.safety import FollowingError, MissCounter
+from app.control.safety import FeedbackFreshness, FollowingError, MissCounter
 from app.control.sources import GoalSource
 from app.control.state import Fault, Snapshot
+from app.control.timing import TickTiming
 from hardware.bus import JointState
 
 
@@ -48,6 +49,7 @@ class LoopState:
     notice: str | None = None  # about the last motion command (e.g. where it started from)
     resync: bool = True
     hold_deadline_s: float | None = None
+    freshness: FeedbackFreshness = field(default_factory=lambda: FeedbackFreshness(0.5))
     hold_velocity_m_s: np.ndarray | None = None  # the held jog's velocity [m/s]
     joints: JointState | None = None
     point_m: np.ndarray = field(default_factory=_nan3)
@@ -60,6 +62,7 @@ class LoopState:
     extra: dict | None = None
     dt_s: float = 0.0  # scheduled time since the previous tick (sources advance by it)
     lateness_s: float = 0.0
+    timing: TickTiming = field(default_factory=TickTiming)  # how this tick started
 
     @classmethod
     def initial(cls, safety: SafetySettings, period_s: float) -> LoopState:
@@ -67,6 +70,7 @@ class LoopState:
         return cls(
             MissCounter(safety.max_missed_reads),
             FollowingError(safety.following_error_rad, safety.following_error_time_s),
+            freshness=FeedbackFreshness(safety.stale_feedback_s),
             dt_s=period_s,
         )
 
@@ -118,4 +122,13 @@ class LoopState:
             lateness_ms=self.lateness_s * 1e3,
             extra=self.extra if self.source else None,
             external_m=self.external_m,
+            gap_ms=self.timing.gap_s * 1e3,
+            overrun=self.timing.overrun,
+            sim_time_s=_sim_time(state),
+            stale=self.freshness.stale,
+            feedback_age_ms=self.freshness.age_s * 1e3,
         )
+
+
+def _sim_time(state: JointState | None) -> float:
+    return float("nan") if state is None or state.sim_time_s is None else state.sim_time_s

@@ -59,6 +59,12 @@ class Snapshot:
     """The loop's state after one tick, in SI units and the base frame.
 
     Arrays are shape (3,); NaN where unknown (no successful read yet, FK failed).
+
+    How the tick started (app/control/timing.py ``TickTiming``): lateness_ms after its
+    deadline, gap_ms since the previous tick started, overrun (it missed its deadline).
+    How fresh the feedback was (app/control/safety.py ``FeedbackFreshness``): sim_time_s,
+    the simulated time of the state read (NaN on real servos); stale, the read brought no
+    news; feedback_age_ms, loop time since the last fresh read (0 when fresh).
     """
 
     time_s: float = 0.0
@@ -86,6 +92,11 @@ class Snapshot:
     lateness_ms: float = 0.0
     extra: dict | None = None
     external_m: np.ndarray = field(default_factory=lambda: _NAN3)  # e.g. motion capture
+    gap_ms: float = 0.0
+    overrun: bool = False
+    sim_time_s: float = float("nan")
+    stale: bool = False
+    feedback_age_ms: float = 0.0
 
     @property
     def tracking_error_m(self) -> np.ndarray:

@@ -30,30 +30,74 @@ class TimingStats:
     ticks: int
 
 
+@dataclass(frozen=True)
+class TickTiming:
+    """How one tick started, as the loop saw it then (what a run logs per tick).
+
+    lateness_s: how far the tick started after its deadline [s]; gap_s: time since the
+    previous tick started [s] (0 for the first tick); overrun: the tick missed its deadline,
+    either because the previous tick ended after it (its work, or its own late start, ran
+    into this slot) or because whole slots were skipped; skipped: slots skipped before it.
+    Over a run, the ticks with ``overrun`` are the ones TimingRecorder counts as overruns
+    (one tick later: the tick that ran long makes the next one miss its deadline).
+    """
+
+    lateness_s: float = 0.0
+    gap_s: float = 0.0
+    overrun: bool = False
+    skipped: int = 0
+
+
 class TickClock:
-    """Sleeps to absolute deadlines; counts overruns (a deadline missed by a whole period)."""
+    """Sleeps to absolute deadlines; skips slots it missed by a whole period and says so.
+
+    Call :meth:`wait_next` at the top of each tick and :meth:`end_tick` after its work;
+    :attr:`last` is then the tick's :class:`TickTiming`. :meth:`now` is the clock it uses
+    (time.perf_counter); a test may subclass it to run the loop on a virtual clock.
+    """
 
     def __init__(self, rate_hz: float, spin_s: float = 3e-4) -> None:
         self.period_s = 1.0 / rate_hz
         self.spin_s = spin_s
-        self._start = time.perf_counter()
+        self._start = self.now()
         self._tick = 0
+        self._started: float | None = None  # when the previous tick started
+        self._ended = -float("inf")  # when the previous tick's work ended
+        self.last = TickTiming()
+
+    def now(self) -> float:
+        """The clock's time [s] (time.perf_counter)."""
+        return time.perf_counter()
+
+    def sleep_until(self, deadline: float) -> None:
+        """Sleep to 0.3 ms before ``deadline`` and busy-wait the rest."""
+        remaining = deadline - self.spin_s - self.now()
+        if remaining > 0:
+            time.sleep(remaining)
+        while self.now() < deadline:
+            pass  # the last few hundred microseconds: time.sleep overshoots by ~50-150 us
 
     def wait_next(self) -> tuple[float, float]:
         """Block until the next deadline; return (deadline, lateness) [s, perf_counter]."""
         self._tick += 1
         deadline = self._start + self._tick * self.period_s
-        now = time.perf_counter()
+        missed_own = self._ended > deadline  # the previous tick ran into this slot
+        now = self.now()
+        missed = 0
         if now - deadline >= self.period_s:  # hopelessly late: skip missed slots, say so
             missed = int((now - deadline) / self.period_s)
             self._tick += missed
             deadline += missed * self.period_s
-        remaining = deadline - self.spin_s - now
-        if remaining > 0:
-            time.sleep(remaining)
-        while time.perf_counter() < deadline:
-            pass  # the last few hundred microseconds: time.sleep overshoots by ~50-150 us
-        return deadline, time.perf_counter() - deadline
+        self.sleep_until(deadline)
+        started = self.now()
+        gap = 0.0 if self._started is None else started - self._started
+        self._started = started
+        self.last = TickTiming(started - deadline, gap, missed_own or missed > 0, missed)
+        return deadline, started - deadline
+
+    def end_tick(self) -> None:
+        """The tick's work is done (the next tick checks whether it ran past its deadline)."""
+        self._ended = self.now()
 
 
 class TimingRecorder:

@@ -75,13 +75,18 @@ COLUMNS = [
     "world_measured_z_m",
     "outside",
     "pose_age_ms",
+    "gap_ms",
+    "overrun",
+    "sim_time_s",
+    "stale",
+    "feedback_age_ms",
 ]
 
 SCHEMA = {
     "title": "deltadash.Tick",
     "description": "One control tick of a run: SI units, base frame",
     "type": "object",
-    "properties": {name: {"type": ["number", "string", "null"]} for name in COLUMNS},
+    "properties": {name: {"type": ["number", "string", "boolean", "null"]} for name in COLUMNS},
 }
 
 

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.control.state import Snapshot
+from app.runs.health import assess
 from app.runs.logs import RunLog
 from app.runs.report import write_report
 from app.runs.run import Run
@@ -58,6 +59,11 @@ def row_of(snap: Snapshot, t_s: float) -> dict[str, Any]:
     row["outside"] = extra.get("outside")
     age = extra.get("pose_age_s")
     row["pose_age_ms"] = None if age is None else age * 1e3
+    row["gap_ms"] = snap.gap_ms  # the loop's health (app/runs/health.py) reads these four
+    row["overrun"] = snap.overrun
+    row["sim_time_s"] = _values(np.array([snap.sim_time_s]))[0]
+    row["stale"] = snap.stale
+    row["feedback_age_ms"] = snap.feedback_age_ms
     return row
 
 
@@ -148,6 +154,7 @@ class Recorder:
             self.run.save()
             return
         stats = run_stats(self._rows, self.skip_s, self.controller.period_s)
+        stats["health"] = assess(self._rows, self.controller.settings.loop.rate_hz)
         times = np.array([r["t_s"] for r in self._rows])
         reference, measured = (
             ("world_goal", "world_measured") if "world" in stats else ("goal", "measured")

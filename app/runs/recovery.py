@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from app.runs.health import assess
 from app.runs.logs import finish_cut_log, is_being_written, read_csv_rows, read_messages
 from app.runs.recorder import run_stats
 from app.runs.report import write_report
@@ -72,6 +73,7 @@ def recover(run: Run, skip_s: float, period_s: float) -> None:
     if rows:
         try:
             run.stats = run_stats(rows, skip_s, period_s)
+            run.stats["health"] = assess(rows, 1.0 / period_s)
             _draw(run, rows)
         except Exception as exc:  # noqa: BLE001
             log.warning("run %s: stats of its logged ticks failed: %s", run.run_id, exc)

@@ -5,9 +5,12 @@ GIL a few hundred times a second (docs/performance.md, "Control loop"). Here a c
 process owns a `SimBus` and steps it against the wall clock, 2 ms at a time; the loop's
 hot path never waits for it:
 
-- after every step the child publishes the joint state and the platform position into
-  shared memory; `read_state` copies the latest frame (at most one 2 ms step old, where a
-  real bus read is a fraction of a millisecond old by the time it arrives);
+- after every step the child publishes the joint state, its simulated time and the
+  platform position into shared memory; `read_state` copies the latest frame (at most one
+  2 ms step old on a quiet machine, where a real bus read is a fraction of a millisecond old
+  by the time it arrives). A starved child publishes late: the state then carries the same
+  `sim_time_s` as the previous read, so the loop knows it is stale (app/control/safety.py
+  `FeedbackFreshness`) instead of taking a frozen arm for a lagging one;
 - `write_goal` validates the goal here (the same `goal_ticks` as every bus) and leaves it
   in shared memory; the child applies it before its next step;
 - everything else (torque, gains, profile, reboot, base motion) is a request over a pipe
@@ -42,14 +45,15 @@ STEP_S = 2e-3  # physics chunk = the most the published state lags (1 ms: 28 % o
 LOCK_TIMEOUT_S = 0.05
 START_TIMEOUT_S = 60.0
 REPLY_TIMEOUT_S = 10.0
-# A frame this old means the child is dead or stuck; a starved child (a loaded machine)
-# publishes late but keeps the arm where it was, as the thread version does: not a fault.
+# A frame this old means the child is dead or stuck: the read fails. A starved child (a
+# loaded machine) publishes late; its frames carry their simulated time, and the loop marks
+# a state whose simulated time did not advance as stale (it is not a bus fault here).
 STALE_S = 2.0
 
 # shared frame: state written by the child, goal written by the parent (float64 slots)
 _POS, _VEL, _CUR, _VOLT, _TEMP, _MOVING, _ERR = (slice(3 * k, 3 * k + 3) for k in range(7))
-_STAMP, _PLATFORM, _GOAL_SEQ, _GOAL = 21, slice(22, 25), 25, slice(26, 29)
-_FRAME_SIZE = 29
+_STAMP, _PLATFORM, _GOAL_SEQ, _GOAL, _SIM_TIME = 21, slice(22, 25), 25, slice(26, 29), 29
+_FRAME_SIZE = 30
 
 
 class ProcessSimBus:
@@ -152,6 +156,7 @@ class ProcessSimBus:
             moving=values[_MOVING] > 0.5,
             hardware_errors=tuple(hardware_error_names(int(code)) for code in values[_ERR]),
             stamp_s=float(values[_STAMP]),
+            sim_time_s=float(values[_SIM_TIME]),
         )
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
@@ -185,6 +190,13 @@ class ProcessSimBus:
     def set_base_motion(self, motion: BaseMotion) -> None:
         """The drone's attitude, acceleration and turning, acting on the arm from now on."""
         self._call("set_base_motion", motion, reply=False)
+
+    def pause(self, paused: bool) -> None:
+        """Freeze (True) or resume (False) the simulator, as a starved process freezes: it
+        stops stepping and publishing but answers requests; on resume it catches up at most
+        `MAX_CATCH_UP_S` of simulated time, as after a stall. For tests and demonstrations of
+        stale feedback. Raises NotConnectedError, BusError (the process is gone)."""
+        self._call("pause", bool(paused))
 
     # -- internals -----------------------------------------------------------------------
     def _require_frame(self, instruction: str) -> np.ndarray:
@@ -250,7 +262,7 @@ def _child_main(config: SimBusConfig, conn: Connection, memory_name: str, lock: 
 def _serve(bus: SimBus, conn: Connection, frame: np.ndarray, lock: Any) -> None:
     """Step physics against the wall clock; answer requests the moment they arrive."""
     dt = bus.twin.model.opt.timestep
-    last, goal_seq = time.monotonic(), 0.0
+    last, goal_seq, paused = time.monotonic(), 0.0, False
     while True:
         if conn.poll(STEP_S):
             try:
@@ -259,7 +271,13 @@ def _serve(bus: SimBus, conn: Connection, frame: np.ndarray, lock: Any) -> None:
                 return  # the parent is gone
             if request is None:
                 return
-            _answer(bus, conn, *request)
+            if request[0] == "pause":
+                paused = bool(request[1][0])
+                conn.send((True, None))
+            else:
+                _answer(bus, conn, *request)
+        if paused:
+            continue
         with lock:
             seq, goal = frame[_GOAL_SEQ], frame[_GOAL].copy()
         if seq != goal_seq:
@@ -296,3 +314,4 @@ def _publish(bus: SimBus, frame: np.ndarray, lock: Any) -> None:
         frame[_VOLT], frame[_TEMP] = state.voltage_v, state.temperature_c
         frame[_MOVING], frame[_ERR] = state.moving, codes
         frame[_STAMP], frame[_PLATFORM] = state.stamp_s, platform
+        frame[_SIM_TIME] = state.sim_time_s

@@ -241,6 +241,7 @@ class SimBus:
             moving=np.array(moving),
             hardware_errors=tuple(hardware_error_names(s.hardware_error) for s in twin.servos),
             stamp_s=time.monotonic(),
+            sim_time_s=twin.time_s,
         )
 
     def _run(self) -> None:

@@ -27,6 +27,7 @@ def _row(k: int) -> dict:
         row[f"goal_{axis}_m"] = value
         row[f"measured_{axis}_m"] = value - (ERROR_X_M if axis == "x" else 0.0)
     row["faults"] = ""
+    row["gap_ms"] = 60.0 if k == 300 else 5.0  # one pause of the loop, logged
     return row
 
 
@@ -84,6 +85,9 @@ def test_a_crashed_run_is_interrupted_with_stats_from_its_logged_ticks(restarted
     assert tracking["x"]["mean_m"] == pytest.approx(ERROR_X_M, abs=1e-12)
     assert tracking["y"]["rmse_m"] == pytest.approx(0.0, abs=1e-12)
     assert 0 < tracking["samples"] < 449 - 100  # the approach is not scored
+    health = run["stats"]["health"]  # judged from the logged ticks too
+    assert not health["ok"] and health["longest_gap_ms"] == pytest.approx(60.0)
+    assert any("paused 60 ms" in reason for reason in health["reasons"])
     saved = json.loads((client.app.state.runs.folder / run["run_id"] / "run.json").read_text())
     assert saved["state"] == "interrupted"  # once: a later start does not redo it
 

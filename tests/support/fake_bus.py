@@ -1,8 +1,11 @@
 """A fake servo bus for tests of the control layer without a thread, a simulator or a pty:
 it records torque / write_goal / reboot calls and reads back an ideal servo (or a stuck one,
-or one whose reads and writes fail)."""
+or one whose reads and writes fail; or, as a simulator, one that carries its simulated time
+and can be paused, when its reads repeat the last state)."""
 
 from __future__ import annotations
+
+import time
 
 import numpy as np
 
@@ -19,11 +22,17 @@ NO_ERRORS: tuple[tuple[str, ...], ...] = ((), (), ())
 class FakeBus:
     """Records torque / write_goal / reboot; reads back an ideal servo (or a stuck one)."""
 
-    def __init__(self, errors: tuple[tuple[str, ...], ...] = NO_ERRORS) -> None:
+    def __init__(
+        self, errors: tuple[tuple[str, ...], ...] = NO_ERRORS, sim_step_s: float | None = None
+    ) -> None:
         self.calls: list[tuple] = []
         self.position = np.array(HOME_RAD)
         self.errors = errors
         self.fail_reads = self.fail_writes = self.stuck = False
+        # as a simulator: each read steps simulated time by sim_step_s, unless paused
+        self.sim_step_s, self.sim_time_s, self.paused = sim_step_s, 0.0, False
+        self.read_delay_s = 0.0  # a slow read: starves the loop that waits for it
+        self._last: JointState | None = None
 
     def torque(self, enabled: bool) -> None:
         self._fail_if(self.fail_writes, "write torque")
@@ -41,7 +50,13 @@ class FakeBus:
 
     def read_state(self) -> JointState:
         self._fail_if(self.fail_reads, "sync read state")
-        return JointState(
+        if self.read_delay_s:
+            time.sleep(self.read_delay_s)
+        if self.paused and self._last is not None:
+            return self._last  # a paused simulator: the state it handed out before
+        if self.sim_step_s is not None:
+            self.sim_time_s += self.sim_step_s
+        self._last = JointState(
             position_rad=self.position.copy(),
             velocity_rad_s=np.zeros(3),
             current_a=np.zeros(3),
@@ -49,8 +64,10 @@ class FakeBus:
             temperature_c=np.full(3, 30.0),
             moving=np.zeros(3, dtype=bool),
             hardware_errors=self.errors,
-            stamp_s=0.0,
+            stamp_s=time.monotonic(),
+            sim_time_s=None if self.sim_step_s is None else self.sim_time_s,
         )
+        return self._last
 
     @staticmethod
     def _fail_if(failing: bool, instruction: str) -> None:

@@ -191,14 +191,40 @@ class WorldStats(ErrorStats):
     inside_only: ErrorStats
 
 
+class LatenessOut(_Out):
+    p50: float = Field(description="median lateness of a tick after its deadline [ms]")
+    p99: float = Field(description="99th percentile [ms]")
+    worst: float = Field(description="largest [ms]")
+
+
+class RunHealth(BaseModel):
+    """The loop's health over the run (app/runs/health.py): ``ok`` false with its reasons
+    when the loop or its feedback was not good enough for the run's figures to mean much
+    (over 1 % overruns, a gap over 20 ms, stale feedback; the limits are in
+    ``thresholds``)."""
+
+    model_config = ConfigDict(extra="allow")
+    ok: bool
+    reasons: list[str] = Field(description="why not ok, in words; empty when ok")
+    rate_hz: float = Field(description="ticks per second over the run [Hz]")
+    lateness_ms: LatenessOut
+    overruns: int = Field(description="ticks that missed their deadline")
+    overrun_share: float = Field(description="overruns / ticks")
+    longest_gap_ms: float = Field(description="longest time between two ticks' starts [ms]")
+    stale_ticks: int = Field(description="ticks whose read brought no news")
+    longest_stale_ms: float = Field(description="longest stretch of stale feedback [ms]")
+    thresholds: dict[str, float]
+
+
 class RunStats(BaseModel):
     """Empty while a run goes; tracking (goal vs FK), validation (FK vs external) when
-    measured, world for hold runs."""
+    measured, world for hold runs, and the loop's health."""
 
     model_config = ConfigDict(extra="allow")  # runs saved by older versions load as they are
     tracking: ErrorStats | None = None
     validation: ErrorStats | None = None
     world: WorldStats | None = None
+    health: RunHealth | None = None
 
 
 class RunOut(_Out):

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from tests.support.app_client import make_client
+from tests.support.app_client import make_client, torque_on
 from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
@@ -36,7 +36,7 @@ def status(client: TestClient) -> dict:
 def at_rest(client: TestClient, point_m: list[float]) -> None:
     """Torque on, a goal, and wait until the commanded point is there."""
     ok_json(client.post("/api/reset"))
-    ok_json(client.post("/api/torque", json={"enabled": True}))
+    torque_on(client)  # waits while the relaxed arm still swings past its joint limits
     ok_json(client.post("/api/goal", json={"position_m": point_m}))
     wait_for(
         lambda: np.allclose(status(client)["ee"]["commanded_m"], point_m, atol=1e-6),

@@ -120,3 +120,22 @@ def test_a_dead_simulator_is_a_bus_error_not_a_frozen_robot() -> None:
             sim.torque(True)
     finally:
         sim.disconnect()
+
+
+def test_a_paused_simulator_hands_out_the_same_state_with_the_same_simulated_time(
+    bus: ProcessSimBus,
+) -> None:
+    first = bus.read_state().sim_time_s
+    later = wait_for(lambda: (t := bus.read_state().sim_time_s) > first and t, "time to run")
+    bus.pause(True)
+    try:
+        paused = bus.read_state()
+        again = wait_for(
+            lambda: (s := bus.read_state()).stamp_s == paused.stamp_s and s, "a repeated frame"
+        )
+    finally:
+        bus.pause(False)
+    assert paused.sim_time_s >= later  # the simulated time of the state it returns
+    assert again.sim_time_s == paused.sim_time_s  # the same state, and it says so
+    np.testing.assert_array_equal(again.position_rad, paused.position_rad)
+    wait_for(lambda: bus.read_state().sim_time_s > paused.sim_time_s, "time to run again")

@@ -124,3 +124,12 @@ def test_realtime_bus_moves_simulated_time_by_itself() -> None:
             sim.advance(0.1)  # the thread owns the clock
     finally:
         sim.disconnect()
+
+
+def test_each_state_carries_the_simulated_time_it_was_taken_at(bus: SimBus) -> None:
+    before = bus.read_state()
+    assert bus.read_state().sim_time_s == before.sim_time_s  # no step: the same state again
+    bus.advance(0.05)
+    after = bus.read_state()
+    assert after.sim_time_s == pytest.approx(before.sim_time_s + 0.05)
+    assert after.sim_time_s == bus.twin.time_s
