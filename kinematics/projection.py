@@ -31,6 +31,15 @@ on the face or edge it lies on, or a vertex. So the candidates are:
 The nearest admissible candidate is the answer. Everything is solved on constraints
 tightened by ``EPS`` m, so a boundary answer passes the IK's own test after rounding.
 Vertical rails (all parallel) reduce to three discs in x, y and are solved exactly.
+
+What it guarantees: the answer is admissible; face and vertex answers are exact (~1e-9 m).
+An edge's local minimum is found when a link brackets it; one hidden by the edge bending
+back within a link (a few mm), or beyond the 12 lowest-bound brackets (ties, as for a
+goal at the centre of a circular edge), could be missed. The laws of
+tests/kinematics/test_projection.py (nothing admissible nearer by more than 0.1 mm) held
+on ~900 random robots, margins, ceilings and goals, and a multi-start SLSQP oracle found
+nothing nearer on ~500 more. Rails within a few degrees of vertical (but not vertical)
+make a long admissible set: its sampling gets coarser (links of 16 mm at 88 deg).
 """
 
 from __future__ import annotations
