@@ -12,11 +12,12 @@ the per-leg Euclidean distance to the boundary [m] instead.
 from __future__ import annotations
 
 import functools
+import math
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize
 
+from . import projection
 from ._arrays import as_vectors
 from .errors import NonFiniteError, ShapeError, UnreachableError
 from .results import Projection
@@ -70,9 +71,15 @@ def _anchor(robot: Any, z_max: float | None) -> tuple[np.ndarray, float]:
 
 
 def _feasible(robot: Any, q: np.ndarray, margin: float, z_max: float | None) -> bool:
-    # The IK's own test too: a boundary point must be one the IK accepts after rounding.
-    inside = bool(signed_distance(robot, q) <= -margin) and bool(reachable(robot, q))
-    return inside and (z_max is None or q[2] <= z_max)
+    """One point: every leg at least ``margin`` inside, the IK accepts it, below ``z_max``."""
+    x, y, z = (float(v) for v in q)
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        return False
+    if z_max is not None and not z <= z_max:
+        return False
+    if not all(robot._leg_signed_distance(i, x, y, z) <= -margin for i in range(3)):
+        return False
+    return bool(robot.ik((x, y, z)).ok)  # the IK's own test: what the caller will run
 
 
 def _bisect(
@@ -90,17 +97,34 @@ def _bisect(
 def project(robot: Any, point: Any, margin: float = 0.0, z_max: float | None = None) -> Projection:
     """Nearest point to ``point`` that is reachable with ``margin`` [m] to spare.
 
+    How: the admissible set (every leg reaches with ``margin`` to spare, i.e.
+    ``signed_distance <= -margin``, and z <= ``z_max``) is bounded by faces (one leg's
+    tube or lemon, a linear leg's cylinder, or the ceiling), edges where two meet and
+    vertices where three do. The answer is the nearest admissible one of: the critical
+    points of the distance on every face (closed form: the nearest point of a knee
+    circle, then along the tube), the vertices, and the local minima along the edges
+    (Newton's method from the cached edge samples that bracket one and could beat the
+    best so far). Vertical rails reduce to three discs in x, y: exact. See
+    :mod:`kinematics.projection`; the first call for a (robot, margin, z_max) samples
+    the edges (0.1-0.5 s), later calls cost about 0.1-0.6 ms (docs/performance.md).
+
+    Guarantee: the answer is admissible (the IK's own test, the margin, the ceiling),
+    and no admissible point is nearer the goal by more than 0.1 mm. Face and vertex
+    answers are exact to ~1e-9 m; an edge's minimum is found wherever two neighbouring
+    samples (a few mm apart) bracket it, i.e. unless the edge turns back within one
+    sample gap. Tested as a law against dense samples on random robots and goals.
+
     Args:
         point: goal in the base frame [m], shape (3,).
         margin: required distance from every leg's workspace boundary [m], >= 0.
         z_max: optional ceiling for the platform [m] (e.g. keep it below the base).
 
     Returns:
-        Projection(point, distance). A reachable goal comes back unchanged.
+        Projection(point, distance). An admissible goal comes back unchanged.
 
     Raises:
         ShapeError / NonFiniteError: for a malformed goal.
-        UnreachableError: when the margin leaves no reachable point at all.
+        UnreachableError: when the margin (and ceiling) leave no reachable point at all.
     """
     goal = as_vectors(point, "point")
     if goal.shape != (3,):
@@ -109,36 +133,12 @@ def project(robot: Any, point: Any, margin: float = 0.0, z_max: float | None = N
         raise NonFiniteError(f"point: must be finite, got {goal.tolist()}")
     if _feasible(robot, goal, margin, z_max):
         return Projection(goal.copy(), 0.0)
-    anchor, depth = _anchor(robot, z_max)
-    if not _feasible(robot, anchor, margin, z_max):
-        raise UnreachableError(f"margin {margin} m leaves no reachable point (deepest {-depth} m)")
-    start = _bisect(robot, anchor, goal, margin, z_max)
-    best = _refine(robot, goal, start, margin, z_max)
+    best = projection.nearest(robot, goal, margin, z_max)
+    if best is None or not _feasible(robot, best, margin, z_max):
+        anchor, depth = _anchor(robot, z_max)
+        if not _feasible(robot, anchor, margin, z_max):
+            raise UnreachableError(
+                f"margin {margin} m leaves no reachable point (deepest {-depth} m)"
+            )
+        best = _bisect(robot, anchor, goal if best is None else best, margin, z_max)
     return Projection(best, float(np.linalg.norm(best - goal)))
-
-
-def _refine(
-    robot: Any, goal: np.ndarray, start: np.ndarray, margin: float, z_max: float | None
-) -> np.ndarray:
-    """Local least-distance solve from a feasible start; falls back to the start."""
-    constraints = [
-        {"type": "ineq", "fun": lambda q, i=i: -margin - robot._leg_signed_distance(i, *q)}
-        for i in range(3)
-    ]
-    if z_max is not None:
-        constraints.append({"type": "ineq", "fun": lambda q: z_max - q[2]})
-    result = minimize(
-        lambda q: float(np.sum((q - goal) ** 2)),
-        start,
-        jac=lambda q: 2.0 * (q - goal),
-        constraints=constraints,
-        method="SLSQP",
-        options={"ftol": 1e-14, "maxiter": 200},
-    )
-    candidate = np.asarray(result.x, dtype=np.float64)
-    if not np.isfinite(candidate).all():
-        return start
-    if not _feasible(robot, candidate, margin, z_max):
-        candidate = _bisect(robot, start, candidate, margin, z_max)
-    closer = np.linalg.norm(candidate - goal) < np.linalg.norm(start - goal)
-    return candidate if closer else start

@@ -9,6 +9,7 @@ speed is limited per tick, so even a gated goal reaches the servos gradually.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -37,6 +38,12 @@ class Gate:
     z_max_m: float
     min_dexterity: float
     max_step_rad: float
+
+    def __post_init__(self) -> None:
+        # The first projection for a (robot, margin, ceiling) computes the workspace's edges
+        # (tens to hundreds of ms, then cached): pay it here, not in the first jog's tick.
+        with contextlib.suppress(DeltaError):
+            self.robot.project((0.0, 0.0, FAR_M), margin=self.margin_m, z_max=self.z_max_m)
 
     def inside(self, point: np.ndarray) -> bool:
         """Within the workspace margin and below the ceiling."""
