@@ -49,6 +49,8 @@ def test_sinusoid_run_end_to_end(fresh):
     png = fresh.get(f"/api/runs/{run_id}/report.png")
     assert png.status_code == 200, png.text
     assert png.content[:8] == b"\x89PNG\r\n\x1a\n"
+    pdf = fresh.get(f"/api/runs/{run_id}/report.pdf")
+    assert pdf.status_code == 200 and pdf.content[:5] == b"%PDF-", pdf.text[:200]
     assert run_id in [r["run_id"] for r in ok_json(fresh.get("/api/runs"))]
 
 

@@ -28,7 +28,12 @@ log = logging.getLogger(__name__)
 router = APIRouter(tags=["runs"])
 _DEFAULT = SinusoidParams()
 MAX_WAYPOINTS = 1000
-FILES = {"log.mcap": "application/octet-stream", "log.csv": "text/csv", "report.png": "image/png"}
+FILES = {
+    "log.mcap": "application/octet-stream",
+    "log.csv": "text/csv",
+    "report.png": "image/png",
+    "report.pdf": "application/pdf",
+}
 
 
 Seconds = Annotated[float, Field(gt=0, le=600, allow_inf_nan=False, strict=True)]
@@ -229,7 +234,8 @@ def window_stats(
     responses={200: {"content": {t: {} for t in FILES.values()}}, **NOT_FOUND, **INVALID},
 )
 def run_file(run_id: str, name: str, runs: RunsDep) -> FileResponse:
-    """log.mcap, log.csv (written as the run goes) or report.png (when it has ended)."""
+    """log.mcap, log.csv (written as the run goes), report.png or report.pdf (when it has
+    ended)."""
     if name not in FILES:
         raise HTTPException(404, f"no file {name!r}; files are {', '.join(FILES)}")
     path = _run(runs, run_id).folder / name
