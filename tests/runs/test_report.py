@@ -3,7 +3,6 @@ missing ticks, PNG and vector PDF."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -15,50 +14,14 @@ from app.runs.recorder import run_stats
 from app.runs.report import break_gaps, report_figure, report_lines, scored_mask, write_report
 from app.runs.run import Run
 from app.runs.stats import error_stats
-
-PERIOD_S = 0.02
-SKIP_S = 0.5
-SINUSOID = {
-    "amplitude_m": [0.05, 0.05, 0.08],
-    "frequency_hz": [1.0, 1.0, 2.0],
-    "phase_rad": [0.0, math.pi / 2, 0.0],
-    "offset_m": [0.0, 0.0, -0.24],
-    "duration_s": 10.0,
-    "feedforward": True,
-}
-CONDITIONS = {"loop_rate_hz": 50.0, "feedforward_lead_s": 0.02}
-UNHEALTHY = {
-    "ok": False,
-    "reasons": ["a gap of 318 ms between ticks (over 20 ms)"],
-    "rate_hz": 141.2,
-    "lateness_ms": {"p50": 0.4, "p99": 12.5, "worst": 318.0},
-    "overruns": 12,
-    "overrun_share": 0.021,
-    "longest_gap_ms": 318.0,
-    "stale_ticks": 84,
-    "longest_stale_ms": 600.0,
-    "thresholds": {"overrun_share": 0.01, "gap_ms": 20.0},
-}
-
-
-def synthetic_rows(gap: tuple[float, float] = (3.0, 3.4)) -> list[dict]:
-    """Approach 0-1 s, timed 1-6 s with the ticks in ``gap`` missing, stop 6-7 s."""
-    times = np.arange(0.0, 7.0, PERIOD_S)
-    times = times[(times < gap[0]) | (times > gap[1])]
-    rows = []
-    for t in times:
-        phase = "approach" if t < 1.0 else "timed" if t <= 6.0 else "stop"
-        goal = [0.05 * math.sin(t), 0.0, -0.24]
-        error = 0.05 if phase != "timed" else 0.001 * math.cos(3 * t)  # big outside the test
-        row = {"t_s": float(t), "phase": phase}
-        for axis, g in zip("xyz", goal, strict=True):
-            row[f"goal_{axis}_m"] = g
-            row[f"measured_{axis}_m"] = g - error
-            row[f"world_goal_{axis}_m"] = row[f"world_measured_{axis}_m"] = None
-            row[f"external_{axis}_m"] = None
-        row["outside"] = None
-        rows.append(row)
-    return rows
+from tests.support.saved_runs import (
+    CONDITIONS,
+    PERIOD_S,
+    SINUSOID,
+    SKIP_S,
+    UNHEALTHY,
+    synthetic_rows,
+)
 
 
 def run_of(tmp_path: Path, kind: str = "sinusoid", params: dict | None = None) -> Run:

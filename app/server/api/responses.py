@@ -198,8 +198,19 @@ class RunStats(BaseModel):
     world: WorldStats | None = None
 
 
+class RunProgress(_Out):
+    """How far the running run is, in run time [s] (approach, test part, stop)."""
+
+    phase: str = Field(description="approach | timed | hold | stop")
+    elapsed_s: float = Field(description="run time since the run started [s]")
+    duration_s: float | None = Field(description="the whole run with approach and stop [s]")
+    test_elapsed_s: float = Field(description="time into the test part [s]")
+    test_duration_s: float | None = Field(description="the test part's length [s]")
+
+
 class RunOut(_Out):
-    """One run, as saved in its run.json."""
+    """One run, as saved in its run.json, with its test in words and, while it runs, how
+    far it is."""
 
     run_id: str
     kind: str = Field(description="sinusoid | chirp | step | waypoints | hold")
@@ -212,6 +223,27 @@ class RunOut(_Out):
     samples: int
     stats: RunStats
     has_report: bool
+    description: str = Field(
+        description="the test and its parameters in words and units (mm, Hz, s, on/off)"
+    )
+    progress: RunProgress | None = Field(
+        None, description="while the run goes: how far it is; null otherwise"
+    )
+
+
+class CompareRow(_Out):
+    label: str = Field(description="the figure, e.g. 'RMSE x'")
+    unit: str = Field(description="the values' unit (mm, %, Hz, ms, ticks) or '' for text")
+    values: list[float | str | None] = Field(description="one per run, in the order asked")
+
+
+class CompareOut(_Out):
+    """Runs side by side: their records, a table of their figures, the overlay plot."""
+
+    ids: list[str]
+    runs: list[RunOut]
+    rows: list[CompareRow]
+    plot: str = Field(description="the errors overlaid: GET this PNG (same ids)")
 
 
 class RunStarted(_Out):
