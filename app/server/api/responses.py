@@ -272,6 +272,9 @@ class LeaseTaken(_Out):
     lease_id: str = Field(description="the secret lease id; only its holder knows it")
     holder: str = Field(description="the display name given")
     timeout_s: float = Field(description="the lease lapses after this long without a command")
+    took_over_from: LeaseOut | None = Field(
+        None, description="the lease this one replaced, when someone held control; else null"
+    )
 
 
 class PoseAccepted(_Out):
