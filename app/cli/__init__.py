@@ -1,7 +1,7 @@
 """The ``deltadash`` command line: one module per sub-command in this package.
 
-``serve`` (serve.py), ``run`` (run.py), ``design`` (design/), ``home`` (home.py), ``ik`` and
-``fk`` (kinematics.py); ``emulate`` (emulate.py).
+``serve`` (serve.py), ``run`` (run.py), ``runs`` (runs.py), ``design`` (design/), ``home``
+(home.py), ``ik`` and ``fk`` (kinematics.py); ``emulate`` (emulate.py).
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from app.cli import design, emulate, home, kinematics, run, serve
+from app.cli import design, emulate, home, kinematics, run, runs, serve
 from kinematics import DeltaError
 
 
@@ -19,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True)
     serve.add_parser(commands)
     run.add_parser(commands)
+    runs.add_parser(commands)
     design.add_parser(commands)
     home.add_parser(commands)
     emulate.add_parser(commands)

@@ -20,6 +20,7 @@ from app.runs.health import summary
 from app.runs.trajectories import SinusoidParams
 
 _D = SinusoidParams()
+FILES = ("log.mcap", "log.csv", "report.png", "report.pdf")
 
 
 def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -77,40 +78,92 @@ def _http(
 
 
 def _take_control(url: str, token: str | None, take_over: bool) -> dict[str, str]:
-    """Take the control lease; the headers every later request sends (token, lease id)."""
+    """Take the control lease; the headers every later request sends (token, lease id).
+    Says on stderr whom it took control from; LeaseRefused when another client holds it
+    and ``take_over`` is false."""
     headers = {"authorization": f"Bearer {token}"} if token else {}
     body = {"client": "deltadash run", "take_over": take_over}
-    lease = _http(f"{url}/api/lease", "POST", body, headers)
+    try:
+        lease = _http(f"{url}/api/lease", "POST", body, headers)
+    except urllib.error.HTTPError as exc:
+        if exc.code == 409:
+            held_by = _detail(exc).split(";")[0]  # the server's hint names its own field
+            raise LeaseRefused(f"{held_by}; add --take-over to take it") from None
+        raise
+    previous = lease.get("took_over_from")
+    if previous:
+        since = time.strftime("%H:%M:%S", time.localtime(previous["since_s"]))
+        print(f"took control from {previous['holder']!r} (held since {since})", file=sys.stderr)
     return {**headers, "x-lease": lease["lease_id"]}
 
 
+class LeaseRefused(Exception):
+    """Another client holds control and --take-over was not given."""
+
+
+def _detail(exc: urllib.error.HTTPError) -> str:
+    try:
+        return str(json.load(exc).get("detail"))
+    except (ValueError, AttributeError, OSError):
+        return exc.reason
+
+
 def _remote(
-    url: str, params: SinusoidParams, token: str | None = None, take_over: bool = False
+    url: str,
+    params: SinusoidParams,
+    token: str | None = None,
+    take_over: bool = False,
+    problems: list[str] | None = None,
 ) -> dict[str, Any]:
+    """Run on a server: take control, torque on, start, follow the run to its end, give
+    control back. Interrupted (Ctrl-C) while the run goes, it aborts the run first; what
+    it could not do at exit goes to ``problems``."""
+    problems = [] if problems is None else problems
     headers = _take_control(url, token, take_over)
-    _http(f"{url}/api/torque", "POST", {"enabled": True}, headers)
-    body = {
-        "amplitude_m": params.amplitude_m,
-        "frequency_hz": params.frequency_hz,
-        "phase_rad": params.phase_rad,
-        "offset_m": params.offset_m,
-        "duration_s": params.duration_s,
-        "feedforward": params.feedforward,
-    }
-    run_id = _http(f"{url}/api/tests/sinusoid", "POST", body, headers)["run_id"]
-    while (run := _http(f"{url}/api/runs/{run_id}", headers=headers))["state"] == "running":
-        time.sleep(0.25)
+    running = None  # the run to abort if this ends before it does
+    try:
+        _http(f"{url}/api/torque", "POST", {"enabled": True}, headers)
+        body = {
+            "amplitude_m": params.amplitude_m,
+            "frequency_hz": params.frequency_hz,
+            "phase_rad": params.phase_rad,
+            "offset_m": params.offset_m,
+            "duration_s": params.duration_s,
+            "feedforward": params.feedforward,
+        }
+        run_id = running = _http(f"{url}/api/tests/sinusoid", "POST", body, headers)["run_id"]
+        while (run := _http(f"{url}/api/runs/{run_id}", headers=headers))["state"] == "running":
+            time.sleep(0.25)
+        running = None
+    finally:
+        if running is not None:
+            _try(
+                problems, f"abort run {running}", url, f"/api/runs/{running}/abort", "POST", headers
+            )
+        _try(problems, "give control back", url, "/api/lease", "DELETE", headers)
     base = f"{url}/api/runs/{run_id}"
-    run["files"] = {name: f"{base}/{name}" for name in ("log.mcap", "log.csv", "report.png")}
+    run["files"] = {name: f"{base}/{name}" for name in FILES}
     return run
 
 
-def _headless(params: SinusoidParams, backend: str) -> dict[str, Any]:
+def _try(problems: list[str], what: str, url: str, path: str, method: str, headers: dict) -> None:
+    try:
+        _http(f"{url}{path}", method, None, headers)
+    except (urllib.error.URLError, OSError, ValueError) as exc:
+        problems.append(f"could not {what}: {exc}")
+
+
+def _headless(
+    params: SinusoidParams, backend: str, problems: list[str] | None = None
+) -> dict[str, Any]:
+    """Run on an in-process controller; a robot not made safe at exit (torque off failed)
+    goes to ``problems``."""
     from app.config import load_settings
     from app.control.controller import Controller
     from app.runs.manager import RunManager
     from app.server.backends import open_backend
 
+    problems = [] if problems is None else problems
     settings = load_settings(hardware={"backend": backend})
     with open_backend(settings) as opened:
         controller = Controller(settings, opened.bus, opened.kind, opened.description)
@@ -121,16 +174,19 @@ def _headless(params: SinusoidParams, backend: str) -> dict[str, Any]:
             run = runs.start_sinusoid(params)
             run.done.wait()
         finally:
-            controller.stop()
+            unsafe = controller.stop()
+            if unsafe:
+                problems.append(f"{unsafe}: the servos may still hold torque")
     result = run.as_dict()
-    result["files"] = {
-        name: str(run.folder / name) for name in ("log.mcap", "log.csv", "report.png")
-    }
+    result["files"] = {name: str(run.folder / name) for name in FILES}
     return result
 
 
 def print_stats(run: dict[str, Any]) -> None:
+    from app.runs.describe import describe
+
     print(f"run {run['run_id']}: {run['state']}" + (f" ({run['reason']})" if run["reason"] else ""))
+    print(f"test: {describe(run['kind'], run['params'], run.get('conditions'))}")
     tracking = run.get("stats", {}).get("tracking")
     if tracking:
         print(f"{'axis':>4} {'mean mm':>9} {'RMSE mm':>9} {'std mm':>9} {'max mm':>9} {'<1mm':>6}")
@@ -148,19 +204,30 @@ def print_stats(run: dict[str, Any]) -> None:
 
 
 def run_sinusoid(args: argparse.Namespace) -> int:
+    """Exit 0: done; 1: the run did not finish (aborted); 2: refused or bad input;
+    3: the robot could not be made safe at exit (or the run not stopped); 130: Ctrl-C."""
     from app.control.errors import GoalRejected, MotionRefused
 
+    problems: list[str] = []
+    code = 0
     try:
         params = _params(args)
         if args.url:
-            run = _remote(args.url.rstrip("/"), params, args.token, args.take_over)
+            run = _remote(args.url.rstrip("/"), params, args.token, args.take_over, problems)
         else:
-            run = _headless(params, args.backend)
-    except (GoalRejected, MotionRefused, ValueError) as exc:
+            run = _headless(params, args.backend, problems)
+    except (GoalRejected, MotionRefused, ValueError, LeaseRefused) as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        code = 2
     except urllib.error.HTTPError as exc:
-        print(f"error: {exc.code} {json.load(exc).get('detail')}", file=sys.stderr)
-        return 2
-    print(json.dumps(run, indent=1)) if args.json else print_stats(run)
-    return 0 if run["state"] == "done" else 1
+        print(f"error: {exc.code} {_detail(exc)}", file=sys.stderr)
+        code = 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        code = 130
+    else:
+        print(json.dumps(run, indent=1)) if args.json else print_stats(run)
+        code = 0 if run["state"] == "done" else 1
+    for problem in problems:
+        print(f"error: {problem}", file=sys.stderr)
+    return 3 if problems else code

@@ -123,13 +123,23 @@ class Authority:
         Raises LeaseHeld when another lease is active and ``take_over`` is false. Taking
         control again while holding it also issues a new id (the old one stops working).
         """
+        return self.take_from(holder, take_over)[0]
+
+    def take_from(self, holder: str, take_over: bool = False) -> tuple[str, LeaseView]:
+        """:meth:`take`, also saying whom it took control from: the public view of the lease
+        it replaced (``held`` false when control was free or its lease had lapsed)."""
         with self._lock:
             current = self._lease
-            if current is not None and self._active(current) and not take_over:
+            active = current is not None and self._active(current)
+            if current is not None and active and not take_over:
                 raise LeaseHeld(f"{self._held_by(current)}; take it with take_over=true")
+            previous = LeaseView(held=False)
+            if current is not None and active:
+                idle = self._clock() - current.last_used_s
+                previous = LeaseView(True, current.holder, current.since_s, idle)
             lease_id = secrets.token_urlsafe(24)
             self._lease = _Lease(lease_id, holder, self._wall_clock(), self._clock())
-            return lease_id
+            return lease_id, previous
 
     def check(self, lease_id: str | None) -> str:
         """Allow one command from the holder of ``lease_id`` and renew the lease.

@@ -82,8 +82,12 @@ class Controller:
         self._thread = threading.Thread(target=self._run, name="deltadash-control", daemon=True)
         self._thread.start()
 
-    def stop(self) -> None:
-        """Stop ticking; relax the servos if the config says so."""
+    def stop(self) -> str | None:
+        """Stop ticking; relax the servos if the config says so (safety.torque_off_on_exit).
+
+        Returns None when the robot was left as the config says, else why not ("torque off
+        at exit failed: ..."), so a command line can exit non-zero; the server logs it.
+        """
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
@@ -93,6 +97,8 @@ class Controller:
                 self.bus.torque(False)
             except BusError as exc:
                 log.warning("torque off at exit failed: %s", exc)
+                return f"torque off at exit failed: {exc}"
+        return None
 
     @property
     def running(self) -> bool:

@@ -9,7 +9,7 @@ Cartesian or joint space. Test trajectories and hold-in-world plug in the same w
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig
@@ -42,6 +42,36 @@ class GoalSource(Protocol):
 
     def next(self, dt_s: float) -> Setpoint:
         """The setpoint for the tick ``dt_s`` [s] after the previous one."""
+
+
+@dataclass(frozen=True)
+class Progress:
+    """How far a timed source (a test run) is, in run time [s]: ``elapsed_s`` of
+    ``duration_s`` for the whole run (approach, test and stop), ``test_elapsed_s`` of
+    ``test_duration_s`` for the test part alone; ``phase`` as in its setpoints."""
+
+    phase: str
+    elapsed_s: float
+    duration_s: float
+    test_elapsed_s: float
+    test_duration_s: float
+
+    @classmethod
+    def at(
+        cls, phase: str, t_s: float, approach_s: float, test_s: float, stop_s: float = 0.0
+    ) -> Progress:
+        """At run time ``t_s`` [s] of a run of ``approach_s``, ``test_s`` then ``stop_s``."""
+        total = approach_s + test_s + stop_s
+        test = min(max(t_s - approach_s, 0.0), test_s)
+        return cls(phase, min(t_s, total), total, test, test_s)
+
+
+@runtime_checkable
+class Progressing(Protocol):
+    """A source that can say how far it is (a page reloaded mid-run shows the real
+    progress); read from other threads, so it only reads its own floats."""
+
+    def progress(self) -> Progress: ...
 
 
 MIN_SPEED_M_S = 1e-4  # ruckig needs a positive limit on every axis, even one not jogged

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.control.errors import GoalRejected, MotionRefused
+from app.control.sources import Progressing
 from app.runs.feasibility import check_path
 from app.runs.logs import RunLog
 from app.runs.recorder import Recorder
@@ -176,6 +177,21 @@ class RunManager:
             run.abort_reason = reason
             self.controller.stop_source(self._active[1]).result(timeout=START_TIMEOUT_S)
         return run
+
+    def progress(self, run_id: str) -> dict[str, Any] | None:
+        """How far the running run ``run_id`` is (see app/control/sources.py's ``Progress``;
+        a length not known yet is None), or None when it is not the one running."""
+        active = self._active
+        if active is None or active[0].run_id != run_id or active[0].state != "running":
+            return None
+        source = active[1]
+        if not isinstance(source, Progressing):
+            return None
+        values = asdict(source.progress())
+        return {
+            k: v if not isinstance(v, float) or math.isfinite(v) else None
+            for k, v in values.items()
+        }
 
     def close(self) -> None:
         """At shutdown: stop the active run (its log is finalised) and drop the plan."""

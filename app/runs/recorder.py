@@ -155,17 +155,14 @@ class Recorder:
             return
         stats = run_stats(self._rows, self.skip_s, self.controller.period_s)
         stats["health"] = assess(self._rows, self.controller.settings.loop.rate_hz)
-        times = np.array([r["t_s"] for r in self._rows])
-        reference, measured = (
-            ("world_goal", "world_measured") if "world" in stats else ("goal", "measured")
-        )
         write_report(
-            self.run.folder / "report.png",
-            times,
-            _columns(self._rows, reference),
-            _columns(self._rows, measured),
-            stats.get("world", stats["tracking"]),
-            self.run.title,
+            self.run.folder,
+            self._rows,
+            self.run,
+            stats,
+            abort_reason,
+            self.skip_s,
+            self.controller.period_s,
         )
         self.run.has_report = True
         self.run.finish(stats, abort_reason, len(self._rows))

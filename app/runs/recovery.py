@@ -13,8 +13,6 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-import numpy as np
-
 from app.runs.health import assess
 from app.runs.logs import finish_cut_log, is_being_written, read_csv_rows, read_messages
 from app.runs.recorder import run_stats
@@ -41,10 +39,6 @@ def logged_rows(run: Run) -> list[dict[str, Any]]:
                 return rows
     csv_path = run.folder / "log.csv"
     return read_csv_rows(csv_path) if csv_path.exists() else []
-
-
-def _xyz(rows: list[dict[str, Any]], prefix: str) -> np.ndarray:
-    return np.array([[r.get(f"{prefix}_{a}_m") for a in "xyz"] for r in rows], dtype=float)
 
 
 def recover(run: Run, skip_s: float, period_s: float) -> None:
@@ -74,7 +68,7 @@ def recover(run: Run, skip_s: float, period_s: float) -> None:
         try:
             run.stats = run_stats(rows, skip_s, period_s)
             run.stats["health"] = assess(rows, 1.0 / period_s)
-            _draw(run, rows)
+            _draw(run, rows, skip_s, period_s)
         except Exception as exc:  # noqa: BLE001
             log.warning("run %s: stats of its logged ticks failed: %s", run.run_id, exc)
             notes.append(f"its stats could not be computed ({exc})")
@@ -90,17 +84,7 @@ def recover(run: Run, skip_s: float, period_s: float) -> None:
     run.save()
 
 
-def _draw(run: Run, rows: list[dict[str, Any]]) -> None:
-    times = np.array([r["t_s"] for r in rows], dtype=float)
-    stats = run.stats
-    world = "world" in stats
-    reference, measured = ("world_goal", "world_measured") if world else ("goal", "measured")
-    write_report(
-        run.folder / "report.png",
-        times,
-        _xyz(rows, reference),
-        _xyz(rows, measured),
-        stats.get("world", stats["tracking"]),
-        f"{run.title} (interrupted)",
-    )
+def _draw(run: Run, rows: list[dict[str, Any]], skip_s: float, period_s: float) -> None:
+    reason = "the server stopped during the run"
+    write_report(run.folder, rows, run, run.stats, reason, skip_s, period_s, "interrupted")
     run.has_report = True

@@ -1,10 +1,18 @@
-"""A run's report figure in the thesis's layout (Fig. 6.2-6.4): per axis, goal and measured
-position on top and the error underneath, with the statistics table beside the title."""
+"""A run's report figure in the thesis's layout (Fig. 6.2-6.4), fit to publish.
+
+Per axis, goal and measured position on top and the error underneath, over the scored part
+of the run only (the approach, the first ``runs.stats_skip_s`` of the test and the stop are
+left out, as in the statistics). Lines break where ticks are missing. Above the plots, in
+words and units (app/runs/describe.py): the test and its parameters, the loop's figures and
+the health verdict. Saved as report.png (screen) and report.pdf (vector, for print).
+"""
 
 from __future__ import annotations
 
+import textwrap
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -12,43 +20,198 @@ matplotlib.use("Agg")  # files only: no display on a server
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 
+from app.runs import describe  # noqa: E402
 from app.runs.stats import AXES  # noqa: E402
+
+if TYPE_CHECKING:
+    from app.runs.run import Run
+
+SCORED_PHASES = ("timed", "hold")
+GAP_PERIODS = 1.5  # a step between ticks over this many loop periods is a gap
+FILES = ("report.png", "report.pdf")
+STYLE = {  # print: sizes legible at a column's width, text kept as text in the PDF
+    "font.size": 9,
+    "axes.titlesize": 9,
+    "axes.labelsize": 9,
+    "legend.fontsize": 8,
+    "xtick.labelsize": 8,
+    "ytick.labelsize": 8,
+    "pdf.fonttype": 42,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+}
+GOAL = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.0}  # dashed: reads in grey
+MEASURED = {"color": "tab:blue", "linewidth": 1.1}
+ERROR = {"color": "tab:red", "linewidth": 0.9}
+BAD = "#b00020"
+
+
+def scored_mask(times_s: np.ndarray, phases: Sequence[str], skip_s: float) -> np.ndarray:
+    """The samples the statistics score (N,) bool: phase "timed" or "hold", from ``skip_s``
+    [s] after the first such sample on (the rule of recorder.run_stats)."""
+    times = np.asarray(times_s, dtype=np.float64)
+    active = np.array([p in SCORED_PHASES for p in phases], dtype=bool)
+    if active.any():
+        active &= times >= float(times[active][0]) + skip_s
+    return active
+
+
+def break_gaps(
+    times_s: np.ndarray, values: np.ndarray, period_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(times (M,), values (M, ...)) with a NaN row inserted in every gap between samples
+    longer than ``GAP_PERIODS`` loop periods, so a plotted line breaks there instead of
+    drawing a straight line across the missing ticks. ``times_s`` (N,) increasing [s]."""
+    times = np.asarray(times_s, dtype=np.float64)
+    data = np.asarray(values, dtype=np.float64)
+    gaps = np.flatnonzero(np.diff(times) > GAP_PERIODS * period_s)
+    if gaps.size == 0:
+        return times, data
+    middle = (times[gaps] + times[gaps + 1]) / 2
+    return np.insert(times, gaps + 1, middle), np.insert(data, gaps + 1, np.nan, axis=0)
+
+
+def columns(rows: list[dict[str, Any]], prefix: str) -> np.ndarray:
+    """(N, 3) [m] of the log columns ``{prefix}_{x,y,z}_m``; None becomes NaN."""
+    return np.array(
+        [
+            [np.nan if r.get(f"{prefix}_{a}_m") is None else r[f"{prefix}_{a}_m"] for a in AXES]
+            for r in rows
+        ],
+        dtype=np.float64,
+    ).reshape(len(rows), 3)
+
+
+def reference_and_measured(rows: list[dict[str, Any]], world: bool) -> tuple[np.ndarray, ...]:
+    """(reference, measured), each (N, 3) [m]: world frame for hold runs, else goal and FK."""
+    names = ("world_goal", "world_measured") if world else ("goal", "measured")
+    return tuple(columns(rows, name) for name in names)
+
+
+def report_lines(
+    run: Run, stats: dict[str, Any], abort_reason: str | None, state: str | None = None
+) -> list[str]:
+    """The figure's heading: run and outcome, the test in words, the loop, the verdict.
+    ``state`` overrides the outcome read from ``abort_reason`` (e.g. "interrupted")."""
+    state = state or ("aborted" if abort_reason else "done")
+    return [
+        f"Run {run.run_id}: {run.kind}, {describe.outcome(state, abort_reason)}",
+        describe.describe(run.kind, run.params, run.conditions),
+        describe.loop_figures(stats, run.conditions),
+        describe.verdict(stats),
+    ]
+
+
+def _caption(times: np.ndarray, scored: np.ndarray, skip_s: float, gaps: int) -> str:
+    total = f"{describe.number(float(times[-1]))} s" if times.size else "0 s"
+    if not scored.any():
+        return f"No scored part (the run ended before its test): the whole run ({total}) is shown."
+    first, last = (describe.number(float(t)) for t in times[scored][[0, -1]])
+    plural = "s" if gaps > 1 else ""
+    breaks = f"; lines break at {gaps} gap{plural} in the ticks" if gaps else ""
+    return (
+        f"Scored part only: t = {first} to {last} s of {total} (approach, first "
+        f"{describe.number(skip_s)} s of the test and stop left out){breaks}."
+    )
+
+
+def report_figure(
+    rows: list[dict[str, Any]],
+    lines: list[str],
+    stats: dict[str, Any],
+    skip_s: float,
+    period_s: float,
+) -> Figure:
+    """The report figure of a run's log ``rows`` (see logs.COLUMNS) under the heading
+    ``lines`` (see :func:`report_lines`); the caller saves and closes it."""
+    times = np.array([r["t_s"] for r in rows], dtype=np.float64)
+    scored = scored_mask(times, [r["phase"] for r in rows], skip_s)
+    shown = scored if scored.any() else np.ones_like(scored)
+    world = "world" in stats
+    reference, measured = (v[shown] for v in reference_and_measured(rows, world))
+    t, both = break_gaps(times[shown], np.hstack([reference, measured]), period_s)
+    gaps = int(t.size - shown.sum())
+    axis_stats = stats.get("world", stats.get("tracking")) or {}
+    with plt.rc_context(STYLE):
+        figure, axes = plt.subplots(
+            2, 3, figsize=(11, 7.2), sharex=True, gridspec_kw={"height_ratios": [2, 1]}
+        )
+        for i, name in enumerate(AXES):
+            top, bottom = axes[0, i], axes[1, i]
+            top.plot(t, both[:, i] * 1e3, label="goal", **GOAL)
+            top.plot(t, both[:, 3 + i] * 1e3, label="measured (FK)", **MEASURED)
+            frame = "world " if world else ""
+            top.set_ylabel(f"{frame}{name} [mm]")
+            bottom.plot(t, (both[:, i] - both[:, 3 + i]) * 1e3, **ERROR)
+            bottom.set_ylabel(f"{name} error [mm]")
+            bottom.set_xlabel("run time [s]")
+            s = axis_stats.get(name, {})
+            top.set_title(
+                f"{name}: RMSE {describe.mm(s.get('rmse_m'))}, mean {describe.mm(s.get('mean_m'))}"
+                f", max |e| {describe.mm(s.get('max_abs_m'))}"
+            )
+        axes[0, 0].legend(loc="upper right")
+        _heading(figure, lines, stats)
+        figure.text(0.01, 0.01, _caption(times, scored, skip_s, gaps), fontsize=8)
+        figure.tight_layout(rect=(0, 0.03, 1, 0.8))
+    return figure
+
+
+def wrap(line: str, width: int) -> list[str]:
+    """``line`` in pieces of at most ``width`` characters, broken after "; " where it can
+    be (between the clauses of describe's sentences), else at spaces."""
+    pieces: list[str] = []
+    for clause in line.split("; "):
+        if pieces and len(pieces[-1]) + 2 + len(clause) <= width:
+            pieces[-1] += "; " + clause
+        else:
+            if pieces:
+                pieces[-1] += ";"
+            pieces.extend(textwrap.wrap(clause, width) or [""])
+    return pieces
+
+
+def _heading(figure: Figure, lines: list[str], stats: dict[str, Any]) -> None:
+    y = 0.985
+    for index, line in enumerate(lines):
+        healthy = not line.startswith("verdict: NOT")
+        for part in wrap(line, 140):
+            figure.text(
+                0.01,
+                y,
+                part,
+                va="top",
+                fontsize=11 if index == 0 else 9,
+                fontweight="bold" if index == 0 or not healthy else "normal",
+                color="black" if healthy else BAD,
+            )
+            y -= 0.035 if index == 0 else 0.028
 
 
 def write_report(
-    path: Path,
-    times_s: np.ndarray,
-    goal: np.ndarray,
-    measured: np.ndarray,
+    folder: Path,
+    rows: list[dict[str, Any]],
+    run: Run,
     stats: dict[str, Any],
-    title: str,
-) -> None:
-    """Save the PNG: 3 columns (x, y, z), rows: position [mm] and error [mm] over time [s]."""
-    figure, axes = plt.subplots(
-        2, 3, figsize=(15, 6.5), sharex=True, gridspec_kw={"height_ratios": [2, 1]}
-    )
-    for i, name in enumerate(AXES):
-        top, bottom = axes[0, i], axes[1, i]
-        top.plot(times_s, goal[:, i] * 1e3, label="goal", color="tab:blue", linewidth=1.2)
-        top.plot(
-            times_s, measured[:, i] * 1e3, label="measured (FK)", color="tab:orange", linewidth=1.0
-        )
-        top.set_ylabel(f"{name} [mm]")
-        top.grid(alpha=0.3)
-        bottom.plot(times_s, (goal[:, i] - measured[:, i]) * 1e3, color="tab:red", linewidth=0.8)
-        bottom.set_ylabel(f"{name} error [mm]")
-        bottom.set_xlabel("time [s]")
-        bottom.grid(alpha=0.3)
-        axis = stats.get(name, {})
-        top.set_title(
-            f"{name}: RMSE {axis.get('rmse_m', float('nan')) * 1e3:.2f} mm, "
-            f"mean {axis.get('mean_m', float('nan')) * 1e3:.2f} mm, "
-            f"max {axis.get('max_abs_m', float('nan')) * 1e3:.2f} mm",
-            fontsize=10,
-        )
-    axes[0, 0].legend(loc="upper right", fontsize=8)
-    figure.suptitle(title)
-    figure.tight_layout()
-    figure.savefig(path, dpi=90)
-    plt.close(figure)
+    abort_reason: str | None,
+    skip_s: float,
+    period_s: float,
+    state: str | None = None,
+) -> list[Path]:
+    """Save report.png and report.pdf (vector) of ``rows`` in ``folder``; their paths.
+
+    ``stats`` as computed by recorder.run_stats (with ``health`` when recorded),
+    ``skip_s`` [s] the stats' skip at the test's start, ``period_s`` [s] the loop period,
+    ``state`` the outcome when it is not read from ``abort_reason`` ("interrupted")."""
+    lines = report_lines(run, stats, abort_reason, state)
+    figure = report_figure(rows, lines, stats, skip_s, period_s)
+    paths = [folder / name for name in FILES]
+    try:
+        with plt.rc_context(STYLE):  # the PDF's font type is read when saving
+            for path in paths:
+                figure.savefig(path, dpi=110)
+    finally:
+        plt.close(figure)
+    return paths

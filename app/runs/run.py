@@ -71,13 +71,6 @@ class Run:
         known = {f.name for f in fields(cls)} - cls.HIDDEN
         return cls(**{k: v for k, v in data.items() if k in known}, folder=path.parent)
 
-    @property
-    def title(self) -> str:
-        if self.kind == "hold":
-            on = self.params.get("latency_compensation")
-            return f"run {self.run_id}: hold in world (latency compensation {on}), world frame"
-        return f"run {self.run_id}: {self.kind}, feed-forward {self.params.get('feedforward')}"
-
     def finish(self, stats: dict[str, Any], abort_reason: str | None, samples: int) -> None:
         self.stats = stats
         self.state, self.reason = ("aborted", abort_reason) if abort_reason else ("done", None)

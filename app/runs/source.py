@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from app.control.sources import Setpoint
+from app.control.sources import Progress, Setpoint
 from app.runs.trajectories import PlannedRun
 
 
@@ -17,6 +17,12 @@ class TrajectorySource:
         self.lead_s = lead_s
         self.t_s = 0.0
         self.finished = False
+
+    def progress(self) -> Progress:
+        t, plan = self.t_s, self.plan  # t_s is one float: safe to read from another thread
+        test_s = plan.params.duration_s
+        stop_s = plan.duration_s - plan.approach_s - test_s
+        return Progress.at(plan.phase_at(t), t, plan.approach_s, test_s, stop_s)
 
     def next(self, dt_s: float) -> Setpoint:
         self.t_s += dt_s

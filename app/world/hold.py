@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from app.control.gate import Gate
-from app.control.sources import Setpoint
+from app.control.sources import Progress, Setpoint
 from app.world.drone_sim import SimulatedDrone
 from app.world.poses import PoseTracker
 from kinematics import Pose
@@ -146,6 +146,12 @@ class HoldSource:
         self.duration_s: float | None = None
         self.approach_s = 1.0
         self._start: np.ndarray | None = None
+
+    def progress(self) -> Progress:
+        """How far a timed hold (a run) is (app/control/sources.py's ``Progressing``)."""
+        t, total = self.t_s, self.duration_s if self.duration_s is not None else math.inf
+        phase = "approach" if t < self.approach_s else "hold"
+        return Progress.at(phase, t, self.approach_s, total - self.approach_s)
 
     def next(self, dt_s: float) -> Setpoint:
         self.t_s += dt_s

@@ -72,6 +72,14 @@ export async function request(method, path, body, retried = false) {
 }
 
 export const get = (path) => request("GET", path);
+
+// A file (e.g. a PNG) with the token: an <img src> could not send it. Throws ApiError.
+export async function getBlob(path) {
+  const headers = token() ? { Authorization: `Bearer ${token()}` } : {};
+  const response = await fetch(path, { headers });
+  if (!response.ok) throw new ApiError(response.status, await detailOf(response));
+  return response.blob();
+}
 export const post = (path, body) => request("POST", path, body);
 
 // This tab's control lease: the secret id from POST /api/lease, in memory only (a reload or

@@ -1,14 +1,18 @@
-// The sinusoid test form (preview, start, abort, progress) and the runs table.
+// The sinusoid test form (preview, start, abort, progress), the runs table and comparing runs.
+// The running run comes from the server (GET /api/runs: its progress and parameters), so a
+// page reloaded mid-run, or another tab, shows where the run really is.
 
-import { get, post, mm, fixed } from "./api.js";
+import { get, getBlob, post, mm, fixed } from "./api.js";
 import { command } from "./control.js";
 import { escape } from "./status.js";
 import { showError, showMessage, setText } from "./ui.js";
 
 const RUNS_POLL_MS = 2000;
 const PREVIEW_DELAY_MS = 300;
-let active = null; // { id, duration, timedSince }
+let active = null; // { id, kind, description, progress, at, filled } of the running run
 let previewTimer = null;
+const picked = new Set(); // run ids ticked for comparing
+let compareUrl = null; // the object URL of the shown comparison plot
 
 // Form fields (mm, deg) -> the API's body (m, rad).
 function sinusoidBody() {
@@ -46,7 +50,7 @@ async function start(event) {
   const body = sinusoidBody();
   try {
     const { run_id } = await command("/api/tests/sinusoid", body);
-    active = { id: run_id, duration: body.duration_s, timedSince: null };
+    active = { id: run_id, kind: "sinusoid", description: "", progress: null, at: 0, filled: true };
     showMessage(`Run ${run_id} started`);
     refreshRuns();
   } catch (err) {
@@ -58,9 +62,19 @@ function abort() {
   if (active) command(`/api/runs/${active.id}/abort`).then(refreshRuns).catch(showError);
 }
 
-// Progress through the timed part, from the loop's phase in status (approach, timed, stop).
+// Progress through the test part: the server's figure at the last poll, advanced by the time
+// since while the status says the test part is going (approach, timed/hold, stop).
 // Feasibility depends on where the robot starts: re-check when its state changes.
 let previewKey = "";
+
+function testShare(phase) {
+  const p = active.progress;
+  if (phase === "stop") return 1;
+  if (!p || !p.test_duration_s) return 0;
+  const going = phase === "timed" || phase === "hold";
+  const since = going && p.phase === phase ? (performance.now() - active.at) / 1000 : 0;
+  return Math.min((p.test_elapsed_s + since) / p.test_duration_s, 1);
+}
 
 export function onStatus(s) {
   const key = `${s.mode}|${s.torque}|${s.estopped}|${s.faults.length}`;
@@ -69,34 +83,73 @@ export function onStatus(s) {
     schedulePreview();
   }
   const bar = document.getElementById("run-progress");
-  const running = Boolean(active) && s.mode === "test";
+  const running = Boolean(active) && (s.mode === "test" || s.mode === "hold-world");
   document.getElementById("sine-abort").disabled = !running;
   bar.hidden = !running;
   if (!running) {
     setText("run-phase", "");
+    setText("run-params", "");
     return;
   }
-  if (s.phase === "timed" && active.timedSince === null) active.timedSince = performance.now();
-  const done = active.timedSince === null ? 0 : (performance.now() - active.timedSince) / 1000;
-  bar.value = s.phase === "stop" ? 1 : Math.min(done / active.duration, 1);
-  bar.textContent = `${Math.round(bar.value * 100)} %`;
-  setText("run-phase", `run ${active.id}: ${s.phase || "starting"} ${Math.round(bar.value * 100)} %`);
+  bar.value = testShare(s.phase);
+  const percent = `${Math.round(bar.value * 100)} %`;
+  bar.textContent = percent;
+  setText("run-phase", `run ${active.id}: ${s.phase || "starting"} ${percent}`);
+  setText("run-params", active.description);
+}
+
+// The form shows the running sinusoid's parameters (mm, Hz, deg, s), once per run.
+function fillForm(params) {
+  const form = document.getElementById("sine-form");
+  const set = (name, value) => { if (form.elements[name]) form.elements[name].value = String(value); };
+  const round = (v) => Math.round(v * 1e6) / 1e6;
+  [0, 1, 2].forEach((i) => {
+    set(`amp${i}`, round(params.amplitude_m[i] * 1e3));
+    set(`freq${i}`, round(params.frequency_hz[i]));
+    set(`phase${i}`, round(params.phase_rad[i] * 180 / Math.PI));
+    set(`off${i}`, round(params.offset_m[i] * 1e3));
+  });
+  set("duration", round(params.duration_s));
+  form.elements.feedforward.checked = Boolean(params.feedforward);
+}
+
+function follow(run) {
+  if (!active || active.id !== run.run_id) active = { id: run.run_id, kind: run.kind, filled: false };
+  Object.assign(active, { description: run.description, progress: run.progress, at: performance.now() });
+  if (!active.filled && run.kind === "sinusoid") {
+    fillForm(run.params);
+    schedulePreview();
+  }
+  active.filled = true;
 }
 
 const triple = (t, key) => (t ? ["x", "y", "z"].map((a) => mm(t[a]?.[key], 2)).join(" / ") : "–");
+
+function health(run) {
+  const h = run.stats && run.stats.health;
+  if (!h || typeof h.ok !== "boolean") return `<td class="muted" title="not checked (an older run)">–</td>`;
+  if (h.ok) return `<td class="ok">ok</td>`;
+  const why = (h.reasons || []).join("; ");
+  return `<td class="bad" title="${escape(why)}">NOT HEALTHY: ${escape(why)}</td>`;
+}
 
 function runRow(run) {
   // a hold run is judged in the world frame (thesis Table 6.3), the others by tracking
   const t = run.stats && (run.stats.world || run.stats.tracking);
   const under = t ? ["x", "y", "z"].map((a) => `${fixed(100 * t[a].share_under_1mm, 0)}%`).join(" / ") : "–";
   const base = `/api/runs/${encodeURIComponent(run.run_id)}`;
-  const links = [["report.png", "report"], ["log.mcap", "MCAP"], ["log.csv", "CSV"]]
-    .filter(([name]) => name !== "report.png" || run.has_report)
+  const links = [["report.png", "report"], ["report.pdf", "PDF"], ["log.mcap", "MCAP"], ["log.csv", "CSV"]]
+    .filter(([name]) => !name.startsWith("report") || run.has_report)
     .map(([name, label]) => `<a href="${base}/${name}" target="_blank" rel="noopener">${label}</a>`)
     .join(" ");
   const reason = run.reason ? ` title="${escape(run.reason)}"` : ""; // long reasons as a tooltip
-  return `<tr data-run="${escape(run.run_id)}"><td>${escape(run.run_id)}</td><td>${escape(run.kind)}${run.stats && run.stats.world ? " (world)" : ""}</td>` +
-    `<td class="${run.state === "done" ? "ok" : run.state === "aborted" ? "bad" : ""}"${reason}>${escape(run.state)}</td>` +
+  const id = escape(run.run_id);
+  const pick = `<input type="checkbox" class="pick" value="${id}" aria-label="compare run ${id}"` +
+    `${picked.has(run.run_id) ? " checked" : ""}${run.state === "running" ? " disabled" : ""}>`;
+  return `<tr data-run="${id}"><td>${pick}</td><td>${id}</td>` +
+    `<td title="${escape(run.description || "")}">${escape(run.kind)}${run.stats && run.stats.world ? " (world)" : ""}</td>` +
+    `<td class="${run.state === "done" ? "ok" : run.state === "running" ? "" : "bad"}"${reason}>${escape(run.state)}</td>` +
+    health(run) +
     `<td class="num">${triple(t, "rmse_m")}</td><td class="num">${triple(t, "max_abs_m")}</td>` +
     `<td class="num">${under}</td><td>${links}</td></tr>`;
 }
@@ -104,19 +157,65 @@ function runRow(run) {
 export async function refreshRuns() {
   try {
     const runs = await get("/api/runs");
-    const html = runs.map(runRow).join("") || `<tr><td colspan="7" class="muted">no runs yet</td></tr>`;
+    const html = runs.map(runRow).join("") || `<tr><td colspan="9" class="muted">no runs yet</td></tr>`;
     const body = document.getElementById("run-rows");
     if (body.innerHTML !== html) body.innerHTML = html;
-    if (active && runs.some((r) => r.run_id === active.id && r.state !== "running")) active = null;
-    // a run started elsewhere (CLI, the 3D scene, another tab) can be followed and aborted too
+    // a run started anywhere (this tab before a reload, the CLI, the 3D scene, another tab)
+    // is followed from the server's record: its progress and parameters
     const running = runs.find((r) => r.state === "running");
-    if (!active && running) {
-      const p = running.params;
-      active = { id: running.run_id, duration: p.duration_s || p.times_s?.at(-1) || 1, timedSince: null };
-    }
+    if (running) follow(running);
+    else active = null;
+    const known = new Set(runs.map((r) => r.run_id));
+    for (const id of picked) if (!known.has(id)) picked.delete(id);
+    updateCompareButton();
   } catch {
     // the status poll shows the connection banner; keep the last table
   }
+}
+
+// Comparing runs: tick two or more rows, then GET /api/runs/compare (the table) and its PNG.
+function updateCompareButton() {
+  document.getElementById("compare-runs").disabled = picked.size < 2;
+  setText("compare-count", picked.size ? `${picked.size} selected` : "");
+}
+
+function onPick(event) {
+  const box = event.target;
+  if (!box.classList.contains("pick")) return;
+  if (box.checked) picked.add(box.value);
+  else picked.delete(box.value);
+  updateCompareButton();
+}
+
+function cell(value, unit) {
+  if (value === null || value === undefined) return `<td class="num muted">–</td>`;
+  if (typeof value === "string") return `<td class="${value.startsWith("NOT") ? "bad" : ""}">${escape(value)}</td>`;
+  const digits = unit === "mm" ? 2 : ["%", "ticks", ""].includes(unit) ? 0 : 1;
+  return `<td class="num">${fixed(value, digits)}</td>`;
+}
+
+async function compare() {
+  const query = new URLSearchParams({ ids: [...picked].join(",") });
+  try {
+    const result = await get(`/api/runs/compare?${query}`);
+    const head = `<tr><th scope="col"></th>${result.ids.map((id) => `<th scope="col">${escape(id)}</th>`).join("")}</tr>`;
+    const rows = result.rows.map((row) =>
+      `<tr><th scope="row">${escape(row.label)}${row.unit ? ` [${escape(row.unit)}]` : ""}</th>` +
+      `${row.values.map((v) => cell(v, row.unit)).join("")}</tr>`).join("");
+    document.getElementById("compare-table").innerHTML = `<thead>${head}</thead><tbody>${rows}</tbody>`;
+    document.getElementById("compare").hidden = false;
+    const plot = document.getElementById("compare-plot");
+    if (compareUrl) URL.revokeObjectURL(compareUrl);
+    compareUrl = URL.createObjectURL(await getBlob(result.plot));
+    plot.dataset.ids = result.ids.join(",");
+    plot.src = compareUrl;
+  } catch (err) {
+    showError(err);
+  }
+}
+
+function closeCompare() {
+  document.getElementById("compare").hidden = true;
 }
 
 export function startRuns() {
@@ -124,6 +223,9 @@ export function startRuns() {
   form.addEventListener("submit", start);
   form.addEventListener("input", schedulePreview);
   document.getElementById("sine-abort").addEventListener("click", abort);
+  document.getElementById("run-rows").addEventListener("change", onPick);
+  document.getElementById("compare-runs").addEventListener("click", compare);
+  document.getElementById("compare-close").addEventListener("click", closeCompare);
   preview();
   refreshRuns();
   setInterval(refreshRuns, RUNS_POLL_MS);

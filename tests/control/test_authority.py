@@ -112,3 +112,14 @@ def test_the_token_is_checked_exactly(authority):
 )
 def test_loopback_hosts(host, loopback):
     assert is_loopback(host) is loopback
+
+
+def test_taking_control_says_whom_it_was_taken_from(authority, clock):
+    _, previous = authority.take_from("alice")
+    assert not previous.held  # control was free
+    clock.now += 5.0
+    bob, previous = authority.take_from("bob", take_over=True)
+    assert (previous.held, previous.holder, previous.idle_s) == (True, "alice", 5.0)
+    clock.now += 31.0  # bob's lease lapses: taking it then took it from nobody
+    _, previous = authority.take_from("carol")
+    assert not previous.held and authority.view().holder == "carol"

@@ -113,6 +113,7 @@ def test_run_files_are_inline_with_their_media_type_and_answer_head(restarted):
     base = f"/api/runs/{seen['crashed']}"
     for name, media_type in (
         ("report.png", "image/png"),
+        ("report.pdf", "application/pdf"),  # drawn from the logged ticks too
         ("log.csv", "text/csv; charset=utf-8"),
         ("log.mcap", "application/vnd.mcap"),
     ):
@@ -124,7 +125,7 @@ def test_run_files_are_inline_with_their_media_type_and_answer_head(restarted):
             assert f"{seen['crashed']}-{name}" in response.headers["content-disposition"]
             assert int(response.headers["content-length"]) == len(got.content)
         assert head.content == b""
-    assert client.head(f"{base}/report.pdf").status_code == 404  # not drawn for this run
+    assert client.head(f"/api/runs/{seen['live']}/report.pdf").status_code == 404  # not yet
     assert client.head(f"{base}/secrets.txt").status_code == 404
 
 

@@ -50,6 +50,8 @@ def test_sinusoid_run_end_to_end(fresh):
     png = fresh.get(f"/api/runs/{run_id}/report.png")
     assert png.status_code == 200, png.text
     assert png.content[:8] == b"\x89PNG\r\n\x1a\n"
+    pdf = fresh.get(f"/api/runs/{run_id}/report.pdf")
+    assert pdf.status_code == 200 and pdf.content[:5] == b"%PDF-", pdf.text[:200]
     assert run_id in [r["run_id"] for r in ok_json(fresh.get("/api/runs"))]
 
 
@@ -169,3 +171,30 @@ def test_step_response_run(fresh):
     big = fresh.post("/api/tests/step", json={"size_m": 0.05})
     assert big.status_code == 422, big.text
     assert "joint speed" in big.json()["detail"]
+
+
+@pytest.mark.slow  # a run of seconds, aborted
+def test_a_running_run_says_how_far_it_is_and_is_not_compared_yet(fresh):
+    fresh.post("/api/torque", json={"enabled": True})
+    earlier = [r["run_id"] for r in ok_json(fresh.get("/api/runs")) if r["state"] != "running"]
+    response = fresh.post("/api/tests/sinusoid", json={"duration_s": 5.0})
+    assert response.status_code == 200, response.text
+    run_id = response.json()["run_id"]
+
+    def into_the_test() -> dict | None:
+        progress = _run(fresh, run_id)["progress"]
+        return progress if progress and progress["test_elapsed_s"] > 0 else None
+
+    progress = wait_for(into_the_test, "the run to be in its test part")
+    assert progress["test_duration_s"] == 5.0 and progress["phase"] in ("timed", "stop")
+    assert 0 < progress["test_elapsed_s"] <= 5.0
+    assert progress["test_elapsed_s"] < progress["elapsed_s"] <= progress["duration_s"]
+    later = wait_for(into_the_test, "a later progress")
+    assert later["elapsed_s"] >= progress["elapsed_s"]  # run time only goes forward
+    assert "5 s" in _run(fresh, run_id)["description"]
+    if earlier:
+        compared = fresh.get("/api/runs/compare", params={"ids": f"{earlier[0]},{run_id}"})
+        assert compared.status_code == 409 and run_id in compared.json()["detail"]
+    ok_json(fresh.post(f"/api/runs/{run_id}/abort"))
+    wait_for(lambda: _state(fresh, run_id) != "running", "the run to end")
+    assert _run(fresh, run_id)["progress"] is None

@@ -2,7 +2,8 @@
 
 One page is walked through in order, as an operator would: the header fills in, go-to,
 jog by key and by pad, a short sinusoid (plot data grows, the run lands in the table with
-stats), e-stop by key, then the server dies and the page says so. Screenshots go to
+stats), a longer one through a reload (the bar and the form come back from the server), the
+two compared, e-stop by key, then the server dies and the page says so. Screenshots go to
 artifacts/ (git-ignored); the plot's frame rate is written there too, not asserted.
 """
 
@@ -14,7 +15,14 @@ from typing import Any
 
 import pytest
 
-from tests.support.browser import browser_skip_reason, chromium_page, save_artifact
+from tests.support import wait as waiting
+from tests.support.browser import (
+    PAGE_WAIT_S,
+    browser_skip_reason,
+    chromium_page,
+    page_condition,
+    save_artifact,
+)
 from tests.support.server import Server, wait_for
 
 SKIP = browser_skip_reason()
@@ -176,20 +184,18 @@ def plotted_span_mm(page: Any) -> float:
     )
 
 
-def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -> None:
-    # its own start, not the previous test's end: no e-stop or fault, torque on, at rest
+def ready_to_run(page: Any, server: Server) -> None:
+    """No e-stop or fault, torque on, the arm at rest: a run's own start."""
     page.click("#reset")
     wait_for(lambda: server.get("/api/status")["mode"] in ("idle", "jog"), "no e-stop or fault")
     # clicked until accepted: the twin's arm may still swing past its joint limits
     wait_for(lambda: server.get("/api/status")["torque"] or page.click("#torque-on"), "torque on")
     wait_for(lambda: commanded_still(server), "the arm at rest")
-    page.fill("input[name=duration]", "2")
-    wait_for(
-        lambda: text(page, "#sine-preview").rsplit(": ", 1)[-1] == "feasible",
-        "the preview to say feasible",
-    )
-    assert "peak joint speed" in text(page, "#sine-preview")
-    before = page.evaluate("window.deltadashPlot.samples")
+
+
+def start_from_page(page: Any, server: Server) -> dict:
+    """Click "Start run" until the server has the run (a starved machine may drop the
+    request: 'Failed to fetch'; the server starts no run for a client that has gone)."""
     runs_before = len(server.get("/api/runs"))
     page.click("#sine-start")
     toast = page.locator("#toast")
@@ -198,12 +204,32 @@ def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -
         text = toast.inner_text() if toast.is_visible() else ""
         if len(server.get("/api/runs")) > runs_before:
             return True
-        if "Failed to fetch" in text:  # a starved machine dropped the request; no run started
+        if "Failed to fetch" in text:
             page.evaluate("document.getElementById('toast').textContent = ''")
             page.click("#sine-start")
         return False
 
     wait_for(started, "the run to start (a refusal shows in the toast)")
+    return server.get("/api/runs")[0]
+
+
+def feasible(page: Any) -> None:
+    preview = "#sine-preview"
+    waiting.wait_for(
+        lambda: text(page, preview).rsplit(": ", 1)[-1] == "feasible",
+        "the preview to say feasible",
+        poll_s=0.1,
+        seen=lambda: text(page, preview),
+    )
+
+
+def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -> None:
+    ready_to_run(page, server)
+    page.fill("input[name=duration]", "2")
+    feasible(page)
+    assert "peak joint speed" in text(page, "#sine-preview")
+    before = page.evaluate("window.deltadashPlot.samples")
+    start_from_page(page, server)
     wait_for(lambda: page.evaluate("window.deltadashPlot.samples") > before, "new plot samples")
     # the sinusoid's x amplitude is 50 mm: the plotted measured x must swing by tens of mm
     wait_for(lambda: plotted_span_mm(page) > 30, "the plotted x to show the sinusoid")
@@ -221,6 +247,73 @@ def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -
     assert row.locator("a", has_text="CSV").get_attribute("href").endswith("/log.csv")
     save_artifact("dashboard-plot.json", json.dumps(page.evaluate("window.deltadashPlot")).encode())
     shot(page, "run-done")
+
+
+def test_a_page_reloaded_mid_run_shows_its_real_progress_and_parameters(
+    page: Any, server: Server
+) -> None:
+    ready_to_run(page, server)
+    page.fill("input[name=duration]", "30")
+    page.fill("input[name=amp0]", "30")
+    feasible(page)
+    run_id = start_from_page(page, server)["run_id"]
+
+    def share() -> float:
+        progress = server.get(f"/api/runs/{run_id}")["progress"] or {}
+        return progress.get("test_elapsed_s", 0.0) / progress.get("test_duration_s", 1.0)
+
+    wait_for(lambda: share() >= 0.3, "a third of the test part done")
+    page.reload()  # the form's fields are back to their defaults (10 s, 50 mm)
+    # A bar restarted at 0 on the reload stays behind the server's progress by what was
+    # done before it (0.3); one that goes on from the server's figure keeps up with it.
+    bar = (
+        "(() => [document.getElementById('run-phase').textContent,"
+        " document.getElementById('run-progress').value])()"
+    )
+    seen: list = []
+
+    def keeps_up() -> bool:
+        phase, value = page.evaluate(bar)
+        seen[:] = [phase, value, share()]  # the server's share read after the page's
+        return "timed" in phase and value >= seen[2] - 0.15
+
+    waiting.wait_for(
+        keeps_up,
+        "the bar to keep up with the server's progress while the test part goes",
+        timeout_s=PAGE_WAIT_S,
+        poll_s=0.2,
+        seen=lambda: seen,
+    )
+    assert page.locator("input[name=duration]").input_value() == "30"
+    assert page.locator("input[name=amp0]").input_value() == "30"
+    assert "amplitude 30 / 50 / 80 mm" in text(page, "#run-params")
+    shot(page, "reloaded-mid-run")
+    wait_for(lambda: server.get(f"/api/runs/{run_id}")["state"] != "running", "the run to end", 90)
+
+
+def test_two_runs_compared_side_by_side(page: Any, server: Server) -> None:
+    done = [r for r in server.get("/api/runs") if r["state"] != "running"][:2]
+    assert len(done) == 2, done
+    for run in done:
+        box = page.locator(f"tr[data-run='{run['run_id']}'] input.pick")
+        wait_for(lambda b=box: b.count() == 1 and b.is_enabled(), "the run's checkbox")
+        box.check()
+    wait_for(lambda: page.locator("#compare-runs").is_enabled(), "the compare button enabled")
+    page.click("#compare-runs")
+    ids = ",".join(run["run_id"] for run in done)
+    page_condition(
+        page,
+        f"""() => {{ const img = document.getElementById('compare-plot');
+            return !document.getElementById('compare').hidden && img.dataset.ids === '{ids}'
+                && img.complete && img.naturalWidth > 0; }}""",
+        "the comparison table and plot",
+    )
+    table = page.locator("#compare-table")
+    rmse = table.locator("tr", has_text="RMSE x")
+    for run in done:
+        assert f"{run['stats']['tracking']['x']['rmse_m'] * 1e3:.2f}" in rmse.inner_text()
+    assert "amplitude 30 / 50 / 80 mm" in table.inner_text()  # the tests in words
+    shot(page, "compare")
 
 
 def test_space_presses_e_stop(page: Any, server: Server) -> None:

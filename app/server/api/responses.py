@@ -227,8 +227,19 @@ class RunStats(BaseModel):
     health: RunHealth | None = None
 
 
+class RunProgress(_Out):
+    """How far the running run is, in run time [s] (approach, test part, stop)."""
+
+    phase: str = Field(description="approach | timed | hold | stop")
+    elapsed_s: float = Field(description="run time since the run started [s]")
+    duration_s: float | None = Field(description="the whole run with approach and stop [s]")
+    test_elapsed_s: float = Field(description="time into the test part [s]")
+    test_duration_s: float | None = Field(description="the test part's length [s]")
+
+
 class RunOut(_Out):
-    """One run, as saved in its run.json."""
+    """One run, as saved in its run.json, with its test in words and, while it runs, how
+    far it is."""
 
     run_id: str
     kind: str = Field(description="sinusoid | chirp | step | waypoints | hold")
@@ -247,6 +258,27 @@ class RunOut(_Out):
     samples: int = Field(description="ticks logged; while the run goes, the live count")
     stats: RunStats
     has_report: bool
+    description: str = Field(
+        description="the test and its parameters in words and units (mm, Hz, s, on/off)"
+    )
+    progress: RunProgress | None = Field(
+        None, description="while the run goes: how far it is; null otherwise"
+    )
+
+
+class CompareRow(_Out):
+    label: str = Field(description="the figure, e.g. 'RMSE x'")
+    unit: str = Field(description="the values' unit (mm, %, Hz, ms, ticks) or '' for text")
+    values: list[float | str | None] = Field(description="one per run, in the order asked")
+
+
+class CompareOut(_Out):
+    """Runs side by side: their records, a table of their figures, the overlay plot."""
+
+    ids: list[str]
+    runs: list[RunOut]
+    rows: list[CompareRow]
+    plot: str = Field(description="the errors overlaid: GET this PNG (same ids)")
 
 
 class RunStarted(_Out):
@@ -275,6 +307,9 @@ class LeaseTaken(_Out):
     lease_id: str = Field(description="the secret lease id; only its holder knows it")
     holder: str = Field(description="the display name given")
     timeout_s: float = Field(description="the lease lapses after this long without a command")
+    took_over_from: LeaseOut | None = Field(
+        None, description="the lease this one replaced, when someone held control; else null"
+    )
 
 
 class PoseAccepted(_Out):

@@ -95,12 +95,18 @@ def get_lease(authority: AuthorityDep) -> dict[str, Any]:
 @router.post("/lease", response_model=LeaseTaken, responses={**UNAUTHORISED, **CONFLICT, **INVALID})
 def post_lease(body: LeaseRequest, authority: AuthorityDep, _: TokenChecked) -> dict[str, Any]:
     """Take control: a new secret lease id to send as ``X-Lease`` with each command.
-    Taking it from another client (one whose lease has not lapsed) needs take_over=true."""
+    Taking it from another client (one whose lease has not lapsed) needs take_over=true
+    (and the token, where one is set); ``took_over_from`` then says whose it was."""
     try:
-        lease_id = authority.take(body.client, body.take_over)
+        lease_id, previous = authority.take_from(body.client, body.take_over)
     except LeaseHeld as exc:
         raise HTTPException(409, str(exc)) from None
-    return {"lease_id": lease_id, "holder": body.client, "timeout_s": authority.timeout_s}
+    return {
+        "lease_id": lease_id,
+        "holder": body.client,
+        "timeout_s": authority.timeout_s,
+        "took_over_from": asdict(previous) if previous.held else None,
+    }
 
 
 @router.delete("/lease", response_model=LeaseOut, responses={**UNAUTHORISED, **CONFLICT, **INVALID})

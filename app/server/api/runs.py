@@ -14,6 +14,7 @@ from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from app.control.errors import GoalRejected, MotionRefused
+from app.runs.describe import describe
 from app.runs.logs import MEDIA_TYPE as MCAP_MEDIA_TYPE
 from app.runs.logs import read_messages
 from app.runs.manager import Run, RunManager
@@ -189,16 +190,25 @@ async def start_waypoints(
     return await _start(request, runs, body.params(), "waypoints")
 
 
+def run_out(runs: RunManager, run: Run) -> dict[str, Any]:
+    """A run's record for the API (RunOut): run.json's fields, its test in words and, while
+    it goes, its progress."""
+    out = run.as_dict()
+    out["description"] = describe(run.kind, run.params, run.conditions)
+    out["progress"] = runs.progress(run.run_id)
+    return out
+
+
 @router.get("/runs", response_model=list[RunOut])
 def list_runs(runs: RunsDep) -> list[dict[str, Any]]:
-    """All runs, newest first, with state and stats."""
-    return [run.as_dict() for run in runs.list()]
+    """All runs, newest first, with state and stats; the running one with its progress."""
+    return [run_out(runs, run) for run in runs.list()]
 
 
 @router.get("/runs/{run_id}", response_model=RunOut, responses={**NOT_FOUND, **INVALID})
 def get_run(run_id: str, runs: RunsDep) -> dict[str, Any]:
     """One run: state, parameters, conditions, stats.tracking.{x,y,z}.{mean_m, rmse_m, ...}."""
-    return _run(runs, run_id).as_dict()
+    return run_out(runs, _run(runs, run_id))
 
 
 @router.post("/runs/{run_id}/abort", response_model=RunOut, responses={**CONTROL, **NOT_FOUND})
@@ -206,7 +216,7 @@ async def abort_run(run_id: str, runs: RunsDep, _: ControlClient) -> dict[str, A
     """Stop a running run; the robot holds where it is and the log stays readable."""
     run = _run(runs, run_id)
     await asyncio.to_thread(runs.abort, run_id)
-    return run.as_dict()
+    return run_out(runs, run)
 
 
 @router.get("/runs/{run_id}/stats", response_model=WindowStats, responses={**NOT_FOUND, **INVALID})

@@ -7,7 +7,16 @@ from app.cli.run import print_stats
 
 def _run(health: dict | None) -> dict:
     stats = {} if health is None else {"health": health}
-    return {"run_id": "r1", "state": "done", "reason": None, "stats": stats, "files": {}}
+    return {
+        "run_id": "r1",
+        "kind": "step",
+        "params": {},
+        "conditions": {},
+        "state": "done",
+        "reason": None,
+        "stats": stats,
+        "files": {},
+    }
 
 
 def test_a_healthy_run_says_so_and_an_unhealthy_one_says_why(capsys):

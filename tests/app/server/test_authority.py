@@ -154,7 +154,14 @@ def test_knowing_the_holders_name_gives_no_control(local):
 
 def test_taking_over_is_explicit_and_ends_the_old_lease(local):
     alice = holding_at_goal(local)
-    bob = take_lease(local, "bob", token=TOKEN, sticky=False)  # take_over=true
+    since = ok_json(local.get("/api/lease"))["since_s"]
+    auth = {"Authorization": f"Bearer {TOKEN}"}
+    taken = ok_json(
+        local.post("/api/lease", json={"client": "bob", "take_over": True}, headers=auth)
+    )
+    bob = {**auth, "X-Lease": taken["lease_id"]}
+    assert taken["took_over_from"]["holder"] == "alice"  # says whose control it took
+    assert taken["took_over_from"]["since_s"] == since
     assert ok_json(local.get("/api/lease"))["holder"] == "bob"
     ok_json(local.post("/api/torque", json={"enabled": True}, headers=bob))
     refused = local.post("/api/torque", json={"enabled": False}, headers=alice)
