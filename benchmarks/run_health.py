@@ -17,6 +17,7 @@ import os
 import platform
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 # benchmarks/kinematics.py would shadow the kinematics package: keep this folder off the path
@@ -25,10 +26,22 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 
 from app.config import load_settings  # noqa: E402
 from app.control.controller import Controller  # noqa: E402
+from app.control.errors import MotionRefused  # noqa: E402
 from app.runs.health import summary  # noqa: E402
 from app.runs.manager import RunManager  # noqa: E402
 from app.runs.trajectories import SinusoidParams  # noqa: E402
 from app.server.backends import open_backend  # noqa: E402
+
+
+def start(runs: RunManager, params: SinusoidParams):
+    """Start the run once the arm, just held by torque on, has stopped moving (a plan from
+    a moving arm is refused: "the robot moved ... since the plan")."""
+    for _ in range(50):
+        try:
+            return runs.start_sinusoid(params)
+        except MotionRefused:
+            time.sleep(0.2)
+    return runs.start_sinusoid(params)
 
 
 def line(run) -> str:
@@ -68,7 +81,7 @@ def main() -> None:
             print(f"backend: {opened.description}")
             for _ in range(args.runs):
                 before = controller.timing.since_start()
-                run = runs.start_sinusoid(SinusoidParams(duration_s=args.duration))
+                run = start(runs, SinusoidParams(duration_s=args.duration))
                 run.done.wait()
                 after = controller.timing.since_start()
                 print(line(run))
