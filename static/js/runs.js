@@ -125,12 +125,22 @@ function follow(run) {
 
 const triple = (t, key) => (t ? ["x", "y", "z"].map((a) => mm(t[a]?.[key], 2)).join(" / ") : "–");
 
+// The loop's health during the run as a coloured flag; the reasons (or the figures) as its
+// tooltip, so the row stays narrow.
 function health(run) {
   const h = run.stats && run.stats.health;
-  if (!h || typeof h.ok !== "boolean") return `<td class="muted" title="not checked (an older run)">–</td>`;
-  if (h.ok) return `<td class="ok">ok</td>`;
-  const why = (h.reasons || []).join("; ");
-  return `<td class="bad" title="${escape(why)}">NOT HEALTHY: ${escape(why)}</td>`;
+  if (!h || typeof h.ok !== "boolean") {
+    return `<td class="health"><span class="flag none" title="not checked (a run from before health was kept)">–</span></td>`;
+  }
+  const figures = [
+    typeof h.rate_hz === "number" ? `${fixed(h.rate_hz, 0)} Hz` : null,
+    h.lateness_ms && typeof h.lateness_ms.p99 === "number" ? `p99 lateness ${fixed(h.lateness_ms.p99, 1)} ms` : null,
+    typeof h.overruns === "number" ? `${h.overruns} overruns` : null,
+  ].filter(Boolean).join(", ");
+  if (h.ok) return `<td class="health"><span class="flag ok" title="loop healthy: ${escape(figures)}">ok</span></td>`;
+  const why = (h.reasons || []).join("; ") || "not healthy";
+  return `<td class="health"><span class="flag bad" title="loop NOT HEALTHY: ${escape(why)}"` +
+    ` aria-label="loop not healthy: ${escape(why)}">flagged</span></td>`;
 }
 
 function runRow(run) {
@@ -140,18 +150,21 @@ function runRow(run) {
   const base = `/api/runs/${encodeURIComponent(run.run_id)}`;
   const links = [["report.png", "report"], ["report.pdf", "PDF"], ["log.mcap", "MCAP"], ["log.csv", "CSV"]]
     .filter(([name]) => !name.startsWith("report") || run.has_report)
-    .map(([name, label]) => `<a href="${base}/${name}" target="_blank" rel="noopener">${label}</a>`)
+    .map(([name, label]) => `<a href="${base}/${name}" target="_blank" rel="noopener"` +
+      `${name === "report.png" ? ` class="report" data-run="${escape(run.run_id)}"` : ""}>${label}</a>`)
     .join(" ");
   const reason = run.reason ? ` title="${escape(run.reason)}"` : ""; // long reasons as a tooltip
   const id = escape(run.run_id);
   const pick = `<input type="checkbox" class="pick" value="${id}" aria-label="compare run ${id}"` +
     `${picked.has(run.run_id) ? " checked" : ""}${run.state === "running" ? " disabled" : ""}>`;
-  return `<tr data-run="${id}"><td>${pick}</td><td>${id}</td>` +
+  // the id may wrap after its date (a narrow table fits 1280 px)
+  const shownId = escape(run.run_id).replace(/^(\d{8}-)/, "$1<wbr>");
+  return `<tr data-run="${id}"><td>${pick}</td><td>${shownId}</td>` +
     `<td title="${escape(run.description || "")}">${escape(run.kind)}${run.stats && run.stats.world ? " (world)" : ""}</td>` +
     `<td class="${run.state === "done" ? "ok" : run.state === "running" ? "" : "bad"}"${reason}>${escape(run.state)}</td>` +
     health(run) +
     `<td class="num">${triple(t, "rmse_m")}</td><td class="num">${triple(t, "max_abs_m")}</td>` +
-    `<td class="num">${under}</td><td>${links}</td></tr>`;
+    `<td class="num">${under}</td><td class="files">${links}</td></tr>`;
 }
 
 export async function refreshRuns() {
@@ -214,6 +227,33 @@ async function compare() {
   }
 }
 
+// A run's report in the page (a lightbox), not a download or a new tab; a modified or
+// middle click still opens the link as the browser would. Esc closes it (Esc is also the
+// e-stop key everywhere on the page: that stays so), as do a click outside it and Close.
+function openReport(event) {
+  const link = event.target.closest("a.report");
+  if (!link || event.button !== 0 || event.ctrlKey || event.metaKey || event.shiftKey || event.altKey) return;
+  event.preventDefault();
+  const box = document.getElementById("report-box");
+  const img = document.getElementById("report-img");
+  img.src = link.href;
+  img.alt = `the report of run ${link.dataset.run}`;
+  setText("report-title", `Report of run ${link.dataset.run}`);
+  document.getElementById("report-open").href = link.href;
+  if (!box.open) box.showModal();
+}
+
+function startReportBox() {
+  const box = document.getElementById("report-box");
+  document.getElementById("run-rows").addEventListener("click", openReport);
+  document.getElementById("report-close").addEventListener("click", () => box.close());
+  box.addEventListener("click", (event) => { if (event.target === box) box.close(); }); // the backdrop
+  // Esc: the e-stop handler takes the key (and cancels the dialog's own Esc); close it here,
+  // never stopping the key from reaching the e-stop
+  document.addEventListener("keydown", (event) => { if (event.key === "Escape" && box.open) box.close(); });
+  box.addEventListener("close", () => { document.getElementById("report-img").removeAttribute("src"); });
+}
+
 function closeCompare() {
   document.getElementById("compare").hidden = true;
 }
@@ -226,6 +266,7 @@ export function startRuns() {
   document.getElementById("run-rows").addEventListener("change", onPick);
   document.getElementById("compare-runs").addEventListener("click", compare);
   document.getElementById("compare-close").addEventListener("click", closeCompare);
+  startReportBox();
   preview();
   refreshRuns();
   setInterval(refreshRuns, RUNS_POLL_MS);

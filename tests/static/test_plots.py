@@ -1,0 +1,283 @@
+"""The plots and the runs table as an operator reads them, in Debian's chromium against
+`deltadash serve` on the simulator (no 3D scene) with three runs saved beforehand.
+
+Plots: pause freezes what is drawn while the server's loop goes on and resume continues;
+the cursor readout gives the drawn values at the hovered time; a drag zooms a time range and
+a double-click restores the window; the snapshot is a PNG download; the window select sets
+the span. Runs: the loop-health flag with its reasons as tooltip, the report in a lightbox
+(no download) closed by a click outside or Esc, and the files column inside 1280x800 and
+1366x768 viewports. Every wait is a condition.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.support.browser import (
+    PAGE_WAIT_S,
+    box_of,
+    browser_skip_reason,
+    chromium_page,
+    page_condition,
+    save_artifact,
+)
+from tests.support.saved_runs import HEALTHY, UNHEALTHY, save_run, synthetic_rows
+from tests.support.server import Server, serve, wait_for
+
+SKIP = browser_skip_reason()
+pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
+QUIET = "20261130-101010-aaaa"
+LOADED = "20261130-111111-bbbb"
+OLD = "20261130-090909-cccc"
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+DRAWN = (
+    "(() => { const p = document.getElementById('plot');"
+    " return JSON.stringify(p.data ? p.data.map((d) => [d.x, d.y]) : null); })()"
+)
+
+
+def _report_png(path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(4, 3), dpi=50)
+    ax.plot([0, 1], [0, 1])
+    fig.savefig(path, format="png")
+    plt.close(fig)
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory) -> Iterator[Server]:
+    folder = tmp_path_factory.mktemp("plots")
+    runs = folder / "runs"
+    for run_id, health in ((QUIET, HEALTHY), (LOADED, UNHEALTHY), (OLD, None)):
+        run = save_run(runs, run_id, synthetic_rows(), health)
+        _report_png(run.folder / "report.png")
+        run.has_report = True
+        run.save()
+    with serve(folder) as served:
+        yield served
+
+
+@pytest.fixture(scope="module")
+def page(server: Server) -> Iterator[Any]:
+    with chromium_page(1366, 900) as page:
+        errors: list[str] = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        # a loaded machine can take over Playwright's 30 s to fire "load": wait on the plot
+        page.goto(server.url + "/", wait_until="commit")
+        page_condition(
+            page, "() => window.deltadashPlot && window.deltadashPlot.fullDraws > 0", "a first plot"
+        )
+        yield page
+        assert not errors, f"JavaScript errors on the page: {errors}"
+
+
+def drawn(page: Any) -> Any:
+    return json.loads(page.evaluate(DRAWN))
+
+
+def paused(page: Any) -> bool:
+    return bool(page.evaluate("window.deltadashPlot.paused"))
+
+
+def set_paused(page: Any, want: bool) -> None:
+    if paused(page) != want:
+        page.click("#plot-pause")
+    wait_for(lambda: paused(page) == want, f"the plots {'paused' if want else 'running'}")
+
+
+def x_range(page: Any) -> list[float]:
+    return page.evaluate("document.getElementById('plot').layout.xaxis.range")
+
+
+def pixel_of(page: Any, t: float) -> tuple[float, float]:
+    """The page pixel of time ``t`` [s] half-way up the first subplot."""
+    return page.evaluate(
+        """(t) => {
+          const p = document.getElementById('plot'), r = p.getBoundingClientRect();
+          const xa = p._fullLayout.xaxis, ya = p._fullLayout.yaxis;
+          return [r.left + xa._offset + xa.l2p(t), r.top + ya._offset + ya._length / 2];
+        }""",
+        t,
+    )
+
+
+def test_pause_freezes_the_plot_and_resume_continues(page: Any, server: Server) -> None:
+    set_paused(page, True)
+    page_condition(page, "() => window.deltadashPlot.dropped > 0", "samples arriving while paused")
+    first = drawn(page)
+    start = server.get("/api/status")["time_s"]
+    wait_for(lambda: server.get("/api/status")["time_s"] > start + 0.5, "the loop to go on")
+    dropped = page.evaluate("window.deltadashPlot.dropped")
+    page_condition(page, f"() => window.deltadashPlot.dropped > {dropped}", "more samples dropped")
+    assert drawn(page) == first, "the plot changed while paused"
+    assert page.locator("#plot-pause").inner_text() == "Resume"
+    assert "paused" in page.locator("#plot-state").inner_text()
+    set_paused(page, False)
+    wait_for(lambda: drawn(page) != first, "the plot to move on after resume")
+    assert page.locator("#plot-pause").inner_text() == "Pause"
+
+
+def test_the_cursor_reads_out_the_drawn_values_at_the_hovered_time(page: Any) -> None:
+    set_paused(page, True)
+    data = drawn(page)
+    readout = page.locator("#plot-readout")
+
+    def hovered() -> bool:
+        x, y = pixel_of(page, -3.0)
+        page.mouse.move(x - 1, y)  # a move per try: a busy page may miss one
+        page.mouse.move(x, y)
+        return readout.get_attribute("data-t") is not None
+
+    wait_for(hovered, "the cursor readout", timeout_s=PAGE_WAIT_S)
+    t = float(readout.get_attribute("data-t"))
+    assert abs(t - -3.0) < 0.1, t  # a pixel is ~0.03 s, a sample 0.02 s
+    j = int(readout.get_attribute("data-index"))
+    assert data[0][0][j] == pytest.approx(t)
+    # each series' readout is its drawn value at that sample (goal, measured, error per axis)
+    for i, key in enumerate(f"{k}_{a}" for a in "xyz" for k in ("goal", "measured", "error")):
+        shown = readout.locator(f"output[data-series='{key}']").inner_text()
+        value = data[i][1][j]
+        assert shown == ("–" if value is None else f"{value:.2f}"), (key, shown, value)
+    # the cursor line stands at the read-out time in the first column
+    line = page.locator("#plot .plot-cursor").first
+    wait_for(line.is_visible, "the cursor line")
+    assert line.bounding_box()["x"] == pytest.approx(pixel_of(page, t)[0], abs=2)
+    save_artifact("plots-cursor.png", page.screenshot())
+    set_paused(page, False)
+
+
+def test_a_drag_zooms_a_time_range_and_double_click_restores(page: Any) -> None:
+    wait_for(lambda: x_range(page) == [-10, 0], "the whole 10 s window")
+    x0, y = pixel_of(page, -6.0)
+    x1, _ = pixel_of(page, -2.0)
+    page.mouse.move(x0, y)
+    page.mouse.down()
+    page.mouse.move((x0 + x1) / 2, y, steps=4)
+    page.mouse.move(x1, y, steps=4)
+    page.mouse.up()
+
+    def zoomed() -> list[float] | None:
+        lo, hi = x_range(page)
+        return [lo, hi] if hi - lo < 9 else None
+
+    lo, hi = wait_for(zoomed, "the x range to narrow to the dragged range")
+    assert lo == pytest.approx(-6.0, abs=0.2) and hi == pytest.approx(-2.0, abs=0.2)
+    assert paused(page), "zooming pauses the plot"
+    # the other subplots follow the same time range
+    assert page.evaluate(
+        "document.getElementById('plot')._fullLayout.xaxis5.range"
+    ) == pytest.approx([lo, hi])
+    save_artifact("plots-zoomed.png", page.locator("section.plots").screenshot())
+    page.mouse.dblclick(*pixel_of(page, -4.0))
+    wait_for(lambda: x_range(page) == [-10, 0], "the window restored by a double-click")
+    wait_for(lambda: not paused(page), "the plot live again (the zoom had paused it)")
+
+
+def test_snapshot_downloads_a_png(page: Any) -> None:
+    with page.expect_download() as info:
+        page.click("#plot-snapshot")
+    download = info.value
+    assert download.suggested_filename.endswith(".png")
+    data = Path(download.path()).read_bytes()
+    assert data[:8] == PNG_MAGIC
+    save_artifact("plots-snapshot.png", data)
+
+
+def test_the_window_select_sets_the_span(page: Any) -> None:
+    page.select_option("#plot-window", "30")
+    wait_for(lambda: x_range(page) == [-30, 0], "a 30 s x range")
+    assert "last 30 s" in page.locator("#plots-title").inner_text()
+    # samples older than 10 s are drawn once the page has seen them (the rings keep 60 s)
+    wait_for(lambda: min(drawn(page)[0][0]) < -12, "samples older than 10 s drawn", timeout_s=120)
+    page.select_option("#plot-window", "5")
+    wait_for(lambda: x_range(page) == [-5, 0], "a 5 s x range")
+    wait_for(lambda: min(drawn(page)[0][0]) >= -5.2, "only the last 5 s drawn")
+    page.select_option("#plot-window", "10")
+    wait_for(lambda: x_range(page) == [-10, 0], "back to 10 s")
+
+
+def test_each_run_shows_its_loop_health_as_a_flag_with_reasons(page: Any) -> None:
+    row = lambda run_id: page.locator(f"tr[data-run='{run_id}']")  # noqa: E731
+    wait_for(lambda: row(OLD).count() == 1, "the runs table")
+    bad = row(LOADED).locator("td.health .flag")
+    assert "bad" in bad.get_attribute("class").split()
+    assert UNHEALTHY["reasons"][0] in bad.get_attribute("title")
+    good = row(QUIET).locator("td.health .flag")
+    assert "ok" in good.get_attribute("class").split() and good.inner_text() == "ok"
+    assert "not checked" in row(OLD).locator("td.health .flag").get_attribute("title")
+    colours = {
+        r: row(r).locator("td.health .flag").evaluate("e => getComputedStyle(e).backgroundColor")
+        for r in (QUIET, LOADED, OLD)
+    }
+    assert len(set(colours.values())) == 3, colours
+
+
+def test_the_report_opens_in_a_lightbox_not_a_download(page: Any, server: Server) -> None:
+    downloads: list[Any] = []
+    page.on("download", lambda d: downloads.append(d))
+    pages_before = len(page.context.pages)
+    link = page.locator(f"tr[data-run='{QUIET}'] a.report")
+    wait_for(lambda: link.count() == 1, "the report link")
+    link.click()
+    box = page.locator("#report-box")
+    wait_for(box.is_visible, "the lightbox")
+    page_condition(
+        page, "() => document.getElementById('report-img').naturalWidth > 0", "the report image"
+    )
+    src = page.locator("#report-img").get_attribute("src")
+    assert src.endswith(f"/api/runs/{QUIET}/report.png")
+    save_artifact("plots-report-lightbox.png", page.screenshot())
+    # a click outside the image (the backdrop) closes it
+    page.mouse.click(5, 5)
+    wait_for(lambda: not box.is_visible(), "the lightbox closed by a click outside")
+    # Esc closes it too (and, being the e-stop key, e-stops: reset afterwards)
+    link.click()
+    wait_for(box.is_visible, "the lightbox again")
+    page.keyboard.press("Escape")
+    wait_for(lambda: not box.is_visible(), "the lightbox closed by Esc")
+    wait_for(lambda: server.get("/api/status")["estopped"], "Esc to e-stop as everywhere")
+    page.click("#reset")
+    wait_for(lambda: not server.get("/api/status")["estopped"], "the page's Reset to clear it")
+    assert not downloads, downloads
+    assert len(page.context.pages) == pages_before, "a new tab opened"
+
+
+@pytest.mark.parametrize("size", [(1280, 800), (1366, 768)])
+def test_the_files_column_is_fully_visible(page: Any, size: tuple[int, int]) -> None:
+    width, height = size
+    page.set_viewport_size({"width": width, "height": height})
+    try:
+        cell = page.locator(f"tr[data-run='{LOADED}'] td.files")
+        wait_for(lambda: cell.locator("a").count() == 4, "the four file links")
+        cell.scroll_into_view_if_needed()
+
+        def inside() -> str | None:
+            """None when every link lies inside the panel and the viewport, else why not."""
+            panel = page.locator("section.runs").evaluate(
+                "e => { const r = e.getBoundingClientRect();"
+                " return {left: r.left, right: r.right, scroll: e.scrollWidth - e.clientWidth}; }"
+            )
+            if panel["scroll"] > 0:
+                return f"the runs panel scrolls sideways by {panel['scroll']} px"
+            right = min(panel["right"], width)
+            for link in cell.locator("a").all():
+                b = link.bounding_box()
+                if b is None or b["x"] < panel["left"] or b["x"] + b["width"] > right:
+                    return f"{link.inner_text()} at {b}, panel {panel}, viewport {width}"
+            return None
+
+        box_of(cell, "the files cell")
+        why = inside()
+        assert why is None, why
+        save_artifact(f"plots-runs-{width}x{height}.png", page.locator("section.runs").screenshot())
+    finally:
+        page.set_viewport_size({"width": 1366, "height": 900})
