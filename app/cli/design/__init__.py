@@ -11,22 +11,12 @@ from __future__ import annotations
 import argparse
 import math
 
-import numpy as np
-
 from app.cli.design import synth, workspace
 from app.cli.design.arguments import common, emit, mass_args, mass_from, robot_from
-from app.design import report
-from kinematics.dynamics import MassModel, inverse_dynamics
-from kinematics.sizing import (
-    XM430_W210_11V1,
-    XM430_W210_12V,
-    XM430_W210_THESIS,
-    Servo,
-    region_grid,
-    size_motors,
-)
 
-SERVOS = {"xm430-12v": XM430_W210_12V, "xm430-11v1": XM430_W210_11V1, "thesis": XM430_W210_THESIS}
+# The maths (numpy, scipy, the report) is imported by each handler, not here: building the
+# parser must stay cheap so that ``deltadash --help``, ``ik`` and ``fk`` start fast.
+SERVOS = ("xm430-12v", "xm430-11v1", "thesis")
 _THESIS_CUBE = ([-0.1, -0.1, -0.2903], [0.1, 0.1, -0.0903])  # 20 cm cube centred at -H
 
 
@@ -70,6 +60,10 @@ def _dynamics_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def _dynamics(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from kinematics.dynamics import inverse_dynamics
+
     mass = mass_from(args).with_payload(args.payload)
     torque = inverse_dynamics(
         robot_from(args), mass, args.point, args.velocity, args.acceleration, args.gravity
@@ -132,7 +126,19 @@ def _size_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def _size(args: argparse.Namespace) -> int:
-    servo = SERVOS[args.servo]
+    from app.design import report
+    from kinematics.dynamics import MassModel
+    from kinematics.sizing import (
+        XM430_W210_11V1,
+        XM430_W210_12V,
+        XM430_W210_THESIS,
+        Servo,
+        region_grid,
+        size_motors,
+    )
+
+    lines = {"xm430-12v": XM430_W210_12V, "xm430-11v1": XM430_W210_11V1}
+    servo = {**lines, "thesis": XM430_W210_THESIS}[args.servo]
     if args.stall or args.no_load:
         servo = Servo("custom", args.stall or servo.stall_nm, args.no_load or servo.no_load_rpm)
     robot, mass = robot_from(args), mass_from(args)

@@ -7,8 +7,6 @@ import time
 from pathlib import Path
 
 from app.cli.design.arguments import common, emit
-from app.design import report
-from app.design.synthesis_report import write_synthesis_report
 from kinematics.synthesis import (
     THESIS_PLATFORM_RADIUS_M,
     Bounds,
@@ -70,6 +68,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 
 def _synth(args: argparse.Namespace) -> int:
     from tqdm import tqdm
+
+    from app.design import report
+    from app.design.synthesis_report import write_synthesis_report
 
     extra = tuple(tuple(e) for e in args.extra) if args.extra else ((0.0, 0.0, -0.075),)
     bounds = Bounds(*(tuple(getattr(args, f"bounds_{n}")) for n in ("L", "l", "Rbar", "H")))
