@@ -157,5 +157,40 @@ def _size(args: argparse.Namespace) -> int:
     )
     bare = size_motors(robot, link_only, grid, tilt_deg=args.tilt, **options)
     payload = report.sizing_payload(sized, level, bare)
-    emit(args, payload, report.sizing_table(payload))
+    payload["peak_cause"] = _peak_cause(args, robot, mass, sized, options)
+    emit(args, payload, report.sizing_table(payload) + "\n" + report.peak_cause_text(payload))
     return 0 if sized.passes else 1
+
+
+def _peak_cause(args: argparse.Namespace, robot, mass, sized, options) -> dict:
+    """What drives the peak: the pose at its point, the peak at zero speed
+    (no velocity terms), and the peak over the region without its top 30 %."""
+    from kinematics.sizing import region_grid, size_motors
+
+    point = sized.peak_nm.point
+    theta = robot.ik(point).joints
+    lower, upper = list(args.region[:3]), list(args.region[3:])
+    z_cut = upper[2] - 0.3 * (upper[2] - lower[2])
+    grid = region_grid(lower, [*upper[:2], z_cut], args.grid)
+    below = size_motors(robot, mass, grid, tilt_deg=args.tilt, **options)
+    still = size_motors(
+        robot,
+        mass,
+        region_grid(lower, upper, args.grid),
+        tilt_deg=args.tilt,
+        **{**options, "speed_m_s": 1e-9},  # 0 would divide by zero in the margins
+    )
+    return {
+        "point_mm": [round(float(v) * 1e3, 2) for v in point],
+        "joint": sized.peak_nm.joint + 1,
+        "joints_deg": [round(math.degrees(float(t)), 1) for t in theta],
+        "boundary_distance_mm": round(-float(robot.signed_distance(point)) * 1e3, 1),
+        "speed_rpm_there": round(sized.speed_rpm.value, 1)
+        if sized.speed_rpm.point == point
+        else None,
+        "peak_nm_zero_speed": round(still.peak_nm.value, 4),
+        "below_z_mm": round(z_cut * 1e3, 1),
+        "peak_nm_below": round(below.peak_nm.value, 4),
+        "speed_rpm_below": round(below.speed_rpm.value, 1),
+        "passes_below": below.passes,
+    }
