@@ -136,8 +136,22 @@ def _point(point: Any, si: bool) -> str:
     return ", ".join(_length(float(v), si) for v in point)
 
 
+# app.config's defaults (the thesis robot, JointSettings' limits), for the fast path below;
+# tests/app/cli/test_kinematics.py checks they are the same.
+DEFAULT_JOINT_LIMITS_RAD = (-0.6, 1.65)
+
+
 def _setup(args: argparse.Namespace) -> tuple[Any, list[tuple[float, float]]]:
-    """The robot and the joint limits [rad] of the config (defaults: the thesis robot)."""
+    """The robot and the joint limits [rad] of the config (defaults: the thesis robot).
+
+    Without --config and without DELTADASH_ environment variables these are app.config's
+    defaults, taken without importing pydantic (a third of ik's start-up time)."""
+    import os
+
+    if args.config is None and not any(k.startswith("DELTADASH_") for k in os.environ):
+        from kinematics import THESIS_DELTA
+
+        return THESIS_DELTA, [DEFAULT_JOINT_LIMITS_RAD] * 3
     from app.config import load_settings
 
     settings = load_settings(args.config)

@@ -98,3 +98,26 @@ def test_ik_says_which_joint_limit_a_reachable_point_needs_to_break(capsys):
 def test_bad_input_is_refused_with_its_reason(capsys, argv, words):
     assert main(argv) == 2
     assert words in capsys.readouterr().err
+
+
+def test_the_fast_path_uses_the_configs_defaults():
+    from app.cli.kinematics import DEFAULT_JOINT_LIMITS_RAD
+    from app.config import Settings
+    from kinematics import THESIS_DELTA
+
+    settings = Settings()
+    for joint in settings.hardware.joints:
+        assert (joint.min_angle_rad, joint.max_angle_rad) == DEFAULT_JOINT_LIMITS_RAD
+    robot = settings.robot.build()
+    assert type(robot) is type(THESIS_DELTA)
+    for name in ("L", "l", "R", "r"):
+        assert getattr(robot, name) == getattr(THESIS_DELTA, name)
+
+
+def test_environment_settings_are_honoured(capsys, monkeypatch):
+    monkeypatch.setenv(
+        "DELTADASH_HARDWARE__JOINTS",
+        '[{"servo_id": 1, "max_angle_rad": 0.3}, {"servo_id": 2}, {"servo_id": 3}]',
+    )
+    assert main(["fk", "20", "20", "20"]) == 2
+    assert "joint 1 = 20.000 deg" in capsys.readouterr().err
