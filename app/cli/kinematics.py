@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 from typing import Any
 
@@ -76,15 +77,21 @@ def parse_values(tokens: list[str], kind: str, default_unit: str) -> list[float]
     """Three SI values from command-line tokens: numbers, each optionally followed by a unit.
 
     ``["0", "0", "-240", "mm"]``, ``["30.1deg,", "30.1", "deg"]`` and ``["(1,", "2,", "3)"]``
-    are read; commas and parentheses are ignored (pasted tuples). ``kind``: "length" or
-    "angle"; ``default_unit`` applies to a number with no unit after it.
+    are read; commas ending a word and parentheses are ignored (pasted tuples). A comma
+    between digits (``12,5``) is refused: a decimal comma must never become two numbers.
+    ``kind``: "length" or "angle"; ``default_unit`` applies to a number with no unit after it.
 
     Raises:
-        UnitError: a word that is neither a number nor a unit of ``kind``, or not 3 numbers.
+        UnitError: a decimal comma, a word that is neither a number nor a unit of ``kind``,
+            or not 3 numbers.
     """
-    words = [w for t in tokens for w in t.replace(",", " ").strip("()").split() if w.strip("()")]
+    for token in tokens:
+        if re.search(r"\d,\d", token):
+            fixed = re.sub(r"(\d),(\d)", r"\1.\2", token)
+            raise UnitError(f"{token!r}: write a decimal point ({fixed}), not a comma")
+    words = [w.strip("(),") for t in tokens for w in t.split()]
     numbers: list[list[Any]] = []  # [value, unit or None]
-    for word in (w.strip("()") for w in words):
+    for word in filter(None, words):
         number, unit = _split(word)
         if number is not None:
             numbers.append([number, unit])

@@ -93,6 +93,8 @@ def test_ik_says_which_joint_limit_a_reachable_point_needs_to_break(capsys):
         (["fk", "30", "30", "30", "mm"], "expected deg or rad"),
         (["ik", "0", "-240"], "expected 3 numbers, got 2"),
         (["fk", "30", "x", "30"], "'x'"),
+        (["ik", "12,5", "-240"], "write a decimal point (12.5)"),  # never 12 and 5
+        (["ik", "0", "0,5", "-240"], "(0.5)"),
     ],
 )
 def test_bad_input_is_refused_with_its_reason(capsys, argv, words):
