@@ -49,7 +49,6 @@ import math
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ._xp import LEG_COS, LEG_SIN
 
@@ -483,6 +482,8 @@ def _links(
     n = len(edges)
     if n < 2:
         return np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0)
+    from scipy.spatial import cKDTree  # here, not at import: scipy costs the CLI ~0.5 s
+
     distance, index = cKDTree(edges).query(edges, k=min(10, n))
     ahead = np.einsum("nkj,nj->nk", edges[index] - edges[:, None, :], tangents) > 0.0
     same = (pairs[index] == pairs[:, None, :]).all(axis=-1)

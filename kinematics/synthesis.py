@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.optimize import differential_evolution
 
 from ._arrays import triple_floats
 from .containment import Containment, certify_box, unit_box_samples
@@ -203,6 +202,8 @@ def _search(
 
     # polish=False: F is a step function of the penalty, a gradient polish can't help.
     # tol=1e-4 (population spread / mean): stopping there costs 1e-5 of the objective.
+    from scipy.optimize import differential_evolution  # here: scipy is slow to import
+
     found = differential_evolution(
         objective,
         problem.bounds.as_list(),

@@ -2,6 +2,10 @@
 
 ``serve`` (serve.py), ``run`` (run.py), ``runs`` (runs.py), ``design`` (design/), ``home``
 (home.py), ``ik`` and ``fk`` (kinematics.py); ``emulate`` (emulate.py).
+
+Building the parser imports no heavy library (fastapi, uvicorn, mujoco, matplotlib, scipy,
+viser, pydantic): each handler imports what it needs, so ``deltadash --help``, ``ik`` and
+``fk`` start fast (benchmarks/cli_startup.py; tests/app/cli/test_help.py checks the law).
 """
 
 from __future__ import annotations
@@ -12,11 +16,33 @@ import sys
 from app.cli import design, emulate, home, kinematics, run, runs, serve
 from kinematics import DeltaError
 
+DESCRIPTION = """\
+Teleoperate and test a Delta robot: the control server and its dashboard page, test
+runs, design tools, a servo emulator and the kinematics. ik and fk speak mm and degrees
+(--si for metres and radians); the other commands give each option's unit in their
+help; the API and every --json output are SI (m, rad, s)."""
+
+EPILOG = """\
+examples:
+  deltadash serve                          dashboard and API on http://127.0.0.1:8000
+  deltadash run sinusoid --duration 5      the thesis tracking test on the simulator
+  deltadash ik 0 0 -240                    joint angles for the point (0, 0, -240) mm
+  deltadash fk 30 30 30                    platform point for joint angles in degrees
+  deltadash design size                    motor sizing, and why it differs from the thesis
+
+Run "deltadash COMMAND --help" for a command's options."""
+
 
 def build_parser() -> argparse.ArgumentParser:
-    description = "The ``deltadash`` command line."
-    parser = argparse.ArgumentParser(prog="deltadash", description=description)
-    commands = parser.add_subparsers(dest="command", required=True)
+    parser = argparse.ArgumentParser(
+        prog="deltadash",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    commands = parser.add_subparsers(
+        dest="command", required=True, title="commands", metavar="COMMAND"
+    )
     serve.add_parser(commands)
     run.add_parser(commands)
     runs.add_parser(commands)

@@ -16,8 +16,6 @@ import argparse
 import math
 import sys
 
-from app.config import ConfigError, load_settings
-
 
 def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = commands.add_parser(
@@ -40,6 +38,7 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.config import ConfigError, load_settings
     from app.server.backends import _calibrations
     from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig
     from hardware.errors import BusError, CalibrationError

@@ -1,63 +1,249 @@
-"""``deltadash ik`` and ``deltadash fk``: the thesis robot's kinematics from the command line."""
+"""``deltadash ik`` and ``deltadash fk``: the configured robot's kinematics from the command line.
+
+Both speak millimetres and degrees by default, and SI (metres, radians) with ``--si``. Each
+number may carry its unit (``-240 mm``, ``30.1 deg``, ``0.525 rad``), which wins over the
+default, so what one command prints can be pasted into the other. Every number printed
+carries its unit; ``--json`` prints SI only (``point_m``, ``joints_rad``), as the API does.
+
+Refusals: ``fk`` refuses a joint angle outside the configured joint limits
+(``hardware.joints[i].min_angle_rad`` / ``max_angle_rad``, exit 2); ``ik`` says when a
+point is outside the workspace or needs a joint outside its limits, and gives the nearest
+reachable point (``robot.project``; exit 1). Bad input exits 2.
+
+Only the standard library is imported at module level: the maths and the settings are
+imported when a command runs, so that ``deltadash --help`` stays fast.
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import re
+import sys
+from typing import Any
 
-from kinematics import THESIS_DELTA
+# unit word -> (kind, factor to SI)
+_UNITS = {
+    "mm": ("length", 1e-3),
+    "m": ("length", 1.0),
+    "deg": ("angle", math.pi / 180),
+    "rad": ("angle", 1.0),
+}
+_MARGIN_M = 1e-5  # the nearest point printed to 0.001 mm must itself be reachable
+_EPILOG = (
+    "Numbers are mm (ik) and degrees (fk) unless --si; a unit after a number (mm, m, deg, "
+    "rad) wins, so ik's output pastes into fk and back. Exit 0: answered; 1: no answer "
+    "(outside the workspace or the joint limits); 2: refused or bad input."
+)
+
+
+class UnitError(ValueError):
+    """Input that cannot be read as three numbers of the expected kind."""
 
 
 def add_parsers(commands: argparse._SubParsersAction) -> None:
     """Register ``ik`` and ``fk`` on the app's sub-command parsers."""
-    ik = commands.add_parser("ik", help="inverse kinematics of the thesis robot (metres)")
-    ik.add_argument("x", type=float)
-    ik.add_argument("y", type=float)
-    ik.add_argument("z", type=float)
-    ik.add_argument("--json", action="store_true", help="machine-readable output")
+    ik = commands.add_parser(
+        "ik",
+        help="joint angles for a platform point (mm in, degrees out)",
+        description="Inverse kinematics of the configured robot (default: the thesis's).",
+        epilog=_EPILOG,
+    )
+    ik.add_argument("values", nargs="+", metavar="X Y Z", help="the point [mm], e.g. 0 0 -240")
+    _common(ik)
     ik.set_defaults(handler=_ik)
-    fk = commands.add_parser("fk", help="forward kinematics of the thesis robot (radians)")
-    fk.add_argument("joints", type=float, nargs=3)
-    fk.add_argument("--deg", action="store_true", help="joint angles given in degrees")
-    fk.add_argument("--json", action="store_true", help="machine-readable output")
+    fk = commands.add_parser(
+        "fk",
+        help="platform point for joint angles (degrees in, mm out)",
+        description="Forward kinematics of the configured robot (default: the thesis's).",
+        epilog=_EPILOG,
+    )
+    fk.add_argument("values", nargs="+", metavar="J1 J2 J3", help="joint angles [deg]")
+    fk.add_argument("--deg", action="store_true", help=argparse.SUPPRESS)  # the old flag
+    _common(fk)
     fk.set_defaults(handler=_fk)
 
 
+def _common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--si", action="store_true", help="metres and radians in and out instead of mm and deg"
+    )
+    parser.add_argument("--config", help="TOML config: robot geometry and joint limits")
+    parser.add_argument("--json", action="store_true", help="machine-readable output (SI)")
+
+
+def parse_values(tokens: list[str], kind: str, default_unit: str) -> list[float]:
+    """Three SI values from command-line tokens: numbers, each optionally followed by a unit.
+
+    ``["0", "0", "-240", "mm"]``, ``["30.1deg,", "30.1", "deg"]`` and ``["(1,", "2,", "3)"]``
+    are read; commas ending a word and parentheses are ignored (pasted tuples). A comma
+    between digits (``12,5``) is refused: a decimal comma must never become two numbers.
+    ``kind``: "length" or "angle"; ``default_unit`` applies to a number with no unit after it.
+
+    Raises:
+        UnitError: a decimal comma, a word that is neither a number nor a unit of ``kind``,
+            or not 3 numbers.
+    """
+    for token in tokens:
+        if re.search(r"\d,\d", token):
+            fixed = re.sub(r"(\d),(\d)", r"\1.\2", token)
+            raise UnitError(f"{token!r}: write a decimal point ({fixed}), not a comma")
+    words = [w.strip("(),") for t in tokens for w in t.split()]
+    numbers: list[list[Any]] = []  # [value, unit or None]
+    for word in filter(None, words):
+        number, unit = _split(word)
+        if number is not None:
+            numbers.append([number, unit])
+        elif unit is not None and numbers and numbers[-1][1] is None:
+            numbers[-1][1] = unit
+        else:
+            raise UnitError(f"cannot read {word!r} as a number or a unit")
+    if len(numbers) != 3:
+        raise UnitError(f"expected 3 numbers, got {len(numbers)}")
+    values = []
+    for number, unit in numbers:
+        unit = unit or default_unit
+        unit_kind, factor = _UNITS[unit]
+        if unit_kind != kind:
+            wanted = "mm or m" if kind == "length" else "deg or rad"
+            raise UnitError(f"{number} {unit}: expected {wanted}")
+        values.append(number * factor)
+    return values
+
+
+def _split(word: str) -> tuple[float | None, str | None]:
+    for unit in sorted(_UNITS, key=len, reverse=True):
+        if word == unit:
+            return None, unit
+        if word.endswith(unit):
+            head = word[: -len(unit)]
+            try:
+                return float(head), unit
+            except ValueError:
+                pass
+    try:
+        value = float(word)
+    except ValueError:
+        return None, None
+    return (value, None) if math.isfinite(value) else (None, None)
+
+
+def _length(value_m: float, si: bool) -> str:
+    if si:
+        return f"{round(value_m, 6) + 0.0:.6f} m"  # + 0.0: no "-0.000"
+    return f"{round(value_m * 1e3, 3) + 0.0:.3f} mm"
+
+
+def _angle(value_rad: float, si: bool) -> str:
+    return f"{value_rad:.6f} rad" if si else f"{math.degrees(value_rad):.3f} deg"
+
+
+def _point(point: Any, si: bool) -> str:
+    return ", ".join(_length(float(v), si) for v in point)
+
+
+# app.config's defaults (the thesis robot, JointSettings' limits), for the fast path below;
+# tests/app/cli/test_kinematics.py checks they are the same.
+DEFAULT_JOINT_LIMITS_RAD = (-0.6, 1.65)
+
+
+def _setup(args: argparse.Namespace) -> tuple[Any, list[tuple[float, float]]]:
+    """The robot and the joint limits [rad] of the config (defaults: the thesis robot).
+
+    Without --config and without DELTADASH_ environment variables these are app.config's
+    defaults, taken without importing pydantic (a third of ik's start-up time)."""
+    import os
+
+    if args.config is None and not any(k.startswith("DELTADASH_") for k in os.environ):
+        from kinematics import THESIS_DELTA
+
+        return THESIS_DELTA, [DEFAULT_JOINT_LIMITS_RAD] * 3
+    from app.config import load_settings
+
+    settings = load_settings(args.config)
+    limits = [(j.min_angle_rad, j.max_angle_rad) for j in settings.hardware.joints]
+    return settings.robot.build(), limits
+
+
+def _outside(joints: list[float], limits: list[tuple[float, float]]) -> list[str]:
+    """One sentence per joint outside its limits, naming the value and the limit."""
+    problems = []
+    for i, (value, (low, high)) in enumerate(zip(joints, limits, strict=True)):
+        if not low <= value <= high:
+            bound, name = (low, "min") if value < low else (high, "max")
+            problems.append(
+                f"joint {i + 1} = {math.degrees(value):.3f} deg ({value:.4f} rad) is "
+                f"{'below' if value < low else 'above'} its limit {math.degrees(bound):.3f} deg "
+                f"(hardware.joints[{i}].{name}_angle_rad = {bound})"
+            )
+    return problems
+
+
+def _refuse(message: str, code: int) -> int:
+    print(f"error: {message}", file=sys.stderr)
+    return code
+
+
 def _ik(args: argparse.Namespace) -> int:
-    point = (args.x, args.y, args.z)
-    result = THESIS_DELTA.ik(point)
-    payload = {
-        "point_m": list(point),
-        "ok": bool(result.ok),
-        "joints_rad": [None if math.isnan(v) else v for v in result.joints.tolist()],
+    try:
+        point = parse_values(args.values, "length", "m" if args.si else "mm")
+    except UnitError as exc:
+        return _refuse(f"ik X Y Z: {exc}", 2)
+    robot, limits = _setup(args)
+    result = robot.ik(point)
+    joints = [float(v) for v in result.joints]
+    ok = bool(result.ok)
+    problems = _outside(joints, limits) if ok else []
+    payload: dict[str, Any] = {
+        "point_m": point,
+        "ok": ok and not problems,
+        "joints_rad": [None if math.isnan(v) else v for v in joints],
     }
+    if not ok:  # robot.project knows the workspace, not the joint limits
+        payload["nearest_m"] = [float(v) for v in robot.project(point, margin=_MARGIN_M).point]
+    if problems:
+        payload["problems"] = problems
     if args.json:
         print(json.dumps(payload))
-    elif result.ok:
-        degrees = ", ".join(f"{math.degrees(v):8.3f}" for v in result.joints)
-        mm = f"({args.x * 1e3:.1f}, {args.y * 1e3:.1f}, {args.z * 1e3:.1f}) mm"
-        print(f"IK {mm} -> joints [{degrees}] deg")
-    else:
-        nearest = THESIS_DELTA.project(point).point
-        mm = ", ".join(f"{v * 1e3:.1f}" for v in nearest)
-        print(f"unreachable: ({args.x}, {args.y}, {args.z}) m; nearest reachable ({mm}) mm")
-    return 0 if result.ok else 1
+        return 0 if payload["ok"] else 1
+    if payload["ok"]:
+        angles = ", ".join(_angle(v, args.si) for v in joints)
+        print(f"IK ({_point(point, args.si)}) -> joints {angles}")
+        return 0
+    if problems:
+        print(f"unreachable: ({_point(point, args.si)}) needs " + "; ".join(problems))
+        return 1
+    print(f"unreachable: ({_point(point, args.si)}) is outside the workspace (IK has no solution)")
+    print(f"nearest reachable point: ({_point(payload['nearest_m'], args.si)})")
+    there = robot.ik(payload["nearest_m"])
+    beyond = _outside([float(v) for v in there.joints], limits) if there.ok else []
+    if beyond:  # robot.project knows the geometric workspace only
+        print("  note: that point is outside the joint limits too: " + "; ".join(beyond))
+    return 1
 
 
 def _fk(args: argparse.Namespace) -> int:
-    joints = [math.radians(v) for v in args.joints] if args.deg else list(args.joints)
-    result = THESIS_DELTA.fk(joints)
+    default = "deg" if args.deg or not args.si else "rad"
+    try:
+        joints = parse_values(args.values, "angle", default)
+    except UnitError as exc:
+        return _refuse(f"fk J1 J2 J3: {exc}", 2)
+    robot, limits = _setup(args)
+    problems = _outside(joints, limits)
+    if problems:
+        return _refuse("refused: " + "; ".join(problems), 2)
+    result = robot.fk(joints)
     payload = {
         "joints_rad": joints,
         "ok": bool(result.ok),
-        "point_m": [None if math.isnan(v) else v for v in result.points.tolist()],
+        "point_m": [None if math.isnan(v) else float(v) for v in result.points],
     }
     if args.json:
         print(json.dumps(payload))
     elif result.ok:
-        mm = ", ".join(f"{v * 1e3:8.3f}" for v in result.points)
-        print(f"FK -> platform ({mm}) mm")
+        angles = ", ".join(_angle(v, args.si) for v in joints)
+        print(f"FK ({angles}) -> platform ({_point(result.points, args.si)})")
     else:
         print("no platform position: the three spheres do not meet")
     return 0 if result.ok else 1

@@ -16,6 +16,7 @@ import urllib.error
 import urllib.request
 from typing import Any
 
+from app.cli.progress import Progress
 from app.runs.health import summary
 from app.runs.trajectories import SinusoidParams
 
@@ -132,8 +133,10 @@ def _remote(
             "feedforward": params.feedforward,
         }
         run_id = running = _http(f"{url}/api/tests/sinusoid", "POST", body, headers)["run_id"]
-        while (run := _http(f"{url}/api/runs/{run_id}", headers=headers))["state"] == "running":
-            time.sleep(0.25)
+        with Progress(_expected_s(params), f"run {run_id}", "s") as bar:
+            while (run := _http(f"{url}/api/runs/{run_id}", headers=headers))["state"] == "running":
+                _show(bar, run.get("progress"))
+                time.sleep(0.25)
         running = None
     finally:
         if running is not None:
@@ -172,7 +175,9 @@ def _headless(
             controller.set_torque(True).result(timeout=2.0)
             runs = RunManager(controller, settings.runs.folder_path)
             run = runs.start_sinusoid(params)
-            run.done.wait()
+            with Progress(_expected_s(params), f"run {run.run_id}", "s") as bar:
+                while not run.done.wait(0.25):
+                    _show(bar, runs.progress(run.run_id))
         finally:
             unsafe = controller.stop()
             if unsafe:
@@ -180,6 +185,18 @@ def _headless(
     result = run.as_dict()
     result["files"] = {name: str(run.folder / name) for name in FILES}
     return result
+
+
+def _expected_s(params: SinusoidParams) -> float:
+    """The bar's length before the server says (its plan adds an approach and a stop)."""
+    return params.duration_s
+
+
+def _show(bar: Progress, progress: dict[str, Any] | None) -> None:
+    """Move the bar to a run's progress (GET /api/runs/{id}'s ``progress``), if known."""
+    if progress and progress.get("duration_s"):
+        done = progress.get("elapsed_s") or 0.0
+        bar.update_to(done, progress.get("phase"), total=progress["duration_s"])
 
 
 def print_stats(run: dict[str, Any]) -> None:

@@ -6,9 +6,10 @@ import argparse
 import ipaddress
 import os
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from app.config import ConfigError, Settings, load_settings
+if TYPE_CHECKING:  # app.config imports pydantic: only when a command runs (fast --help)
+    from app.config import Settings
 
 
 def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -57,6 +58,8 @@ def _is_loopback(host: str) -> bool:
 
 def check_exposure(settings: Settings) -> None:
     """Binding beyond loopback without a token would hand the robot to the network."""
+    from app.config import ConfigError
+
     if not _is_loopback(settings.server.host) and settings.server.token is None:
         raise ConfigError(
             f"server.host = {settings.server.host!r} is reachable from other machines: "
@@ -67,6 +70,7 @@ def check_exposure(settings: Settings) -> None:
 def run(args: argparse.Namespace) -> int:
     import uvicorn
 
+    from app.config import ConfigError, load_settings
     from app.server import create_app
 
     try:

@@ -172,6 +172,53 @@ def sizing_payload(sized: Sizing, level: Sizing, link_only: Sizing) -> dict[str,
     }
 
 
+def peak_cause_text(payload: dict[str, Any]) -> str:
+    """Why the peak torque is what it is, and why it differs from the thesis's 0.905 N m
+    (docs/design.md, "Motor sizing"); ``payload["peak_cause"]`` from ``design size``."""
+    c = payload["peak_cause"]
+    peak = payload["peak_nm"]["value"]
+    point = ", ".join(f"{v:g}" for v in c["point_mm"])
+    angles = ", ".join(f"{v:g}" for v in c["joints_deg"])
+    speed = f", {c['speed_rpm_there']:g} rpm there for the speed" if c["speed_rpm_there"] else ""
+    servo = payload["servo"]
+    if payload["passes"]:
+        verdict = "The servo passes."
+    elif payload["speed_margin"] < 1:
+        verdict = (
+            f"FAIL because the joint speed needed ({payload['speed_rpm']['value']:.0f} rpm) "
+            f"is above the servo's {servo['no_load_rpm']:g} rpm no-load speed, so no torque "
+            "is left at that speed (the speed constraint), not because of the static load."
+        )
+    else:
+        verdict = (
+            f"FAIL because the servo gives only {payload['available_nm_at_speed']:.3f} N m at "
+            f"the top speed, below the peak (the torque constraint)."
+        )
+    below = "passes" if c["passes_below"] else "still fails"
+    return "\n".join(
+        [
+            "",
+            f"Why the peak torque is {peak:.3f} N m, not the thesis's "
+            f"{THESIS_SIZING['peak_nm']} N m:",
+            f"- It happens at ({point}) mm, joint {c['joint']}, near the top of the region: "
+            f"{c['boundary_distance_mm']:g} mm from the workspace boundary, joint angles "
+            f"({angles}) deg, a link pointing almost straight up{speed}.",
+            f"- There the speed constraint (--speed in any direction) needs large joint speeds "
+            f"and accelerations, and those times the servo's reflected rotor inertia give the "
+            f"peak: at zero speed (gravity and --acceleration only) it is "
+            f"{c['peak_nm_zero_speed']:.3f} N m, with "
+            f"the link's inertia only (no rotor) {payload['peak_nm_link_inertia_only']:.3f} N m.",
+            f"- Away from the top (z <= {c['below_z_mm']:g} mm) the peak is "
+            f"{c['peak_nm_below']:.3f} N m at {c['speed_rpm_below']:g} rpm and the servo "
+            f"{below}.",
+            "- The thesis states no region, pose or mass model for its 0.905 N m; it lies "
+            "within the spread above (the tool is not wrong, the figures answer different "
+            'questions). See docs/design.md, "Motor sizing".',
+            f"- {verdict}",
+        ]
+    )
+
+
 def sizing_table(payload: dict[str, Any]) -> str:
     rows = [
         ("static torque [N m]", payload["static_nm"], THESIS_SIZING["static_nm"]),

@@ -11,22 +11,12 @@ from __future__ import annotations
 import argparse
 import math
 
-import numpy as np
-
 from app.cli.design import synth, workspace
 from app.cli.design.arguments import common, emit, mass_args, mass_from, robot_from
-from app.design import report
-from kinematics.dynamics import MassModel, inverse_dynamics
-from kinematics.sizing import (
-    XM430_W210_11V1,
-    XM430_W210_12V,
-    XM430_W210_THESIS,
-    Servo,
-    region_grid,
-    size_motors,
-)
 
-SERVOS = {"xm430-12v": XM430_W210_12V, "xm430-11v1": XM430_W210_11V1, "thesis": XM430_W210_THESIS}
+# The maths (numpy, scipy, the report) is imported by each handler, not here: building the
+# parser must stay cheap so that ``deltadash --help``, ``ik`` and ``fk`` start fast.
+SERVOS = ("xm430-12v", "xm430-11v1", "thesis")
 _THESIS_CUBE = ([-0.1, -0.1, -0.2903], [0.1, 0.1, -0.0903])  # 20 cm cube centred at -H
 
 
@@ -70,6 +60,10 @@ def _dynamics_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def _dynamics(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from kinematics.dynamics import inverse_dynamics
+
     mass = mass_from(args).with_payload(args.payload)
     torque = inverse_dynamics(
         robot_from(args), mass, args.point, args.velocity, args.acceleration, args.gravity
@@ -132,7 +126,19 @@ def _size_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def _size(args: argparse.Namespace) -> int:
-    servo = SERVOS[args.servo]
+    from app.design import report
+    from kinematics.dynamics import MassModel
+    from kinematics.sizing import (
+        XM430_W210_11V1,
+        XM430_W210_12V,
+        XM430_W210_THESIS,
+        Servo,
+        region_grid,
+        size_motors,
+    )
+
+    lines = {"xm430-12v": XM430_W210_12V, "xm430-11v1": XM430_W210_11V1}
+    servo = {**lines, "thesis": XM430_W210_THESIS}[args.servo]
     if args.stall or args.no_load:
         servo = Servo("custom", args.stall or servo.stall_nm, args.no_load or servo.no_load_rpm)
     robot, mass = robot_from(args), mass_from(args)
@@ -151,5 +157,40 @@ def _size(args: argparse.Namespace) -> int:
     )
     bare = size_motors(robot, link_only, grid, tilt_deg=args.tilt, **options)
     payload = report.sizing_payload(sized, level, bare)
-    emit(args, payload, report.sizing_table(payload))
+    payload["peak_cause"] = _peak_cause(args, robot, mass, sized, options)
+    emit(args, payload, report.sizing_table(payload) + "\n" + report.peak_cause_text(payload))
     return 0 if sized.passes else 1
+
+
+def _peak_cause(args: argparse.Namespace, robot, mass, sized, options) -> dict:
+    """What drives the peak: the pose at its point, the peak at zero speed
+    (no velocity terms), and the peak over the region without its top 30 %."""
+    from kinematics.sizing import region_grid, size_motors
+
+    point = sized.peak_nm.point
+    theta = robot.ik(point).joints
+    lower, upper = list(args.region[:3]), list(args.region[3:])
+    z_cut = upper[2] - 0.3 * (upper[2] - lower[2])
+    grid = region_grid(lower, [*upper[:2], z_cut], args.grid)
+    below = size_motors(robot, mass, grid, tilt_deg=args.tilt, **options)
+    still = size_motors(
+        robot,
+        mass,
+        region_grid(lower, upper, args.grid),
+        tilt_deg=args.tilt,
+        **{**options, "speed_m_s": 1e-9},  # 0 would divide by zero in the margins
+    )
+    return {
+        "point_mm": [round(float(v) * 1e3, 2) for v in point],
+        "joint": sized.peak_nm.joint + 1,
+        "joints_deg": [round(math.degrees(float(t)), 1) for t in theta],
+        "boundary_distance_mm": round(-float(robot.signed_distance(point)) * 1e3, 1),
+        "speed_rpm_there": round(sized.speed_rpm.value, 1)
+        if sized.speed_rpm.point == point
+        else None,
+        "peak_nm_zero_speed": round(still.peak_nm.value, 4),
+        "below_z_mm": round(z_cut * 1e3, 1),
+        "peak_nm_below": round(below.peak_nm.value, 4),
+        "speed_rpm_below": round(below.speed_rpm.value, 1),
+        "passes_below": below.passes,
+    }

@@ -7,8 +7,7 @@ import time
 from pathlib import Path
 
 from app.cli.design.arguments import common, emit
-from app.design import report
-from app.design.synthesis_report import write_synthesis_report
+from app.cli.progress import Progress
 from kinematics.synthesis import (
     THESIS_PLATFORM_RADIUS_M,
     Bounds,
@@ -69,17 +68,17 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def _synth(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
+    from app.design import report
+    from app.design.synthesis_report import write_synthesis_report
 
     extra = tuple(tuple(e) for e in args.extra) if args.extra else ((0.0, 0.0, -0.075),)
     bounds = Bounds(*(tuple(getattr(args, f"bounds_{n}")) for n in ("L", "l", "Rbar", "H")))
     problem = Problem(DesiredVolume(tuple(args.size), extra), bounds)
-    # tqdm(disable=None) hides itself when stderr is not a terminal (CI, pipes)
-    with tqdm(total=args.maxiter, desc="synthesis", unit="gen", disable=None) as bar:
+    # a bar on a terminal, a line every 10 % otherwise (CI, pipes); stdout keeps the result
+    with Progress(args.maxiter, "synthesis", "gen") as bar:
 
         def progress(generation: int, best: float) -> None:
-            bar.update(1)
-            bar.set_postfix(best=f"{best:.4g}")
+            bar.update_to(generation, note=f"best {best:.4g}")
 
         start = time.perf_counter()
         result = synthesize(

@@ -102,3 +102,22 @@ def test_every_command_explains_itself(command, capsys):
         _run(["design", command, "--help"], capsys)
     assert exited.value.code == 0
     assert "--json" in capsys.readouterr().out
+
+
+def test_size_on_its_defaults_says_what_drives_the_peak_and_why_it_is_not_the_thesis(capsys):
+    # issue 17: on its own defaults the command printed FAIL and 11.3 against 0.905 N m
+    code, out = _run(["design", "size", "--grid", "5"], capsys)
+    assert code == 1 and "FAIL" in out
+    assert "not the thesis's 0.905 N m" in out
+    assert "near the top of the region" in out and "reflected rotor inertia" in out
+    assert "speed constraint" in out and "docs/design.md" in out
+    code, out = _run(["design", "size", "--grid", "5", "--json"], capsys)
+    payload = json.loads(out)
+    cause = payload["peak_cause"]
+    assert cause["point_mm"] == payload["peak_nm"]["point_mm"]
+    assert cause["joint"] == payload["peak_nm"]["joint"]
+    # laws: removing the speed or the top of the region cannot raise the peak
+    assert cause["peak_nm_zero_speed"] <= payload["peak_nm"]["value"]
+    assert cause["peak_nm_below"] <= payload["peak_nm"]["value"]
+    assert cause["peak_nm_below"] < payload["peak_nm"]["value"] / 5  # the top drives it
+    assert 0 <= cause["boundary_distance_mm"] < 10

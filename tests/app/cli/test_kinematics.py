@@ -1,25 +1,125 @@
-"""The deltadash command line's kinematics demo."""
+"""``deltadash ik`` and ``fk``: one set of units, refusals, and ik's output pasted into fk."""
 
 import json
+import math
+import re
+
+import pytest
 
 from app.cli import main
 
 
+def _ik_joints(out: str) -> list[str]:
+    """The words after "joints" in ik's line, as a person would select and paste them."""
+    return out.split("joints", 1)[1].split()
+
+
+@pytest.mark.parametrize(
+    "point_mm", [(0.0, 0.0, -240.0), (35.5, -20.25, -210.0), (-80.0, 60.0, -280.0)]
+)
+@pytest.mark.parametrize("si", [False, True])
+def test_ik_output_pasted_into_fk_gives_back_the_point(capsys, point_mm, si):
+    flags = ["--si"] if si else []
+    given = [v / 1e3 for v in point_mm] if si else list(point_mm)
+    assert main(["ik", *map(str, given), *flags]) == 0
+    pasted = _ik_joints(capsys.readouterr().out)
+    assert pasted[1].rstrip(",") == ("rad" if si else "deg")  # every number has its unit
+    assert main(["fk", *pasted, *flags]) == 0
+    out = capsys.readouterr().out
+    unit = "m" if si else "mm"
+    found = [float(v) for v in re.findall(rf"(-?\d+\.\d+) {unit}\b", out.split("platform")[1])]
+    scale = 1e3 if si else 1.0
+    assert max(abs(a * scale - b) for a, b in zip(found, point_mm, strict=True)) < 0.01
+
+
+def test_si_output_pasted_into_a_default_fk_still_means_radians(capsys):
+    assert main(["ik", "0", "0", "-0.24", "--si"]) == 0
+    pasted = _ik_joints(capsys.readouterr().out)
+    assert main(["fk", *pasted, "--json"]) == 0  # default degrees, but each value says rad
+    point = json.loads(capsys.readouterr().out)["point_m"]
+    assert point == pytest.approx([0, 0, -0.24], abs=1e-5)
+
+
 def test_ik_json_round_trips_through_fk(capsys):
-    assert main(["ik", "0", "0", "-0.24", "--json"]) == 0
+    assert main(["ik", "0", "0", "-240", "--json"]) == 0
     ik = json.loads(capsys.readouterr().out)
-    assert ik["ok"] is True
-    assert main(["fk", *map(str, ik["joints_rad"]), "--json"]) == 0
+    assert ik["ok"] is True and ik["point_m"] == pytest.approx([0, 0, -0.24])
+    assert main(["fk", *map(str, ik["joints_rad"]), "--si", "--json"]) == 0
     fk = json.loads(capsys.readouterr().out)
     assert max(abs(a - b) for a, b in zip(fk["point_m"], [0, 0, -0.24], strict=True)) < 1e-12
 
 
+def test_fk_refuses_joints_outside_the_configured_limits(capsys):
+    # the report of issue 17: 30 "degrees" read as radians gave a point, silently
+    assert main(["fk", "30", "30", "30", "--si"]) == 2
+    err = capsys.readouterr().err
+    assert "joint 1 = 1718.873 deg" in err and "max_angle_rad = 1.65" in err
+
+
+def test_fk_limits_come_from_the_config(capsys, tmp_path):
+    config = tmp_path / "robot.toml"
+    joints = "".join(
+        f"[[hardware.joints]]\nservo_id = {i}\nmax_angle_rad = 0.4\n" for i in (1, 2, 3)
+    )
+    config.write_text(joints)
+    assert main(["fk", "20", "20", "20"]) == 0
+    capsys.readouterr()
+    assert main(["fk", "20", "20", "30", "--config", str(config)]) == 2
+    err = capsys.readouterr().err
+    assert "joint 3 = 30.000 deg" in err and "joint 1" not in err
+    assert f"limit {math.degrees(0.4):.3f} deg" in err
+
+
 def test_unreachable_point_names_the_nearest_reachable_one(capsys):
-    assert main(["ik", "0.4", "0", "-0.2"]) == 1
+    assert main(["ik", "400", "0", "-200"]) == 1
     out = capsys.readouterr().out
-    assert "unreachable" in out and "nearest reachable" in out
+    assert "outside the workspace" in out and "nearest reachable point" in out
+    nearest = [float(v) for v in re.findall(r"(-?\d+\.\d+) mm", out.split("nearest")[1])]
+    main(["ik", *map(str, nearest)])  # printed to 0.001 mm, still inside the workspace
+    assert "outside the workspace" not in capsys.readouterr().out
 
 
-def test_fk_in_degrees(capsys):
-    assert main(["fk", "30", "30", "30", "--deg"]) == 0
-    assert "platform" in capsys.readouterr().out
+def test_ik_says_which_joint_limit_a_reachable_point_needs_to_break(capsys):
+    # (50, 0, -90) mm is inside the geometric workspace but needs theta_1 = -74 deg
+    assert main(["ik", "50", "0", "-90"]) == 1
+    out = capsys.readouterr().out
+    assert "joint 1 = -74.09" in out and "min_angle_rad = -0.6" in out
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["ik", "0", "0", "-240", "deg"], "expected mm or m"),
+        (["fk", "30", "30", "30", "mm"], "expected deg or rad"),
+        (["ik", "0", "-240"], "expected 3 numbers, got 2"),
+        (["fk", "30", "x", "30"], "'x'"),
+        (["ik", "12,5", "-240"], "write a decimal point (12.5)"),  # never 12 and 5
+        (["ik", "0", "0,5", "-240"], "(0.5)"),
+    ],
+)
+def test_bad_input_is_refused_with_its_reason(capsys, argv, words):
+    assert main(argv) == 2
+    assert words in capsys.readouterr().err
+
+
+def test_the_fast_path_uses_the_configs_defaults():
+    from app.cli.kinematics import DEFAULT_JOINT_LIMITS_RAD
+    from app.config import Settings
+    from kinematics import THESIS_DELTA
+
+    settings = Settings()
+    for joint in settings.hardware.joints:
+        assert (joint.min_angle_rad, joint.max_angle_rad) == DEFAULT_JOINT_LIMITS_RAD
+    robot = settings.robot.build()
+    assert type(robot) is type(THESIS_DELTA)
+    for name in ("L", "l", "R", "r"):
+        assert getattr(robot, name) == getattr(THESIS_DELTA, name)
+
+
+def test_environment_settings_are_honoured(capsys, monkeypatch):
+    monkeypatch.setenv(
+        "DELTADASH_HARDWARE__JOINTS",
+        '[{"servo_id": 1, "max_angle_rad": 0.3}, {"servo_id": 2}, {"servo_id": 3}]',
+    )
+    assert main(["fk", "20", "20", "20"]) == 2
+    assert "joint 1 = 20.000 deg" in capsys.readouterr().err

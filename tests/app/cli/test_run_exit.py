@@ -4,6 +4,7 @@ at exit (torque off failed), and 0 when it could."""
 from __future__ import annotations
 
 import contextlib
+import re
 
 import pytest
 
@@ -42,3 +43,4 @@ def test_headless_run_exits_non_zero_when_torque_off_at_exit_fails(
     assert ": done" in out and "test: sinusoid per axis" in out  # the run itself ended well
     assert ("torque off at exit failed" in err) == (code == 3), err
     assert ("torque", True) in bus.calls
+    assert re.search(r"run \S+: \d+% \(", err), err  # its progress, as lines (not a TTY)
