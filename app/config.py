@@ -143,6 +143,12 @@ class JogSettings(_Section):
     hold_timeout_s: float = Field(
         0.15, gt=0, le=2.0, description="a held jog stops this long after its last heartbeat [s]"
     )
+    confirm_move_m: float = Field(
+        0.05, gt=0, description="the dashboard asks before a typed move longer than this [m]"
+    )
+    home_m: tuple[float, float, float] = Field(
+        (0.0, 0.0, -0.24), description="the point the dashboard's Go home button goes to [m]"
+    )
 
 
 class SafetySettings(_Section):

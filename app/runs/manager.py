@@ -89,7 +89,10 @@ class RunManager:
     def plan(self, params: TimedPath):
         """(plan, start point, start joints) from where the robot is; GoalRejected if infeasible."""
         snap = self.controller.snapshot()
-        start = snap.point_commanded_m
+        # the command is the robot's point only while it holds it (torque on, no stop); a
+        # relaxed or stopped arm is where it is measured (it starts from there: resync)
+        holding = snap.torque and not snap.estopped and not snap.faults
+        start = snap.point_commanded_m if holding else snap.point_measured_m
         if not np.isfinite(start).all():
             start = snap.point_measured_m
         if not np.isfinite(start).all():

@@ -226,6 +226,10 @@ class GoalView:
         self._update_trail(snap.point_measured_m, now_s)
         goal = snap.goal_m
         idle = not self._dragging and now_s - self._drag_ended_at > FOLLOW_AFTER_DRAG_S
+        # the marker is the loop's setpoint: none (torque off) shows none, not an old goal
+        has_goal = bool(np.isfinite(goal).all())
+        if self.marker.visible != has_goal:
+            self.marker.visible = has_goal
         if idle and np.isfinite(goal).all() and np.abs(goal - self.marker.position).max() > 1e-4:
             self.gizmo.position = goal
             self.marker.position = goal

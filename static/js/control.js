@@ -13,6 +13,14 @@ const GAMEPAD_PERIOD_MS = 50;
 const DEADZONE = 0.15;
 const DEADMAN_BUTTON = 4; // LB on standard-mapping pads
 let maxSpeed = 0.5; // [m/s], /api/info's jog limit
+let confirmMoveM = 0.05; // [m], /api/info's confirm_move_m: longer typed moves ask first
+let homeM = [0, 0, -0.24]; // [m], /api/info's home_m
+let latest = null; // the last GET /api/status (status.js hands each one here)
+// always moving (a goal's or jog's "jog" source stays on at its target: moving only on the way)
+const MOVING_MODES = new Set(["move", "move-joints", "test", "hold-world"]);
+const MOVING_RAD_S = 0.05; // a joint faster than this counts as moving (torque-off asks)
+const ON_THE_WAY_M = 5e-5; // the command this far from the goal, or from the last status's
+let previousCommandM = null; // the commanded point [m] in the status before the latest
 
 // A command that needs the control lease (api.js takes it on first use); another holder is
 // taken over only if the operator agrees.
@@ -31,7 +39,149 @@ export async function command(path, body) {
 }
 
 export function estop() {
-  post("/api/estop").then(() => showMessage("E-stop", "error")).catch(showError);
+  // nothing before the request: not the confirmation, not a pending promise
+  post("/api/estop").then(() => showMessage("E-stop: nothing moves until Reset", "error", {
+    clearsWhen: (s) => !s.estopped,
+  })).catch(showError);
+  answerConfirm(false); // a pending move is not wanted after an e-stop
+}
+
+// ---- an in-page confirmation (not window.confirm: that would block the e-stop keys) ----
+let pendingConfirm = null;
+
+function answerConfirm(yes) {
+  const resolve = pendingConfirm;
+  pendingConfirm = null;
+  document.getElementById("confirm").hidden = true;
+  if (resolve) resolve(yes);
+}
+
+// Ask the operator; resolves true (the yes button) or false (cancel, e-stop, another ask).
+export function askConfirm(text, yesLabel) {
+  answerConfirm(false);
+  setText("confirm-text", text);
+  setText("confirm-yes", yesLabel);
+  document.getElementById("confirm").hidden = false;
+  document.getElementById("confirm-no").focus();
+  return new Promise((resolve) => { pendingConfirm = resolve; });
+}
+
+// ---- typed goals: decimal point or comma, to 0.01 mm, shown before they are sent ----
+const DECIMAL = /^[+\-\u2212]?(\d+([.,]\d*)?|[.,]\d+)$/;
+
+// A typed number in mm: "12.5", "12,5" (a decimal comma) and "-240" are numbers; "1,234.5",
+// "12,5,0", "" and "1e3" are refused with the reason. Rounded to 0.01 mm.
+export function parseMm(text) {
+  const t = String(text).trim().replace("\u2212", "-");
+  if (!t) return { error: "is empty" };
+  if (!DECIMAL.test(t)) return { error: `"${text}" is not a number (e.g. 12.5 or 12,5)` };
+  const value = Number(t.replace(",", "."));
+  if (!Number.isFinite(value)) return { error: `"${text}" is not a number` };
+  return { value: Math.round(value * 100) / 100 };
+}
+
+const fmt2 = (v) => v.toFixed(2);
+const tripleMm = (p) => `(${p.map(fmt2).join(", ")}) mm`;
+
+// The point the robot is at for a new move [m]: its goal while torque holds it, else measured.
+function robotPointM() {
+  const s = latest;
+  if (!s) return null;
+  const goal = s.goal && s.goal.position_m;
+  if (s.torque && goal && goal.every((v) => v !== null)) return goal;
+  const meas = s.ee && s.ee.position_m;
+  return meas && meas.every((v) => v !== null) ? meas : null;
+}
+
+function distanceMm(targetMm) {
+  const here = robotPointM();
+  if (!here) return null;
+  return Math.hypot(...targetMm.map((v, i) => v - here[i] * 1000));
+}
+
+// The form's target in mm, or the first field's error; marks bad fields.
+function formTarget() {
+  const form = document.getElementById("goal-form");
+  const target = [];
+  let error = null;
+  for (const k of ["x", "y", "z"]) {
+    const input = form.elements[k];
+    const parsed = parseMm(input.value);
+    input.setAttribute("aria-invalid", parsed.error ? "true" : "false");
+    if (parsed.error && !error) error = `${k}: ${parsed.error}`;
+    target.push(parsed.value);
+  }
+  return error ? { error } : { target };
+}
+
+function describeMove(targetMm) {
+  const d = distanceMm(targetMm);
+  return `target ${tripleMm(targetMm)}` + (d === null ? "" : `, distance ${d.toFixed(2)} mm`);
+}
+
+function updateGoalPreview() {
+  const out = document.getElementById("goal-preview");
+  const { target, error } = formTarget();
+  out.textContent = error ? `Not sent: ${error}` : `Go will send: ${describeMove(target)}`;
+  out.className = error ? "goal-preview bad" : "goal-preview muted";
+}
+
+// Go to ``targetMm`` (3 numbers, mm): a move longer than confirm_move_m asks first, naming the
+// target and the distance; nothing is sent on cancel. Resolves true if the goal was accepted.
+export async function goTo(targetMm, what = "Go to") {
+  const d = distanceMm(targetMm);
+  if (d === null || d > confirmMoveM * 1000) {
+    const why = d === null ? "the robot's position is not known yet" : `longer than ${(confirmMoveM * 1000).toFixed(0)} mm`;
+    const ok = await askConfirm(`${what}: ${describeMove(targetMm)} (${why}). Move?`, "Move");
+    if (!ok) {
+      showMessage("Move cancelled: nothing was sent");
+      return false;
+    }
+  }
+  try {
+    await command("/api/goal", { position_m: targetMm.map((v) => v / 1000) });
+    showMessage(`Going to ${tripleMm(targetMm)}`);
+    return true;
+  } catch (err) {
+    showError(err);
+    return false;
+  }
+}
+
+export function goHome() {
+  return goTo(homeM.map((v) => Math.round(v * 1e5) / 100), "Go to the home point");
+}
+
+export const homePointM = () => homeM;
+
+export function homeText() {
+  return tripleMm(homeM.map((v) => v * 1000));
+}
+
+function armMoving(s) {
+  if (!s || !s.torque) return false;
+  const speeds = (s.joints && s.joints.velocity_rad_s) || [];
+  const apart = (a, b) => Boolean(a && b) && a.some((v, i) => v !== null && b[i] !== null && Math.abs(v - b[i]) > ON_THE_WAY_M);
+  const onTheWay = apart(s.goal.position_m, s.ee.commanded_m) || apart(s.ee.commanded_m, previousCommandM);
+  return MOVING_MODES.has(s.mode) || onTheWay || speeds.some((v) => v !== null && Math.abs(v) > MOVING_RAD_S);
+}
+
+async function torqueOff() {
+  if (armMoving(latest)) {
+    const ok = await askConfirm("The arm is moving. Torque off lets it drop and hang; " +
+      "E-STOP stops it instead. Torque off anyway?", "Torque off");
+    if (!ok) return;
+  }
+  command("/api/torque", { enabled: false }).catch(showError);
+}
+
+// status.js hands every status here: the robot's point for distances, moving for torque off.
+export function controlStatus(s) {
+  previousCommandM = latest ? latest.ee.commanded_m : null;
+  latest = s;
+  if (document.activeElement?.closest?.("#goal-form") || !document.getElementById("goal-preview").textContent) {
+    updateGoalPreview(); // the distance follows the robot while the operator types
+  }
 }
 
 function speedMS() {
@@ -117,8 +267,10 @@ function bindButtons() {
   const on = (id, path, body) => document.getElementById(id).addEventListener("click", () =>
     command(path, body).catch(showError));
   on("torque-on", "/api/torque", { enabled: true });
-  on("torque-off", "/api/torque", { enabled: false });
+  document.getElementById("torque-off").addEventListener("click", torqueOff);
   on("reset", "/api/reset");
+  document.getElementById("confirm-yes").addEventListener("click", () => answerConfirm(true));
+  document.getElementById("confirm-no").addEventListener("click", () => answerConfirm(false));
   const pad = document.querySelector(".pad");
   pad.addEventListener("pointerdown", (event) => {
     const spec = event.target.closest("[data-jog]")?.dataset.jog;
@@ -129,13 +281,17 @@ function bindButtons() {
   for (const type of ["pointerup", "pointercancel", "lostpointercapture"]) {
     pad.addEventListener(type, () => releaseHold("pad"));
   }
-  document.getElementById("goal-form").addEventListener("submit", (event) => {
+  const goalForm = document.getElementById("goal-form");
+  goalForm.addEventListener("input", updateGoalPreview);
+  goalForm.addEventListener("submit", (event) => {
     event.preventDefault();
-    const form = new FormData(event.target);
-    const goal = ["x", "y", "z"].map((k) => Number(form.get(k)) / 1000);
-    command("/api/goal", { position_m: goal })
-      .then(() => showMessage("Goal accepted"))
-      .catch(showError);
+    const { target, error } = formTarget();
+    updateGoalPreview();
+    if (error) {
+      showMessage(`Not sent: ${error}`, "error");
+      return;
+    }
+    goTo(target);
   });
 }
 
@@ -162,6 +318,8 @@ function pollGamepad() {
 
 export function startControl(info) {
   if (info && info.jog_max_velocity_m_s) maxSpeed = info.jog_max_velocity_m_s;
+  if (info && info.confirm_move_m) confirmMoveM = info.confirm_move_m;
+  if (info && Array.isArray(info.home_m)) homeM = info.home_m;
   bindButtons();
   document.addEventListener("keydown", onKey);
   document.addEventListener("keyup", onKeyUp);

@@ -5,7 +5,7 @@
 import { get, getBlob, post, mm, fixed } from "./api.js";
 import { command } from "./control.js";
 import { escape } from "./status.js";
-import { showError, showMessage, setText } from "./ui.js";
+import { operatorText, showError, showMessage, setText } from "./ui.js";
 
 const RUNS_POLL_MS = 2000;
 const PREVIEW_DELAY_MS = 300;
@@ -32,10 +32,12 @@ async function preview() {
     const speed = c.peak_joint_speed_rad_s === null ? "–" : fixed(c.peak_joint_speed_rad_s, 2);
     const head = `peak joint speed ${speed} rad/s (limit ${fixed(c.joint_speed_limit_rad_s, 1)}), ` +
       `peak platform speed ${fixed(c.peak_speed_m_s, 2)} m/s: `;
-    out.textContent = head + (c.feasible ? "feasible" : c.detail);
+    out.textContent = head + (c.feasible ? "feasible" : operatorText({ message: c.detail }).text);
+    out.title = c.feasible ? "" : `server: ${c.detail}`;
     out.className = c.feasible ? "preview ok" : "preview bad";
   } catch (err) {
-    out.textContent = err.message;
+    out.textContent = operatorText(err).text;
+    out.title = `server: ${err.message}`;
     out.className = "preview bad";
   }
 }
@@ -77,7 +79,9 @@ function testShare(phase) {
 }
 
 export function onStatus(s) {
-  const key = `${s.mode}|${s.torque}|${s.estopped}|${s.faults.length}`;
+  // a relaxed arm moves on its own (falls, swings): re-check as it moves, to the centimetre
+  const where = s.torque ? "" : (s.ee.position_m || []).map((v) => (v === null ? "" : Math.round(v * 100))).join(",");
+  const key = `${s.mode}|${s.torque}|${s.estopped}|${s.faults.length}|${where}`;
   if (key !== previewKey && s.mode !== "test") {
     previewKey = key;
     schedulePreview();

@@ -1,10 +1,13 @@
 // Header, faults and the servo table from GET /api/status, polled; connection banner.
 
 import { get, mm, deg, fixed } from "./api.js";
-import { command } from "./control.js";
-import { showError, setText } from "./ui.js";
+import { command, controlStatus, goHome, homePointM, homeText } from "./control.js";
+import { showError, setText, toastStatus } from "./ui.js";
 
 const POLL_MS = 200;
+const STALE_MS = 1000; // values older than this are greyed and marked stale
+const HANGING_BELOW_M = 0.1; // measured this far below the home point: the arm hangs
+let lastStatusAt = null; // performance.now() of the last status answer
 const BACKENDS = { sim: "simulator", emulated: "emulated bus", dynamixel: "real servos" };
 export const state = { status: null, online: false, streamOnline: false, why: "", listeners: [] };
 
@@ -75,11 +78,46 @@ function renderFaults(s) {
   list.hidden = items.length === 0;
 }
 
+const known = (v) => Boolean(v) && v.every((x) => x !== null && x !== undefined);
+
+// The loop has a setpoint (so a tracking error means something) only while torque holds the
+// arm, nothing stopped it and there is a goal: otherwise command - measured is a stale figure.
+export function hasSetpoint(s) {
+  return s.torque && !s.estopped && !s.faults.length && known(s.goal.position_m);
+}
+
 function renderPosition(s) {
-  const triple = (v) => (v ? v.map((x) => mm(x)).join(", ") + " mm" : "–");
+  const triple = (v) => (known(v) ? v.map((x) => mm(x, 2)).join(", ") + " mm" : "–");
   setText("pos-meas", triple(s.ee.position_m));
   setText("pos-goal", triple(s.goal.position_m));
-  setText("pos-err", triple(s.ee.error_m));
+  const setpoint = hasSetpoint(s);
+  setText("pos-err", setpoint ? triple(s.ee.error_m) : "–");
+  document.getElementById("pos-err").title = setpoint ? "goal minus measured" : "no setpoint (torque off or stopped): no error";
+}
+
+// First steps: a relaxed arm (torque off), or one hanging below the workspace, says what to do.
+function renderFirstSteps(s) {
+  const panel = document.getElementById("first-steps");
+  const meas = s.ee.position_m;
+  const homeZ = homePointM()[2];
+  const hanging = known(meas) && meas[2] < homeZ - HANGING_BELOW_M;
+  const show = !s.estopped && !s.faults.length && (!s.torque || hanging);
+  panel.hidden = !show;
+  if (!show) return;
+  const where = known(meas) ? ` at z = ${mm(meas[2], 0)} mm` : "";
+  setText("first-steps-why", s.torque
+    ? `The arm is below the workspace${where}. Go to the home point first.`
+    : `Torque is off: the arm hangs relaxed${where}. Torque on, then go to the home point.`);
+  setText("home-point", homeText());
+  document.getElementById("first-torque").disabled = s.torque;
+  document.getElementById("first-torque").closest("li").classList.toggle("done", s.torque);
+  document.getElementById("first-home").disabled = !s.torque;
+}
+
+// Every value on the page is from the last status; older than STALE_MS it is greyed.
+function checkStale() {
+  const stale = lastStatusAt === null || performance.now() - lastStatusAt > STALE_MS;
+  document.body.classList.toggle("stale", stale);
 }
 
 function servoRow(j, i, torque) {
@@ -108,14 +146,20 @@ export function escape(text) {
 }
 
 async function poll() {
+  const askedAt = performance.now();
   try {
     const s = await get("/api/status");
     state.status = s;
+    lastStatusAt = performance.now();
+    checkStale();
     if (!state.online) setOnline(true);
     renderHeader(s);
     renderFaults(s);
     renderPosition(s);
     renderServos(s);
+    renderFirstSteps(s);
+    controlStatus(s);
+    toastStatus(s, askedAt);
     state.listeners.forEach((fn) => fn(s));
   } catch (err) {
     setOnline(false, err.message || "no answer");
@@ -129,5 +173,9 @@ export function startStatus() {
     const id = event.target.dataset.reboot;
     if (id) command("/api/reset").catch(showError);
   });
+  document.getElementById("first-torque").addEventListener("click", () =>
+    command("/api/torque", { enabled: true }).catch(showError));
+  document.getElementById("first-home").addEventListener("click", goHome);
+  setInterval(checkStale, 250);
   poll();
 }

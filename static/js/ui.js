@@ -1,22 +1,90 @@
-// Small page helpers: text updates without layout churn, and a transient message line.
+// Small page helpers: text updates without layout churn, the message line (toast), and the
+// one place server errors become operator wording (mm, degrees, buttons by their names).
 
 let toastTimer = null;
+let toastClears = null; // (status) => true once the toast's condition has cleared
+let toastShownAt = 0; // performance.now() when it was shown
 
 export function setText(id, text) {
   const el = document.getElementById(id);
   if (el && el.textContent !== text) el.textContent = text;
 }
 
-export function showMessage(text, kind = "info") {
+// A message for the operator. ``detail``: the server's own words (a tooltip, and the console);
+// ``clearsWhen(status)``: the toast goes as soon as the status says its condition cleared
+// (e.g. "e-stop is active" after Reset), not only after its time.
+export function showMessage(text, kind = "info", { detail = "", clearsWhen = null } = {}) {
   const toast = document.getElementById("toast");
   toast.textContent = text;
+  toast.title = detail ? `server: ${detail}` : "";
   toast.className = `toast ${kind}`;
   toast.hidden = false;
+  toastClears = clearsWhen;
+  toastShownAt = performance.now();
   clearTimeout(toastTimer);
-  toastTimer = setTimeout(() => { toast.hidden = true; }, kind === "error" ? 8000 : 3000);
+  // a toast with a condition stays while it holds (e-stop still active); others time out
+  if (!clearsWhen) toastTimer = setTimeout(hideToast, kind === "error" ? 8000 : 3000);
+}
+
+function hideToast() {
+  document.getElementById("toast").hidden = true;
+  toastClears = null;
+}
+
+// Each status poll: a toast whose condition has cleared goes. ``askedAt``: when that status
+// was requested; one asked before the toast was shown may predate its condition.
+export function toastStatus(status, askedAt) {
+  if (toastClears && askedAt > toastShownAt && toastClears(status)) {
+    clearTimeout(toastTimer);
+    hideToast();
+  }
 }
 
 export function showError(err) {
-  const status = err && err.status ? ` (${err.status})` : "";
-  showMessage(`${err && err.message ? err.message : err}${status}`, "error");
+  const { text, clearsWhen } = operatorText(err);
+  const detail = err && err.message ? `${err.message}${err.status ? ` (HTTP ${err.status})` : ""}` : "";
+  if (detail) console.info("server said:", detail);
+  showMessage(text, "error", { detail, clearsWhen });
+}
+
+const METRE_FIELDS = /\b(position|delta|amplitude|offset)_m\b/g;
+
+// "[0.0300, 0.0000, -0.2300] m" -> "(30.0, 0.0, -230.0) mm"; "0.5 m" -> "500.0 mm".
+export function metresToMm(text) {
+  const num = "-?\\d+(?:\\.\\d+)?(?:e-?\\d+)?";
+  return text
+    .replace(new RegExp(`\\[\\s*(${num})\\s*,\\s*(${num})\\s*,\\s*(${num})\\s*\\]\\s*m\\b`, "g"),
+      (_, x, y, z) => `(${[x, y, z].map((v) => (Number(v) * 1000).toFixed(1)).join(", ")}) mm`)
+    .replace(new RegExp(`(${num}) m\\b(?!/)`, "g"), (_, v) => `${(Number(v) * 1000).toFixed(1)} mm`)
+    .replace(/(-?\d+(?:\.\d+)?) rad\b(?!\/)/g, (_, v) => `${(Number(v) * 180 / Math.PI).toFixed(1)}°`);
+}
+
+// A server error (ApiError: status, message = the detail) in an operator's words, and when
+// its condition clears (for the toast). API paths, field names and SI units stay in the API.
+export function operatorText(err) {
+  const raw = String(err && err.message ? err.message : err);
+  if (raw.startsWith("e-stop is active")) {
+    return { text: "E-stop is active: press Reset first.", clearsWhen: (s) => !s.estopped };
+  }
+  if (raw.startsWith("torque is off")) {
+    return { text: "Torque is off: press Torque on first.", clearsWhen: (s) => s.torque };
+  }
+  const fault = raw.match(/^fault: (.*); POST \/api\/reset first$/);
+  if (fault) {
+    return { text: `Fault: ${metresToMm(fault[1])}. Press Reset first.`, clearsWhen: (s) => !s.faults.length && !s.estopped };
+  }
+  if (raw.startsWith("position_m: outside the workspace")) {
+    return { text: "That point is outside the workspace: choose a point inside it.", clearsWhen: null };
+  }
+  if (raw.startsWith("position_m: no joint solution")) {
+    return { text: "The arm cannot reach that point (no joint angles for it).", clearsWhen: null };
+  }
+  if (err && err.status === 0) return { text: `No answer from the server: ${raw}`, clearsWhen: null };
+  let text = raw
+    .replace(/POST \/api\/reset first/g, "press Reset first")
+    .replace(/POST \/api\/torque \{"enabled": true\} first/g, "press Torque on first")
+    .replace(/\(a goal or jog\)/g, "(Go to or jog)");
+  text = metresToMm(text).replace(METRE_FIELDS, (_, what) => what === "position" ? "goal" : what);
+  text = text.replace(/^infeasible: /, "Not possible: ");
+  return { text: text.charAt(0).toUpperCase() + text.slice(1), clearsWhen: null };
 }

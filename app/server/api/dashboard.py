@@ -65,6 +65,8 @@ def get_info(settings: SettingsDep, scene: SceneDep) -> dict[str, Any]:
         "telemetry_hz": settings.server.telemetry_hz,
         "jog_max_velocity_m_s": settings.jog.max_velocity_m_s,
         "jog_step_m": settings.jog.step_m,
+        "confirm_move_m": settings.jog.confirm_move_m,
+        "home_m": list(settings.jog.home_m),
         "joint_speed_limit_rad_s": settings.limits.joint_speed_rad_s,
         "loop_rate_hz": settings.loop.rate_hz,
     }

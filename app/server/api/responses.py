@@ -325,5 +325,7 @@ class InfoOut(_Out):
     telemetry_hz: float
     jog_max_velocity_m_s: float
     jog_step_m: float
+    confirm_move_m: float
+    home_m: list[float]
     joint_speed_limit_rad_s: float
     loop_rate_hz: float

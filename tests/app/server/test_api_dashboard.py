@@ -111,3 +111,35 @@ def test_with_a_token_info_says_so_and_the_check_needs_it(tmp_path) -> None:
         assert client.post(url, json={"duration_s": 1}).status_code == 401
         headers = {"Authorization": f"Bearer {token}"}
         assert client.post(url, json={"duration_s": 1}, headers=headers).status_code == 200
+
+
+def test_info_names_the_long_move_distance_and_a_reachable_home(client: TestClient) -> None:
+    info = ok_json(client.get("/api/info"))
+    settings = client.app.state.settings
+    assert info["confirm_move_m"] == settings.jog.confirm_move_m == 0.05
+    assert info["home_m"] == list(settings.jog.home_m)
+    _, ok = settings.robot.build().ik(np.array(info["home_m"]))
+    assert bool(ok), "the dashboard's home point must be reachable"
+
+
+def test_check_of_a_relaxed_arm_starts_from_where_it_hangs(client: TestClient) -> None:
+    """Torque off: the command is the last held point, the arm falls from it; the preview's
+    "the robot is there now" must name the measured point, not the old command."""
+    hold_at_centre(client)
+    held = np.array(ok_json(client.get("/api/status"))["ee"]["commanded_m"])
+    ok_json(client.post("/api/torque", json={"enabled": False}))
+
+    def names_the_measured_point() -> bool:
+        detail = client.post("/api/tests/sinusoid/check", json={"duration_s": 2}).json()["detail"]
+        if not detail or "there now" not in detail:
+            return False
+        named = np.array([float(v) for v in detail.split("point [")[1].split("]")[0].split(",")])
+        measured = np.array(ok_json(client.get("/api/status"))["ee"]["position_m"])
+        return bool(
+            np.linalg.norm(named - measured) < 0.005 and np.linalg.norm(named - held) > 0.02
+        )
+
+    try:
+        wait_for(names_the_measured_point, "the check to start from the hanging arm")
+    finally:
+        hold_at_centre(client)
