@@ -22,7 +22,7 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from app.runs import describe  # noqa: E402
-from app.runs.report import STYLE, break_gaps, reference_and_measured, scored_mask  # noqa: E402
+from app.runs.report import DRAWING, STYLE, break_gaps, reference_and_measured, scored_mask  # noqa: E402
 from app.runs.stats import AXES  # noqa: E402
 
 MIN_RUNS, MAX_RUNS = 2, 8
@@ -200,10 +200,11 @@ def figure(runs: list[dict[str, Any]], folders: list[Path], skip_s: float) -> Fi
 
 def png(runs: list[dict[str, Any]], folders: list[Path], skip_s: float) -> bytes:
     """:func:`figure` as PNG bytes."""
-    fig = figure(runs, folders, skip_s)
     buffer = BytesIO()
-    try:
-        fig.savefig(buffer, format="png", dpi=100)
-    finally:
-        plt.close(fig)
+    with DRAWING:
+        fig = figure(runs, folders, skip_s)
+        try:
+            fig.savefig(buffer, format="png", dpi=100)
+        finally:
+            plt.close(fig)
     return buffer.getvalue()

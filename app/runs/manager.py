@@ -24,7 +24,7 @@ from app.control.sources import Progressing
 from app.runs.feasibility import check_path
 from app.runs.logs import RunLog
 from app.runs.recorder import Recorder
-from app.runs.recovery import abandoned, recover
+from app.runs.recovery import abandoned, draw_report, recover
 from app.runs.run import Run
 from app.runs.source import TrajectorySource
 from app.runs.trajectories import SinusoidParams, TimedPath, plan_sinusoid
@@ -74,11 +74,20 @@ class RunManager:
     def _recover(self, run: Run) -> None:
         rate_hz = run.conditions.get("loop_rate_hz")
         period_s = 1.0 / rate_hz if rate_hz else self.controller.period_s
+        skip_s = self.controller.settings.runs.stats_skip_s
+        rows: list[dict[str, Any]] = []
         try:
-            recover(run, self.controller.settings.runs.stats_skip_s, period_s)
+            rows = recover(run, skip_s, period_s)
         except OSError as exc:  # listed as interrupted all the same
             log.warning("run %s: could not save its record: %s", run.run_id, exc)
         log.warning("run %s was interrupted: %s", run.run_id, run.reason)
+        if rows:  # the report after start-up: the server answers meanwhile
+            threading.Thread(
+                target=draw_report,
+                args=(run, rows, skip_s, period_s),
+                name=f"report-{run.run_id}",
+                daemon=True,
+            ).start()
 
     def list(self) -> list[Run]:
         return sorted(self._runs.values(), key=lambda r: r.started_at, reverse=True)

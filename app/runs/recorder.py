@@ -155,15 +155,20 @@ class Recorder:
             return
         stats = run_stats(self._rows, self.skip_s, self.controller.period_s)
         stats["health"] = assess(self._rows, self.controller.settings.loop.rate_hz)
-        write_report(
-            self.run.folder,
-            self._rows,
-            self.run,
-            stats,
-            abort_reason,
-            self.skip_s,
-            self.controller.period_s,
-        )
-        self.run.has_report = True
+        # The record is final before the report is drawn (seconds of matplotlib on a loaded
+        # machine): the run has ended, so it must not hold the robot's next run back.
         self.run.finish(stats, abort_reason, len(self._rows))
-        self.run.save()
+        try:
+            self.run.write()
+            write_report(
+                self.run.folder,
+                self._rows,
+                self.run,
+                stats,
+                abort_reason,
+                self.skip_s,
+                self.controller.period_s,
+            )
+            self.run.has_report = True
+        finally:
+            self.run.save()

@@ -41,12 +41,14 @@ def logged_rows(run: Run) -> list[dict[str, Any]]:
     return read_csv_rows(csv_path) if csv_path.exists() else []
 
 
-def recover(run: Run, skip_s: float, period_s: float) -> None:
+def recover(run: Run, skip_s: float, period_s: float) -> list[dict[str, Any]]:
     """Finish an abandoned run from its logs and save its record (see the module's text).
 
     ``skip_s``: start of the scored part after the test begins [s] (``runs.stats_skip_s``);
     ``period_s``: the loop period the run ran at [s]. Raises OSError if the record cannot
     be saved; a log that cannot be read or finished only leaves the stats out and says so.
+    Returns the logged rows the stats came from (empty without stats), for
+    :func:`draw_report`.
     """
     mcap = run.folder / "log.mcap"
     last_written = max(
@@ -68,7 +70,6 @@ def recover(run: Run, skip_s: float, period_s: float) -> None:
         try:
             run.stats = run_stats(rows, skip_s, period_s)
             run.stats["health"] = assess(rows, 1.0 / period_s)
-            _draw(run, rows, skip_s, period_s)
         except Exception as exc:  # noqa: BLE001
             log.warning("run %s: stats of its logged ticks failed: %s", run.run_id, exc)
             notes.append(f"its stats could not be computed ({exc})")
@@ -82,9 +83,16 @@ def recover(run: Run, skip_s: float, period_s: float) -> None:
     )
     run.ended_at = last_written  # when its logs were last written
     run.save()
+    return rows if run.stats else []
 
 
-def _draw(run: Run, rows: list[dict[str, Any]], skip_s: float, period_s: float) -> None:
-    reason = "the server stopped during the run"
-    write_report(run.folder, rows, run, run.stats, reason, skip_s, period_s, "interrupted")
-    run.has_report = True
+def draw_report(run: Run, rows: list[dict[str, Any]], skip_s: float, period_s: float) -> None:
+    """Draw a recovered run's report from its logged ``rows`` (seconds of matplotlib, so the
+    manager does it after start-up, in a thread) and save the record with ``has_report``."""
+    try:
+        reason = "the server stopped during the run"
+        write_report(run.folder, rows, run, run.stats, reason, skip_s, period_s, "interrupted")
+        run.has_report = True
+        run.write()
+    except Exception as exc:  # noqa: BLE001 - a report that fails must not stop the server
+        log.warning("run %s: its report could not be drawn: %s", run.run_id, exc)

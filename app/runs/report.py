@@ -10,6 +10,7 @@ the health verdict. Saved as report.png (screen) and report.pdf (vector, for pri
 from __future__ import annotations
 
 import textwrap
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -24,6 +25,10 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from app.runs import describe  # noqa: E402
 from app.runs.stats import AXES  # noqa: E402
+
+# pyplot's figure list and rc_context's global rcParams are not thread-safe: a report
+# drawn in a run's writer thread and a comparison drawn for a request take turns.
+DRAWING = threading.Lock()
 
 if TYPE_CHECKING:
     from app.runs.run import Run
@@ -206,12 +211,13 @@ def write_report(
     ``skip_s`` [s] the stats' skip at the test's start, ``period_s`` [s] the loop period,
     ``state`` the outcome when it is not read from ``abort_reason`` ("interrupted")."""
     lines = report_lines(run, stats, abort_reason, state)
-    figure = report_figure(rows, lines, stats, skip_s, period_s)
     paths = [folder / name for name in FILES]
-    try:
-        with plt.rc_context(STYLE):  # the PDF's font type is read when saving
-            for path in paths:
-                figure.savefig(path, dpi=110)
-    finally:
-        plt.close(figure)
+    with DRAWING:
+        figure = report_figure(rows, lines, stats, skip_s, period_s)
+        try:
+            with plt.rc_context(STYLE):  # the PDF's font type is read when saving
+                for path in paths:
+                    figure.savefig(path, dpi=110)
+        finally:
+            plt.close(figure)
     return paths

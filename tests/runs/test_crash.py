@@ -102,6 +102,7 @@ def test_a_run_killed_with_its_server_is_interrupted_after_a_restart(tmp_path: P
         assert run["samples"] == seeking
         for axis in "xyz":
             assert math.isfinite(run["stats"]["tracking"][axis]["rmse_m"])
+        wait_for(lambda: _listed(again, run_id)["has_report"], "the report drawn after start-up")
         base = f"{again.url}/api/runs/{run_id}"
         for name in ("log.mcap", "log.csv", "report.png", "log.cut.mcap"):
             with urllib.request.urlopen(f"{base}/{name}", timeout=10) as response:

@@ -14,7 +14,7 @@ from mcap.reader import NonSeekingReader, make_reader
 from app.runs.logs import COLUMNS, RunLog
 from app.runs.run import Run
 from tests.support.app_client import make_client
-from tests.support.wait import ok_json
+from tests.support.wait import ok_json, wait_for
 
 ERROR_X_M = 0.001  # measured x lags the goal by 1 mm on every tick
 
@@ -104,12 +104,21 @@ def test_a_crashed_runs_files_are_served_and_its_mcap_is_whole(restarted):
     assert make_reader(io.BytesIO(mcap.content)).get_summary().statistics.message_count == 449
     assert client.get(f"{base}/log.cut.mcap").content == seen["cut"]  # kept as it was
     assert client.get(f"{base}/log.csv").text.count("\n") == 451  # header and 450 rows
+    _reported(client, seen["crashed"])  # drawn after start-up, in a thread
     png = client.get(f"{base}/report.png")
     assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def _reported(client, run_id: str) -> None:
+    wait_for(
+        lambda: ok_json(client.get(f"/api/runs/{run_id}"))["has_report"],
+        "the interrupted run's report drawn",
+    )
+
+
 def test_run_files_are_inline_with_their_media_type_and_answer_head(restarted):
     client, seen = restarted
+    _reported(client, seen["crashed"])
     base = f"/api/runs/{seen['crashed']}"
     for name, media_type in (
         ("report.png", "image/png"),

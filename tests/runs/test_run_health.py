@@ -51,7 +51,7 @@ def run_with(controller: Controller, folder: Path, on_tick: Callable[[Snapshot],
     """A short sinusoid run with ``on_tick`` called in the control thread every tick of it."""
     controller.add_listener(on_tick)
     run = RunManager(controller, folder).start_sinusoid(SHORT)
-    assert run.done.wait(WAIT_S), "the run did not end"
+    assert run.done.wait(4 * WAIT_S), "the run did not end (and its report drawn)"
     controller.remove_listener(on_tick)
     return run
 

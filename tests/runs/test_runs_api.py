@@ -47,6 +47,11 @@ def test_sinusoid_run_end_to_end(fresh):
     assert len(messages) == run["samples"] > 0  # every tick of the run, nothing dropped
     rows = list(csv.DictReader(io.StringIO(fresh.get(f"/api/runs/{run_id}/log.csv").text)))
     assert len(rows) == run["samples"] and {r["phase"] for r in rows} >= {"approach", "timed"}
+    wait_for(  # drawn after the record is final, so it holds no next run back
+        lambda: _run(fresh, run_id)["has_report"],
+        "the report drawn",
+        seen=lambda: _run(fresh, run_id),
+    )
     png = fresh.get(f"/api/runs/{run_id}/report.png")
     assert png.status_code == 200, png.text
     assert png.content[:8] == b"\x89PNG\r\n\x1a\n"
