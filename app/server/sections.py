@@ -1,9 +1,12 @@
 """Planar sections of the gate's workspace, for the page's 2D view (no WebGL needed).
 
 A section is a regular grid on a plane, each cell centre marked where the gate accepts a
-goal there (app/control/gate.py ``Gate.inside``: every leg's boundary at least the margin
+goal there (app/control/gate.py: ``Gate.inside``, every leg's boundary at least the margin
 away, i.e. the intersection of the three legs' tori shrunk by the margin, and below the
-ceiling). The grid's extent is the accepted volume's bounding box (same for every level, so
+ceiling; then the joint limits and the singularity margin on the IK's knee-out branch, see
+:func:`accepted`). The workspace alone is not enough: at z = -240 mm its nearest point to
+(300, 20) mm needs joint 2 at 118 deg, beyond its 94.5 deg limit, and the gate refuses it.
+The grid's extent is the workspace's bounding box (same for every level, so
 the view's scale does not jump as the platform moves), its step about 1/160 of the largest
 side. Sections are cached per (gate, plane, level rounded to 1 mm): the page asks again
 only when the platform has moved a few millimetres.
@@ -39,12 +42,73 @@ class Section(NamedTuple):
     reachable: np.ndarray
 
 
-def accepted(gate: Gate, points: np.ndarray) -> np.ndarray:
+def inside(gate: Gate, points: np.ndarray) -> np.ndarray:
     """``Gate.inside`` for many points: (*, 3) [m] -> (*) bool (vectorised, same rule)."""
     points = np.asarray(points, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         below = points[..., 2] <= gate.z_max_m
     return below & gate.robot.reachable(points, margin=gate.margin_m)
+
+
+def accepted(gate: Gate, points: np.ndarray) -> np.ndarray:
+    """Whether the gate accepts each point as a goal from a working posture: (*, 3) [m] ->
+    (*) bool. ``inside`` (margin, ceiling), then the IK's knee-out branch (the one
+    ``Gate.solve`` falls back on) within the joint limits and at least ``min_dexterity``
+    from a singularity, as ``Gate.check_joints`` judges one point."""
+    points = np.asarray(points, dtype=np.float64)
+    ok = inside(gate, points)
+    if not ok.any():
+        return ok
+    solution = gate.robot.ik(points[ok])
+    joints = solution.joints
+    low, high = np.array(gate.joint_min_rad), np.array(gate.joint_max_rad)
+    with np.errstate(invalid="ignore"):
+        limits = ((joints >= low) & (joints <= high)).all(axis=-1)
+        dexterity = np.asarray(gate.robot.dexterity(joints))
+        ok[ok] = solution.ok & limits & (dexterity >= gate.min_dexterity)
+    return ok
+
+
+@functools.lru_cache(maxsize=8)
+def anchor(gate: Gate) -> np.ndarray:
+    """An accepted point on the z axis, deepest inside the workspace (3,) [m]: where
+    :func:`nearest` heads when the workspace's nearest point breaks a joint limit."""
+    lower, upper = extent(gate)
+    column = np.zeros((400, 3))
+    column[:, 2] = np.linspace(lower[2], upper[2], 400)
+    good = accepted(gate, column)
+    if not good.any():
+        raise ValueError("the gate accepts no point on the z axis")
+    depth = np.where(good, -gate.robot.signed_distance(column), -np.inf)
+    return column[int(np.argmax(depth))]
+
+
+def nearest(gate: Gate, point: np.ndarray, samples: int = 100) -> np.ndarray:
+    """A point the gate accepts near ``point`` (3,) [m] (``point`` itself if accepted).
+
+    The workspace's nearest point (``Gate.nearest``: the 422's ``nearest_m``) when the gate
+    accepts it; where that breaks a joint limit or the singularity margin, the accepted point
+    nearest it on the segment from it to :func:`anchor` (``samples`` steps, then bisection
+    to ~1e-6 of the segment): accepted, but not always the nearest accepted point.
+    """
+    point = np.asarray(point, dtype=np.float64)
+    if accepted(gate, point[None])[0]:
+        return point
+    projected = gate.nearest(point)
+    if accepted(gate, projected[None])[0]:
+        return projected
+    home = anchor(gate)
+    steps = np.linspace(0.0, 1.0, samples + 1)
+    line = projected + steps[:, None] * (home - projected)
+    first = int(np.argmax(accepted(gate, line)))  # the anchor (last) is accepted
+    bad, good = steps[max(first - 1, 0)], steps[first]
+    for _ in range(20):
+        middle = 0.5 * (bad + good)
+        if accepted(gate, (projected + middle * (home - projected))[None])[0]:
+            good = middle
+        else:
+            bad = middle
+    return projected + good * (home - projected)
 
 
 @functools.lru_cache(maxsize=8)
@@ -57,11 +121,11 @@ def extent(gate: Gate) -> tuple[np.ndarray, np.ndarray]:
     upper = np.array([reach, reach, top])
     axes = [np.linspace(lower[k], upper[k], 60) for k in range(3)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
-    inside = accepted(gate, grid)
-    if not inside.any():
+    found_inside = inside(gate, grid)
+    if not found_inside.any():
         raise ValueError("the workspace is empty with this margin and ceiling")
     step = (upper - lower) / 59
-    found = grid[inside]
+    found = grid[found_inside]
     return found.min(0) - step, found.max(0) + step  # a frame of refused cells all round
 
 
@@ -88,7 +152,7 @@ def _section(gate: Gate, plane: str, level_m: float) -> Section:
     uu, vv = np.meshgrid(u, v, indexing="xy")
     points = np.empty((*uu.shape, 3))
     points[..., iu], points[..., iv], points[..., il] = uu, vv, level_m
-    inside = accepted(gate, points)
-    for array in (u, v, inside):
+    ok = accepted(gate, points)
+    for array in (u, v, ok):
         array.flags.writeable = False  # shared by every caller of the cache
-    return Section(plane, level_m, u, v, inside)
+    return Section(plane, level_m, u, v, ok)

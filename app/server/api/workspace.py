@@ -29,8 +29,9 @@ def get_section(
     at_m: Coordinate,
 ) -> dict[str, Any]:
     """Where the gate accepts a goal on a plane: a grid of cell centres, one string per row
-    (v), '1' where accepted. The gate's margin and ceiling apply; the level is rounded to
-    1 mm (``at_m`` in the answer is the one used)."""
+    (v), '1' where accepted (workspace with the gate's margin and ceiling, joint limits and
+    singularity margin on the knee-out branch). The level is rounded to 1 mm (``at_m`` in
+    the answer is the one used)."""
     cut = sections.section(controller.gate, plane, at_m)
     u_axis, v_axis, level_axis = ("xyz"[k] for k in sections.AXES[plane])
     return {
@@ -49,14 +50,15 @@ def get_section(
 def get_nearest(
     controller: ControllerDep, x_m: Coordinate, y_m: Coordinate, z_m: Coordinate
 ) -> dict[str, Any]:
-    """Whether a point is inside the gate's workspace and, if not, the nearest point that is
-    (the same projection the 422 of POST /api/goal answers as ``nearest_m``)."""
+    """Whether the gate accepts a point as a goal and, if not, a nearby point it accepts:
+    the workspace's nearest point (the 422's ``nearest_m``) when that passes the joint
+    limits too, else the accepted point nearest it on the way to the workspace's centre
+    (app/server/sections.py ``nearest``)."""
     point = np.array([x_m, y_m, z_m])
-    inside = controller.gate.inside(point)
-    nearest = point if inside else controller.gate.nearest(point)
+    nearest = sections.nearest(controller.gate, point)
     return {
         "position_m": point.tolist(),
-        "inside": inside,
+        "inside": bool(np.array_equal(nearest, point)),
         "nearest_m": [float(v) for v in nearest],
         "distance_m": float(np.linalg.norm(nearest - point)),
     }

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from app.control.errors import GoalRejected
 from tests.support.wait import ok_json
 
 SECTIONS = [("xy", -0.24), ("xy", -0.33), ("xz", 0.0), ("xz", 0.05), ("yz", -0.03)]
@@ -33,10 +34,20 @@ def test_a_section_marks_exactly_what_the_gate_accepts(client, plane, level):
     rng = np.random.default_rng(17)
     inside, outside = points[reachable], points[~reachable]
     for point in inside[rng.choice(len(inside), 40)]:
-        assert gate.inside(point), point  # the same rule, point by point
-        assert gate.robot.ik(point).ok, point  # and the legs reach it
+        assert gate_accepts(gate, point), point  # the gate's own checks, point by point
+        assert gate.robot.ik(point).ok, point  # so the legs reach it
     for point in outside[rng.choice(len(outside), 40)]:
-        assert not gate.inside(point), point
+        assert not gate_accepts(gate, point), point
+
+
+def gate_accepts(gate, point) -> bool:
+    """The gate takes ``point`` as a goal from a working posture (its knee-out joints)."""
+    try:
+        gate.check_point(point)
+        gate.solve(point, gate.robot.ik(point).joints)
+    except GoalRejected:
+        return False
+    return True
 
 
 def test_a_level_is_rounded_to_a_millimetre_and_cached(client):
@@ -65,23 +76,40 @@ def test_a_bad_section_request_is_422_naming_the_field(client, params, field):
     assert f"query.{field}" in response.json()["detail"]
 
 
-def test_nearest_is_the_point_inside_and_the_goals_422_outside(client):
+def nearest(client, point) -> dict:
+    params = dict(zip(("x_m", "y_m", "z_m"), point, strict=True))
+    return ok_json(client.get("/api/workspace/nearest", params=params))
+
+
+def test_nearest_is_the_point_itself_when_the_gate_takes_it(client):
+    answer = nearest(client, [0, 0, -0.24])
+    assert answer["inside"] and answer["nearest_m"] == [0, 0, -0.24] and answer["distance_m"] == 0
+
+
+def test_nearest_is_the_goals_422_point_when_the_gate_takes_that(client):
     gate = client.app.state.controller.gate
-    inside = ok_json(
-        client.get("/api/workspace/nearest", params={"x_m": 0, "y_m": 0, "z_m": -0.24})
-    )
-    assert inside["inside"] and inside["nearest_m"] == [0, 0, -0.24] and inside["distance_m"] == 0
-    goal = [0.3, 0.05, -0.24]
-    params = dict(zip(("x_m", "y_m", "z_m"), goal, strict=True))
-    outside = ok_json(client.get("/api/workspace/nearest", params=params))
-    nearest = np.array(outside["nearest_m"])
-    assert not outside["inside"] and gate.inside(nearest)
-    assert outside["distance_m"] == pytest.approx(np.linalg.norm(nearest - goal))
+    goal = [0.0, 0.01, -0.5]  # below the workspace: its nearest point is on the bottom
+    answer = nearest(client, goal)
+    refused = client.post("/api/goal", json={"position_m": goal})
+    assert refused.status_code == 422 and not answer["inside"]
+    np.testing.assert_allclose(answer["nearest_m"], refused.json()["nearest_m"], atol=1e-9)
+    point = np.array(answer["nearest_m"])
+    assert gate_accepts(gate, point)
+    assert answer["distance_m"] == pytest.approx(np.linalg.norm(point - goal))
+    # nothing nearer is accepted: a little towards the goal from it is outside
+    assert not gate.inside(point + 1e-4 * (np.array(goal) - point) / answer["distance_m"])
+
+
+@pytest.mark.parametrize("goal", [[0.3, 0.02, -0.24], [0.3, 0.05, -0.24], [0, 0, 0.1]])
+def test_nearest_is_a_point_the_gate_takes_where_the_422_point_breaks_a_joint_limit(client, goal):
+    """At z = -240 mm the workspace's nearest point to (300, 20) mm needs joint 2 past its
+    limit: the 422's nearest_m would be refused in turn; /nearest answers one it takes."""
+    gate = client.app.state.controller.gate
     refused = client.post("/api/goal", json={"position_m": goal})
     assert refused.status_code == 422
-    np.testing.assert_allclose(refused.json()["nearest_m"], nearest, atol=1e-9)
-    # nothing nearer is accepted: points a little towards the goal from it are outside
-    assert not gate.inside(nearest + 1e-4 * (np.array(goal) - nearest) / outside["distance_m"])
+    assert not gate_accepts(gate, np.array(refused.json()["nearest_m"]))
+    answer = nearest(client, goal)
+    assert not answer["inside"] and gate_accepts(gate, np.array(answer["nearest_m"]))
 
 
 def test_nearest_refuses_a_bad_coordinate_naming_it(client):
