@@ -26,6 +26,7 @@ AXES: dict[str, tuple[int, int, int]] = {"xy": (0, 1, 2), "xz": (0, 2, 1), "yz":
 """plane -> (index of u, index of v, index of the level's axis) in (x, y, z)."""
 CELLS = 160  # along the longest side of the extent
 LEVEL_STEP_M = 1e-3  # levels are rounded to this (the cache key)
+NUDGE_M = 2e-5  # a nearest point is moved this far inwards: 0.01 mm rounding stays inside
 
 
 class Section(NamedTuple):
@@ -89,26 +90,35 @@ def nearest(gate: Gate, point: np.ndarray, samples: int = 100) -> np.ndarray:
     The workspace's nearest point (``Gate.nearest``: the 422's ``nearest_m``) when the gate
     accepts it; where that breaks a joint limit or the singularity margin, the accepted point
     nearest it on the segment from it to :func:`anchor` (``samples`` steps, then bisection
-    to ~1e-6 of the segment): accepted, but not always the nearest accepted point.
+    to ~1e-6 of the segment): accepted, but not always the nearest accepted point. Either
+    is then moved NUDGE_M towards the anchor (when that is accepted too), so that the point
+    rounded to 0.01 mm, as a page shows and sends it, is still accepted.
     """
     point = np.asarray(point, dtype=np.float64)
     if accepted(gate, point[None])[0]:
         return point
-    projected = gate.nearest(point)
-    if accepted(gate, projected[None])[0]:
-        return projected
     home = anchor(gate)
+    found = gate.nearest(point)
+    if not accepted(gate, found[None])[0]:
+        found = _towards(gate, found, home, samples)
+    length = float(np.linalg.norm(home - found))
+    nudged = found + (home - found) * min(NUDGE_M / length, 1.0) if length > 0 else found
+    return nudged if accepted(gate, nudged[None])[0] else found
+
+
+def _towards(gate: Gate, start: np.ndarray, home: np.ndarray, samples: int) -> np.ndarray:
+    """The accepted point nearest ``start`` on the segment to ``home`` (which is accepted)."""
     steps = np.linspace(0.0, 1.0, samples + 1)
-    line = projected + steps[:, None] * (home - projected)
-    first = int(np.argmax(accepted(gate, line)))  # the anchor (last) is accepted
+    line = start + steps[:, None] * (home - start)
+    first = int(np.argmax(accepted(gate, line)))
     bad, good = steps[max(first - 1, 0)], steps[first]
     for _ in range(20):
         middle = 0.5 * (bad + good)
-        if accepted(gate, (projected + middle * (home - projected))[None])[0]:
+        if accepted(gate, (start + middle * (home - start))[None])[0]:
             good = middle
         else:
             bad = middle
-    return projected + good * (home - projected)
+    return start + good * (home - start)
 
 
 @functools.lru_cache(maxsize=8)

@@ -135,6 +135,7 @@ def test_the_2d_view_draws_the_region_and_the_robots_point(page: Any, server: Se
     wait_for(
         lambda: abs(server.get("/api/status")["ee"]["position_m"][2] + 0.24) < 0.002,
         "arrival at z = -240 mm",
+        PAGE_WAIT_S,  # 150 mm on a loaded machine's twin
     )
     for canvas in ("ws-top", "ws-side"):
         wait_for(lambda c=canvas: pixels_of(page, c, REACHABLE_RGB) > 500, f"{canvas} drawn")
