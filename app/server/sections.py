@@ -152,7 +152,7 @@ def section(gate: Gate, plane: Plane, level_m: float) -> Section:
     return _section(gate, plane, rounded_level(level_m))
 
 
-@functools.lru_cache(maxsize=64)
+@functools.lru_cache(maxsize=256)
 def _section(gate: Gate, plane: str, level_m: float) -> Section:
     iu, iv, il = AXES[plane]
     lower, upper = extent(gate)

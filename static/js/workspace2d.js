@@ -13,7 +13,9 @@ import { command } from "./control.js";
 import { setText, showError, showMessage } from "./ui.js";
 
 const MIN_FRAME_MS = 100; // at most ~10 redraws a second
-const REFETCH_M = 0.003; // a new section once the cut is this far from the one drawn
+// Cuts on a 5 mm grid: a sinusoid's z sweep asks for a few dozen sections once, then the
+// server's cache answers (each new one is ~20k IK solutions on the server's CPU).
+const LEVEL_STEP_M = 0.005;
 const TYPED_DEBOUNCE_MS = 150;
 const COLOURS = {
   reachable: "#d3f9d8", outside: "#f1f3f5", edge: "#2b8a3e", robot: "#1864ab",
@@ -40,8 +42,8 @@ function levelOf(view) {
 }
 
 async function fetchSection(view) {
-  const level = Math.round(levelOf(view) * 1000) / 1000;
-  if (view.loading || (view.section && Math.abs(view.section.at_m - level) < REFETCH_M)) return;
+  const level = Number((Math.round(levelOf(view) / LEVEL_STEP_M) * LEVEL_STEP_M).toFixed(3));
+  if (view.loading || (view.section && Math.abs(view.section.at_m - level) < 1e-4)) return;
   view.loading = true;
   try {
     const query = new URLSearchParams({ plane: view.plane, at_m: String(level) });

@@ -131,7 +131,9 @@ def test_an_outside_goal_offers_the_nearest_point_and_goes_there(page: Any, serv
 def test_the_2d_view_draws_the_region_and_the_robots_point(page: Any, server: Server) -> None:
     # the arm powers up hanging below the workspace: the top cut there is empty; go home
     wait_for(lambda: server.get("/api/status")["torque"] or page.click("#torque-on"), "torque on")
-    page.click("#goal-form button[type=submit]")  # the form's default goal: (0, 0, -240) mm
+    for axis, value in zip("xyz", ("0", "0", "-240"), strict=True):
+        page.fill(f"#goal-form input[name={axis}]", value)
+    page.click("#goal-form button[type=submit]")
     wait_for(
         lambda: abs(server.get("/api/status")["ee"]["position_m"][2] + 0.24) < 0.002,
         "arrival at z = -240 mm",
