@@ -28,6 +28,7 @@ class TimingStats:
     worst_ms: float
     overruns: int
     ticks: int
+    longest_gap_ms: float = 0.0  # the longest time between two ticks' starts [ms]
 
 
 @dataclass(frozen=True)
@@ -114,14 +115,16 @@ class TimingRecorder:
         self.target_hz = rate_hz
         self._period_s = 1.0 / rate_hz
         size = max(int(WINDOW_S * rate_hz), 2)
-        self._ring = np.zeros((3, size))  # lateness, period, work [s]
+        self._ring = np.zeros((4, size))  # lateness, period, work, gap between starts [s]
         self._filled = 0
         self._histogram = np.zeros(2001, dtype=np.int64)  # 10 us bins up to 20 ms
         self.ticks = 0
         self.overruns = 0
         self.worst_s = 0.0
+        self.longest_gap_s = 0.0
         self._first: float | None = None
         self._last: float | None = None
+        self._last_lateness_s = 0.0
         self._window = TimingStats(rate_hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0)
         self._refreshed_at = 0.0
 
@@ -131,8 +134,10 @@ class TimingRecorder:
         if self._first is None:
             self._first = self._refreshed_at = deadline
         period = 0.0 if self._last is None else deadline - self._last
-        self._last = deadline
-        self._ring[:, (self.ticks - 1) % self._ring.shape[1]] = (lateness_s, period, work_s)
+        gap = 0.0 if self._last is None else period + lateness_s - self._last_lateness_s
+        self._last, self._last_lateness_s = deadline, lateness_s
+        self.longest_gap_s = max(self.longest_gap_s, gap)
+        self._ring[:, (self.ticks - 1) % self._ring.shape[1]] = (lateness_s, period, work_s, gap)
         self._filled = min(self._filled + 1, self._ring.shape[1])
         self._histogram[min(int(lateness_s * 1e5), 2000)] += 1
         self.worst_s = max(self.worst_s, lateness_s)
@@ -164,6 +169,7 @@ class TimingRecorder:
             self.worst_s * 1e3,
             self.overruns,
             self.ticks,
+            self.longest_gap_s * 1e3,
         )
 
     def last_window(self) -> TimingStats:
@@ -173,7 +179,7 @@ class TimingRecorder:
     def _compute_window(self) -> TimingStats:
         if self._filled < 2:
             return TimingStats(self.target_hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0, self.ticks)
-        lateness, periods, work = self._ring[:, : self._filled]
+        lateness, periods, work, gaps = self._ring[:, : self._filled]
         periods = periods[periods > 0]
         mean_period = float(periods.mean()) if periods.size else 0.0
         p50, p99 = np.percentile(lateness, [50, 99])
@@ -186,4 +192,5 @@ class TimingRecorder:
             float(lateness.max()) * 1e3,
             int((lateness + work > self._period_s).sum()),
             self._filled,
+            float(gaps.max()) * 1e3,
         )

@@ -26,24 +26,12 @@ machine's: each of these rules flags that run (docs/performance.md, "Loop health
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
 
-
-@dataclass(frozen=True)
-class Thresholds:
-    """Where a run stops being healthy (see the module docstring)."""
-
-    max_overrun_share: float = 0.01
-    max_gap_ms: float = 20.0
-    min_rate_share: float = 0.95
-    max_stale_ms: float = 20.0
-    max_stale_share: float = 0.01
-
-
-THRESHOLDS = Thresholds()
+from app.control.loop_health import THRESHOLDS, Thresholds  # the live light's limits too
 
 
 def _number(value: Any) -> float:

@@ -2,10 +2,12 @@
 
 import { get } from "./api.js";
 import { startControl } from "./control.js";
+import { renderHealth } from "./health.js";
 import { startPlots } from "./plots.js";
 import { onStatus, startRuns } from "./runs.js";
 import { startScene } from "./scene.js";
 import { setStreamOnline, startStatus, state } from "./status.js";
+import { onWorkspaceStatus, startWorkspace2d } from "./workspace2d.js";
 
 async function boot() {
   let info = null;
@@ -17,9 +19,11 @@ async function boot() {
   startScene(info);
   startStatus();
   state.listeners.push(onStatus);
+  state.listeners.push(renderHealth, onWorkspaceStatus);
   startControl(info);
   startRuns();
   startPlots(setStreamOnline);
+  startWorkspace2d();
 }
 
 boot();

@@ -8,7 +8,7 @@ FK failed).
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -77,13 +77,34 @@ class TimingStatsOut(_Out):
     worst_ms: float
     overruns: int
     ticks: int
+    longest_gap_ms: float = Field(description="the longest time between two ticks' starts [ms]")
+
+
+class LoopHealthOut(_Out):
+    """The loop-health light over the last 10 s (app/control/loop_health.py): red past a
+    run-health limit (over 1 % overruns, a gap over 20 ms, rate under 95 %), amber halfway
+    (0.5 %, 10 ms, 97.5 %), green otherwise, unknown before two ticks."""
+
+    level: Literal["green", "amber", "red", "unknown"]
+    reasons: list[str] = Field(description="the limits of that level passed, in words")
+    window_s: float = Field(description="the window judged [s]")
+    rate_hz: float
+    target_hz: float
+    rate_share: float = Field(description="rate_hz / target_hz")
+    p99_ms: float = Field(description="99th percentile of tick lateness [ms]")
+    overruns: int
+    ticks: int
+    overrun_share: float = Field(description="overruns / ticks")
+    longest_gap_ms: float = Field(description="the longest time between two ticks' starts [ms]")
 
 
 class LoopStatus(TimingStatsOut):
-    """The last 10 s at top level (overruns and ticks since start), and both in full."""
+    """The last 10 s at top level (overruns and ticks since start), both in full, and the
+    health light judged on the last 10 s."""
 
     since_start: TimingStatsOut
     last_10s: TimingStatsOut
+    health: LoopHealthOut
 
 
 class BusStatusOut(_Out):
@@ -329,3 +350,30 @@ class InfoOut(_Out):
     home_m: list[float]
     joint_speed_limit_rad_s: float
     loop_rate_hz: float
+
+
+class WorkspaceSectionOut(_Out):
+    """GET /api/workspace/section: where the gate accepts a goal on one plane.
+
+    Row j of ``reachable`` is v = v_m[j], its character i is u = u_m[i]: '1' where
+    (u, v) at the level passes the gate's workspace check (margin, ceiling).
+    """
+
+    plane: str = Field(description="xy | xz | yz")
+    at_m: float = Field(description="the level used, rounded to 1 mm [m]")
+    axes: list[str] = Field(description="the names of u, v and the level's axis, e.g. x, y, z")
+    u_m: list[float] = Field(description="cell centres along u [m]")
+    v_m: list[float] = Field(description="cell centres along v [m]")
+    reachable: list[str] = Field(description="one string per v, '1'/'0' per u")
+    margin_m: float = Field(description="the gate's distance from the boundary [m]")
+    z_max_m: float = Field(description="the gate's ceiling [m]")
+
+
+class NearestOut(_Out):
+    """GET /api/workspace/nearest: the point, whether the gate's workspace holds it, and
+    the nearest point it holds (the point itself when inside) [m]."""
+
+    position_m: list[float]
+    inside: bool
+    nearest_m: list[float]
+    distance_m: float

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from app.control.controller import Controller
+from app.control.loop_health import classify
 from app.control.state import Snapshot
 
 
@@ -67,8 +68,10 @@ def loop_timing(controller: Controller) -> dict[str, Any]:
         "worst_ms": window.worst_ms,
         "overruns": total.overruns,
         "ticks": total.ticks,
+        "longest_gap_ms": window.longest_gap_ms,
         "since_start": asdict(total),
         "last_10s": asdict(window),
+        "health": asdict(classify(window)),
     }
 
 

@@ -1,0 +1,168 @@
+"""Planar sections of the gate's workspace, for the page's 2D view (no WebGL needed).
+
+A section is a regular grid on a plane, each cell centre marked where the gate accepts a
+goal there (app/control/gate.py: ``Gate.inside``, every leg's boundary at least the margin
+away, i.e. the intersection of the three legs' tori shrunk by the margin, and below the
+ceiling; then the joint limits and the singularity margin on the IK's knee-out branch, see
+:func:`accepted`). The workspace alone is not enough: at z = -240 mm its nearest point to
+(300, 20) mm needs joint 2 at 118 deg, beyond its 94.5 deg limit, and the gate refuses it.
+The grid's extent is the workspace's bounding box (same for every level, so
+the view's scale does not jump as the platform moves), its step about 1/160 of the largest
+side. Sections are cached per (gate, plane, level rounded to 1 mm): the page asks again
+only when the platform has moved a few millimetres.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Literal, NamedTuple
+
+import numpy as np
+
+from app.control.gate import Gate
+
+Plane = Literal["xy", "xz", "yz"]
+AXES: dict[str, tuple[int, int, int]] = {"xy": (0, 1, 2), "xz": (0, 2, 1), "yz": (1, 2, 0)}
+"""plane -> (index of u, index of v, index of the level's axis) in (x, y, z)."""
+CELLS = 160  # along the longest side of the extent
+LEVEL_STEP_M = 1e-3  # levels are rounded to this (the cache key)
+NUDGE_M = 2e-5  # a nearest point is moved this far inwards: 0.01 mm rounding stays inside
+
+
+class Section(NamedTuple):
+    """One section: ``reachable[j, i]`` is whether (u_m[i], v_m[j]) at ``level_m`` passes.
+
+    plane: "xy" (level is z), "xz" (level is y) or "yz" (level is x); u_m (n_u,), v_m (n_v,)
+    cell centres [m]; reachable (n_v, n_u) bool; level_m: the level used [m] (rounded).
+    """
+
+    plane: str
+    level_m: float
+    u_m: np.ndarray
+    v_m: np.ndarray
+    reachable: np.ndarray
+
+
+def inside(gate: Gate, points: np.ndarray) -> np.ndarray:
+    """``Gate.inside`` for many points: (*, 3) [m] -> (*) bool (vectorised, same rule)."""
+    points = np.asarray(points, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        below = points[..., 2] <= gate.z_max_m
+    return below & gate.robot.reachable(points, margin=gate.margin_m)
+
+
+def accepted(gate: Gate, points: np.ndarray) -> np.ndarray:
+    """Whether the gate accepts each point as a goal from a working posture: (*, 3) [m] ->
+    (*) bool. ``inside`` (margin, ceiling), then the IK's knee-out branch (the one
+    ``Gate.solve`` falls back on) within the joint limits and at least ``min_dexterity``
+    from a singularity, as ``Gate.check_joints`` judges one point."""
+    points = np.asarray(points, dtype=np.float64)
+    ok = inside(gate, points)
+    if not ok.any():
+        return ok
+    solution = gate.robot.ik(points[ok])
+    joints = solution.joints
+    low, high = np.array(gate.joint_min_rad), np.array(gate.joint_max_rad)
+    with np.errstate(invalid="ignore"):
+        limits = ((joints >= low) & (joints <= high)).all(axis=-1)
+        dexterity = np.asarray(gate.robot.dexterity(joints))
+        ok[ok] = solution.ok & limits & (dexterity >= gate.min_dexterity)
+    return ok
+
+
+@functools.lru_cache(maxsize=8)
+def anchor(gate: Gate) -> np.ndarray:
+    """An accepted point on the z axis, deepest inside the workspace (3,) [m]: where
+    :func:`nearest` heads when the workspace's nearest point breaks a joint limit."""
+    lower, upper = extent(gate)
+    column = np.zeros((400, 3))
+    column[:, 2] = np.linspace(lower[2], upper[2], 400)
+    good = accepted(gate, column)
+    if not good.any():
+        raise ValueError("the gate accepts no point on the z axis")
+    depth = np.where(good, -gate.robot.signed_distance(column), -np.inf)
+    return column[int(np.argmax(depth))]
+
+
+def nearest(gate: Gate, point: np.ndarray, samples: int = 100) -> np.ndarray:
+    """A point the gate accepts near ``point`` (3,) [m] (``point`` itself if accepted).
+
+    The workspace's nearest point (``Gate.nearest``: the 422's ``nearest_m``) when the gate
+    accepts it; where that breaks a joint limit or the singularity margin, the accepted point
+    nearest it on the segment from it to :func:`anchor` (``samples`` steps, then bisection
+    to ~1e-6 of the segment): accepted, but not always the nearest accepted point. Either
+    is then moved NUDGE_M towards the anchor (when that is accepted too), so that the point
+    rounded to 0.01 mm, as a page shows and sends it, is still accepted.
+    """
+    point = np.asarray(point, dtype=np.float64)
+    if accepted(gate, point[None])[0]:
+        return point
+    home = anchor(gate)
+    found = gate.nearest(point)
+    if not accepted(gate, found[None])[0]:
+        found = _towards(gate, found, home, samples)
+    length = float(np.linalg.norm(home - found))
+    nudged = found + (home - found) * min(NUDGE_M / length, 1.0) if length > 0 else found
+    return nudged if accepted(gate, nudged[None])[0] else found
+
+
+def _towards(gate: Gate, start: np.ndarray, home: np.ndarray, samples: int) -> np.ndarray:
+    """The accepted point nearest ``start`` on the segment to ``home`` (which is accepted)."""
+    steps = np.linspace(0.0, 1.0, samples + 1)
+    line = start + steps[:, None] * (home - start)
+    first = int(np.argmax(accepted(gate, line)))
+    bad, good = steps[max(first - 1, 0)], steps[first]
+    for _ in range(20):
+        middle = 0.5 * (bad + good)
+        if accepted(gate, (start + middle * (home - start))[None])[0]:
+            good = middle
+        else:
+            bad = middle
+    return start + good * (home - start)
+
+
+@functools.lru_cache(maxsize=8)
+def extent(gate: Gate) -> tuple[np.ndarray, np.ndarray]:
+    """The accepted volume's bounding box (lower (3,), upper (3,)) [m], from a 60^3 grid,
+    padded by one of its steps (so the ceiling shows too); ValueError if nothing is accepted."""
+    reach = gate.robot.R + getattr(gate.robot, "L", 0.0) + gate.robot.l
+    top = min(gate.z_max_m, 0.0)
+    lower = np.array([-reach, -reach, top - 2.0 * reach])
+    upper = np.array([reach, reach, top])
+    axes = [np.linspace(lower[k], upper[k], 60) for k in range(3)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    found_inside = inside(gate, grid)
+    if not found_inside.any():
+        raise ValueError("the workspace is empty with this margin and ceiling")
+    step = (upper - lower) / 59
+    found = grid[found_inside]
+    return found.min(0) - step, found.max(0) + step  # a frame of refused cells all round
+
+
+def rounded_level(level_m: float) -> float:
+    """The level a section is computed at [m]: ``level_m`` rounded to LEVEL_STEP_M."""
+    return round(round(level_m / LEVEL_STEP_M) * LEVEL_STEP_M, 6)
+
+
+def section(gate: Gate, plane: Plane, level_m: float) -> Section:
+    """The accepted region on ``plane`` at ``level_m`` [m] (rounded, see rounded_level).
+
+    Raises KeyError for an unknown plane. Cached per (gate, plane, rounded level).
+    """
+    return _section(gate, plane, rounded_level(level_m))
+
+
+@functools.lru_cache(maxsize=256)
+def _section(gate: Gate, plane: str, level_m: float) -> Section:
+    iu, iv, il = AXES[plane]
+    lower, upper = extent(gate)
+    cell = float((upper - lower).max()) / CELLS
+    u = np.arange(lower[iu] + cell / 2, upper[iu], cell)
+    v = np.arange(lower[iv] + cell / 2, upper[iv], cell)
+    uu, vv = np.meshgrid(u, v, indexing="xy")
+    points = np.empty((*uu.shape, 3))
+    points[..., iu], points[..., iv], points[..., il] = uu, vv, level_m
+    ok = accepted(gate, points)
+    for array in (u, v, ok):
+        array.flags.writeable = False  # shared by every caller of the cache
+    return Section(plane, level_m, u, v, ok)

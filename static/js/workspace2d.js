@@ -1,0 +1,266 @@
+// A 2D view of the workspace without WebGL: a top section (x-y at the platform's height)
+// and a side section (x-z through the platform's y) of the region the gate accepts
+// (GET /api/workspace/section), with the robot's measured point, the goal the loop uses,
+// the goal typed in the Go-to form and, when that is outside, the nearest reachable point
+// (GET /api/workspace/nearest) with a button that sends it as the goal.
+//
+// Light by design, so the e-stop stays fast: canvas 2D only, sections fetched when the cut
+// moved a few mm (cached by the server), and a redraw only when something drawn changed,
+// at most every MIN_FRAME_MS.
+
+import { get } from "./api.js";
+import { command } from "./control.js";
+import { setText, showError, showMessage } from "./ui.js";
+
+const MIN_FRAME_MS = 100; // at most ~10 redraws a second
+// Cuts on a 5 mm grid: a sinusoid's z sweep asks for a few dozen sections once, then the
+// server's cache answers (each new one is ~20k IK solutions on the server's CPU).
+const LEVEL_STEP_M = 0.005;
+const TYPED_DEBOUNCE_MS = 150;
+const COLOURS = {
+  reachable: "#d3f9d8", outside: "#f1f3f5", edge: "#2b8a3e", robot: "#1864ab",
+  goal: "#343a40", typed: "#e8590c", nearest: "#9c36b5", text: "#495057",
+};
+const XYZ = { x: 0, y: 1, z: 2 };
+
+const views = {
+  top: { plane: "xy", levelAxis: 2, fallback: -0.24, section: null, image: null, loading: false, error: null },
+  side: { plane: "xz", levelAxis: 1, fallback: 0.0, section: null, image: null, loading: false, error: null },
+};
+const seen = { robot: null, goal: null, typed: null, inside: true, nearest: null };
+let drawnKey = "";
+let lastDraw = 0;
+let drawTimer = null;
+let typedTimer = null;
+let typedAsked = 0; // the latest /nearest request; older answers are dropped
+
+const mmText = (p) => p.map((v) => (v * 1000).toFixed(1)).join(", ");
+
+// The level of a view's cut [m]: through the robot's point (measured, else commanded).
+function levelOf(view) {
+  return seen.robot ? seen.robot[view.levelAxis] : view.fallback;
+}
+
+async function fetchSection(view) {
+  const level = Number((Math.round(levelOf(view) / LEVEL_STEP_M) * LEVEL_STEP_M).toFixed(3));
+  if (view.loading || (view.section && Math.abs(view.section.at_m - level) < 1e-4)) return;
+  view.loading = true;
+  try {
+    const query = new URLSearchParams({ plane: view.plane, at_m: String(level) });
+    view.section = await get(`/api/workspace/section?${query}`);
+    view.image = sectionImage(view.section);
+    view.error = null;
+    schedule();
+  } catch (err) {
+    view.error = err.message;
+    schedule();
+  } finally {
+    view.loading = false;
+  }
+}
+
+// The section's grid as an offscreen canvas, one pixel per cell (v up).
+function sectionImage(section) {
+  const width = section.u_m.length, height = section.v_m.length;
+  const image = document.createElement("canvas");
+  image.width = width;
+  image.height = height;
+  const ctx = image.getContext("2d");
+  const pixels = ctx.createImageData(width, height);
+  const fill = [hex(COLOURS.reachable), hex(COLOURS.outside)];
+  section.reachable.forEach((row, j) => {
+    const y = height - 1 - j;
+    for (let i = 0; i < width; i += 1) {
+      const colour = fill[row[i] === "1" ? 0 : 1];
+      pixels.data.set([...colour, 255], 4 * (y * width + i));
+    }
+  });
+  ctx.putImageData(pixels, 0, 0);
+  return image;
+}
+
+function hex(colour) {
+  return [1, 3, 5].map((k) => parseInt(colour.slice(k, k + 2), 16));
+}
+
+// Canvas pixels of (u, v) [m]: equal scales, the section's extent centred.
+function transform(canvas, section) {
+  const cellU = section.u_m[1] - section.u_m[0], cellV = section.v_m[1] - section.v_m[0];
+  const u0 = section.u_m[0] - cellU / 2, u1 = section.u_m[section.u_m.length - 1] + cellU / 2;
+  const v0 = section.v_m[0] - cellV / 2, v1 = section.v_m[section.v_m.length - 1] + cellV / 2;
+  const pad = 18;
+  const scale = Math.min((canvas.width - 2 * pad) / (u1 - u0), (canvas.height - 2 * pad) / (v1 - v0));
+  const left = (canvas.width - scale * (u1 - u0)) / 2, top = (canvas.height - scale * (v1 - v0)) / 2;
+  return {
+    box: [left, top, scale * (u1 - u0), scale * (v1 - v0)],
+    at: (p, view) => {
+      const [iu, iv] = view.section.axes.map((a) => XYZ[a]);
+      return [left + (p[iu] - u0) * scale, top + (v1 - p[iv]) * scale];
+    },
+  };
+}
+
+function marker(ctx, [x, y], kind) {
+  ctx.save();
+  ctx.lineWidth = 2;
+  ctx.strokeStyle = ctx.fillStyle = COLOURS[kind];
+  ctx.beginPath();
+  if (kind === "goal") {
+    ctx.moveTo(x - 6, y - 6); ctx.lineTo(x + 6, y + 6); ctx.moveTo(x + 6, y - 6); ctx.lineTo(x - 6, y + 6);
+    ctx.stroke();
+  } else if (kind === "typed") {
+    ctx.arc(x, y, 7, 0, 2 * Math.PI);
+    ctx.stroke();
+  } else {
+    ctx.arc(x, y, kind === "robot" ? 5 : 4, 0, 2 * Math.PI);
+    ctx.fill();
+  }
+  ctx.restore();
+}
+
+function drawView(name) {
+  const view = views[name];
+  const canvas = document.getElementById(`ws-${name}`);
+  const ctx = canvas.getContext("2d");
+  ctx.fillStyle = "#ffffff";
+  ctx.fillRect(0, 0, canvas.width, canvas.height);
+  if (!view.section || !view.image) {
+    ctx.fillStyle = COLOURS.text;
+    ctx.fillText(view.error ? `no section: ${view.error}` : "loading the workspace…", 10, 20);
+    return;
+  }
+  const t = transform(canvas, view.section);
+  ctx.imageSmoothingEnabled = false;
+  ctx.drawImage(view.image, ...t.box);
+  ctx.strokeStyle = COLOURS.edge;
+  ctx.strokeRect(...t.box);
+  const [u, v, level] = view.section.axes;
+  ctx.fillStyle = COLOURS.text;
+  ctx.font = "12px system-ui, sans-serif";
+  ctx.fillText(`${u} →   ${v} ↑   cut at ${level} = ${(view.section.at_m * 1000).toFixed(0)} mm`, 6, 13);
+  if (!view.section.reachable.some((row) => row.includes("1"))) {
+    ctx.fillText("nothing reachable at this height: move the platform into the workspace",
+      6, canvas.height - 6);
+  }
+  if (seen.typed) {
+    if (!seen.inside && seen.nearest) {
+      const [a, b] = [t.at(seen.typed, view), t.at(seen.nearest, view)];
+      ctx.save();
+      ctx.setLineDash([4, 3]);
+      ctx.strokeStyle = COLOURS.nearest;
+      ctx.beginPath(); ctx.moveTo(...a); ctx.lineTo(...b); ctx.stroke();
+      ctx.restore();
+      marker(ctx, b, "nearest");
+    }
+    marker(ctx, t.at(seen.typed, view), "typed");
+  }
+  if (seen.goal) marker(ctx, t.at(seen.goal, view), "goal");
+  if (seen.robot) {
+    const at = t.at(seen.robot, view);
+    marker(ctx, at, "robot");
+    canvas.dataset.robotPx = at.map((c) => Math.round(c)).join(",");
+  } else {
+    delete canvas.dataset.robotPx;
+  }
+}
+
+function draw() {
+  drawTimer = null;
+  if (document.hidden) return; // drawn again on the next change once visible
+  const key = JSON.stringify([seen, views.top.section?.at_m, views.side.section?.at_m,
+    Boolean(views.top.image), Boolean(views.side.image), views.top.error, views.side.error]);
+  if (key === drawnKey) return;
+  drawnKey = key;
+  lastDraw = performance.now();
+  drawView("top");
+  drawView("side");
+}
+
+function schedule() {
+  if (drawTimer !== null) return;
+  drawTimer = setTimeout(draw, Math.max(0, lastDraw + MIN_FRAME_MS - performance.now()));
+}
+
+const rounded = (p) => (p ? p.map((v) => Math.round(v * 1e4) / 1e4) : null); // 0.1 mm
+
+// Each /api/status: the measured point and the loop's goal; new sections when the cut moved.
+export function onWorkspaceStatus(s) {
+  const measured = s.ee.position_m, commanded = s.ee.commanded_m;
+  const point = measured && measured.every((v) => v !== null) ? measured :
+    commanded && commanded.every((v) => v !== null) ? commanded : null;
+  seen.robot = rounded(point);
+  const goal = s.goal.position_m;
+  seen.goal = goal && goal.every((v) => v !== null) ? rounded(goal) : null;
+  setText("ws-robot", seen.robot ? `${mmText(seen.robot)} mm` : "–");
+  setText("ws-goal-now", seen.goal ? `${mmText(seen.goal)} mm` : "none");
+  fetchSection(views.top);
+  fetchSection(views.side);
+  schedule();
+}
+
+// The Go-to form's values [m], a decimal comma read as a point; null unless all 3 are numbers.
+function typedGoal() {
+  const form = document.getElementById("goal-form");
+  const values = ["x", "y", "z"].map((k) => {
+    const text = String(form.elements[k]?.value ?? "").trim().replace(",", ".");
+    return text === "" ? NaN : Number(text) / 1000;
+  });
+  return values.every(Number.isFinite) ? values : null;
+}
+
+async function checkTyped() {
+  const goal = typedGoal();
+  const ask = ++typedAsked;
+  const button = document.getElementById("ws-go-nearest");
+  if (!goal || goal.some((v) => Math.abs(v) > 1)) {
+    Object.assign(seen, { typed: null, inside: true, nearest: null });
+    button.hidden = true;
+    setText("ws-typed", goal ? "the typed goal is over 1 m away: not shown" : "–");
+    schedule();
+    return;
+  }
+  try {
+    const [x, y, z] = goal.map(String);
+    const answer = await get(`/api/workspace/nearest?${new URLSearchParams({ x_m: x, y_m: y, z_m: z })}`);
+    if (ask !== typedAsked) return; // the operator typed on meanwhile
+    Object.assign(seen, { typed: rounded(goal), inside: answer.inside, nearest: answer.nearest_m });
+    button.hidden = answer.inside;
+    button.dataset.nearest = JSON.stringify(answer.nearest_m);
+    setText("ws-typed", answer.inside ? `${mmText(goal)} mm: inside the workspace` :
+      `${mmText(goal)} mm is outside; nearest reachable ${mmText(answer.nearest_m)} mm ` +
+      `(${(answer.distance_m * 1000).toFixed(1)} mm away)`);
+  } catch (err) {
+    if (ask === typedAsked) setText("ws-typed", `cannot check the typed goal: ${err.message}`);
+  }
+  schedule();
+}
+
+function typedChanged() {
+  clearTimeout(typedTimer);
+  typedTimer = setTimeout(checkTyped, TYPED_DEBOUNCE_MS);
+}
+
+function goNearest() {
+  const nearest = JSON.parse(document.getElementById("ws-go-nearest").dataset.nearest || "null");
+  if (!nearest) return;
+  command("/api/goal", { position_m: nearest })
+    .then(() => {
+      showMessage(`Going to the nearest reachable point ${mmText(nearest)} mm`);
+      const form = document.getElementById("goal-form"); // the form now shows the goal sent
+      ["x", "y", "z"].forEach((k, i) => { form.elements[k].value = (nearest[i] * 1000).toFixed(2); });
+      checkTyped();
+    })
+    .catch(showError);
+}
+
+export function startWorkspace2d() {
+  const form = document.getElementById("goal-form");
+  if (!form || !document.getElementById("ws-top")) return;
+  form.addEventListener("input", typedChanged);
+  form.addEventListener("change", typedChanged);
+  document.getElementById("ws-go-nearest").addEventListener("click", goNearest);
+  document.addEventListener("visibilitychange", () => { if (!document.hidden) schedule(); });
+  checkTyped();
+  fetchSection(views.top);
+  fetchSection(views.side);
+}

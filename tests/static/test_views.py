@@ -1,0 +1,174 @@
+"""The loop-health light and the 2D workspace view, in Debian's chromium against
+`deltadash serve` on the simulator: the light shows the server's level and figures, the
+view draws the accepted region and the robot's point, and an outside goal typed in Go-to
+offers "Go to nearest", which makes the nearest reachable point the loop's setpoint."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tests.support import wait as waiting
+from tests.support.browser import (
+    PAGE_WAIT_S,
+    browser_skip_reason,
+    chromium_page,
+    page_condition,
+    save_artifact,
+)
+from tests.support.server import Server, wait_for
+
+SKIP = browser_skip_reason()
+pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
+SCENE_STUB = "<p>3D scene (viser): stubbed in this test</p>"
+ROBOT_RGB = (0x18, 0x64, 0xAB)  # workspace2d.js COLOURS.robot
+REACHABLE_RGB = (0xD3, 0xF9, 0xD8)  # COLOURS.reachable
+
+
+@pytest.fixture(scope="module")
+def page(server: Server) -> Iterator[Any]:
+    with chromium_page(1366, 900) as page:
+        errors: list[str] = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        scene = f"http://127.0.0.1:{server.get('/api/info')['viser_port']}/**"
+        page.route(scene, lambda route: route.fulfill(content_type="text/html", body=SCENE_STUB))
+        page.goto(server.url + "/", timeout=PAGE_WAIT_S * 1e3)  # a loaded machine is slow
+        yield page
+        assert not errors, f"JavaScript errors on the page: {errors}"
+
+
+def pixels_of(page: Any, canvas: str, rgb: tuple[int, int, int]) -> int:
+    """How many pixels of the canvas have exactly this colour."""
+    return page.evaluate(
+        """([id, rgb]) => {
+          const c = document.getElementById(id);
+          const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+          let n = 0;
+          for (let k = 0; k < d.length; k += 4) {
+            if (d[k] === rgb[0] && d[k + 1] === rgb[1] && d[k + 2] === rgb[2]) n += 1;
+          }
+          return n;
+        }""",
+        [canvas, list(rgb)],
+    )
+
+
+def colour_at(page: Any, canvas: str) -> tuple[int, ...] | None:
+    """The colour at the robot's marker (the canvas's data-robot-px), None if not drawn."""
+    colour = page.evaluate(
+        """(id) => {
+          const c = document.getElementById(id);
+          if (!c.dataset.robotPx) return null;
+          const [x, y] = c.dataset.robotPx.split(",").map(Number);
+          return Array.from(c.getContext("2d").getImageData(x, y, 1, 1).data.slice(0, 3));
+        }""",
+        canvas,
+    )
+    return None if colour is None else tuple(colour)
+
+
+def torque_on(page: Any, server: Server) -> None:
+    """Click Torque on until the server has it on (the twin's arm may still swing past its
+    joint limits just after start-up), one click every 2 s at most on a slow machine."""
+    clicked = [-1e9]
+
+    def on() -> bool:
+        if server.get("/api/status")["torque"]:
+            return True
+        if time.monotonic() - clicked[0] > 2.0:
+            clicked[0] = time.monotonic()
+            page.click("#torque-on")
+        return False
+
+    def seen() -> Any:
+        status = server.get("/api/status")
+        toast = page.locator("#toast")
+        return status["mode"], status["faults"], toast.is_visible() and toast.inner_text()
+
+    waiting.wait_for(on, "torque on", PAGE_WAIT_S, poll_s=0.2, seen=seen)
+
+
+def test_the_loop_light_shows_the_servers_level_and_figures(page: Any, server: Server) -> None:
+    light = page.locator("#loop-health")
+    page_condition(
+        page,
+        "() => /health-(green|amber|red)/.test(document.getElementById('loop-health').className)",
+        "the loop light to take a colour",
+    )
+    level = light.get_attribute("data-level")
+    assert f"health-{level}" in light.get_attribute("class")
+    assert light.is_visible()
+    text, title = light.inner_text(), light.get_attribute("title")
+    assert "Hz" in text and "p99" in text and "ovr" in text
+    assert "overruns" in title and "last 10 s" in title and "amber: halfway" in title
+    # the page shows the server's verdict, not one of its own (the level may change between
+    # reads on a loaded machine: wait until one read agrees)
+    wait_for(
+        lambda: (
+            server.get("/api/status")["loop"]["health"]["level"]
+            == light.get_attribute("data-level")
+        ),
+        "the page's light to match the server's level",
+    )
+
+
+def test_an_outside_goal_offers_the_nearest_point_and_goes_there(page: Any, server: Server) -> None:
+    # torque on where the arm hangs at power-up, (0, 0, -395) mm, just below the workspace;
+    # a goal further below is outside, and its nearest reachable point is a few mm away
+    torque_on(page, server)
+    page.fill("#goal-form input[name=x]", "0")
+    page.fill("#goal-form input[name=y]", "20")
+    page.fill("#goal-form input[name=z]", "-450")
+    button = page.locator("#ws-go-nearest")
+    wait_for(lambda: button.is_visible(), "the Go to nearest button for an outside goal")
+    assert "outside" in page.locator("#ws-typed").inner_text()
+    query = "/api/workspace/nearest?x_m=0&y_m=0.02&z_m=-0.45"
+    nearest = np.array(server.get(query)["nearest_m"])
+    save_artifact("views-go-nearest.png", page.screenshot(full_page=True))
+    button.click()
+
+    def commanded_at_nearest() -> bool:
+        status = server.get("/api/status")
+        goal, commanded = status["goal"]["position_m"], status["ee"]["commanded_m"]
+        return bool(
+            goal is not None
+            and np.allclose(goal, nearest, atol=1e-6)
+            and np.allclose(commanded, nearest, atol=1e-4)
+        )
+
+    waiting.wait_for(
+        commanded_at_nearest,
+        "the commanded point to reach the nearest reachable point",
+        seen=lambda: (server.get("/api/status")["ee"], page.locator("#toast").inner_text()),
+    )
+    # the form now holds the goal sent, which is inside: the offer goes away
+    wait_for(lambda: not button.is_visible(), "the offer to go once the typed goal is inside")
+    assert "inside" in page.locator("#ws-typed").inner_text()
+
+
+def test_the_2d_view_draws_the_region_and_the_robots_point(page: Any, server: Server) -> None:
+    # the arm powers up hanging below the workspace: the top cut there is empty; go home
+    torque_on(page, server)
+    for axis, value in zip("xyz", ("0", "0", "-240"), strict=True):
+        page.fill(f"#goal-form input[name={axis}]", value)
+    page.click("#goal-form button[type=submit]")
+    wait_for(
+        lambda: abs(server.get("/api/status")["ee"]["position_m"][2] + 0.24) < 0.002,
+        "arrival at z = -240 mm",
+        PAGE_WAIT_S,  # 150 mm on a loaded machine's twin
+    )
+    for canvas in ("ws-top", "ws-side"):
+        wait_for(lambda c=canvas: pixels_of(page, c, REACHABLE_RGB) > 500, f"{canvas} drawn")
+    for canvas in ("ws-top", "ws-side"):
+        waiting.wait_for(
+            lambda c=canvas: colour_at(page, c) == ROBOT_RGB,
+            f"the robot's point on {canvas}",
+            seen=lambda c=canvas: colour_at(page, c),
+        )
+    measured = server.get("/api/status")["ee"]["position_m"]
+    shown = [float(v) for v in page.locator("#ws-robot").inner_text().split(" mm")[0].split(",")]
+    np.testing.assert_allclose(shown, np.array(measured) * 1e3, atol=3.0)  # read 0.2 s apart
