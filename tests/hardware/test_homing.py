@@ -82,6 +82,9 @@ def test_homing_reads_a_count_that_ran_past_the_seam_as_the_servo_will(
     np.testing.assert_allclose(bus.read_state().position_rad, [0.0, 0.0, 0.0], atol=RAD_PER_TICK)
 
 
+ON_ITS_TURN_RAD = 0.05
+
+
 def test_extended_position_mode_homes_across_the_seam_and_keeps_its_turn(
     bus, emulator, tmp_path: Path
 ) -> None:
@@ -97,7 +100,9 @@ def test_extended_position_mode_homes_across_the_seam_and_keeps_its_turn(
     # driver puts the joint back on its turn with Homing Offset 4096.
     bus.reboot([1])
     assert emulator.servo(1).table.get(Reg.HOMING_OFFSET) == 4096
-    assert bus.read_state().position_rad[0] == pytest.approx(1.0, abs=2 * RAD_PER_TICK)
+    # on its turn: a turn off would read 1.0 -/+ 6.28 rad; the relaxed link may sag a
+    # few ticks meanwhile (more on a loaded machine), so the bound is a few degrees
+    assert bus.read_state().position_rad[0] == pytest.approx(1.0, abs=ON_ITS_TURN_RAD)
     # ... and so does a fresh connect after the servo restarted its count at power-on
     with emulator.lock:
         emulator.servo(1).table.set(Reg.HOMING_OFFSET, 0)
@@ -105,7 +110,7 @@ def test_extended_position_mode_homes_across_the_seam_and_keeps_its_turn(
     fresh = DynamixelBus(bus.config)
     fresh.connect()
     try:
-        assert fresh.read_state().position_rad[0] == pytest.approx(1.0, abs=2 * RAD_PER_TICK)
+        assert fresh.read_state().position_rad[0] == pytest.approx(1.0, abs=ON_ITS_TURN_RAD)
     finally:
         fresh.disconnect()
 

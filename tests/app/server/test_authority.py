@@ -82,7 +82,8 @@ def holding_at_goal(client: TestClient) -> dict[str, str]:
     ok_json(client.post("/api/torque", json={"enabled": True}, headers=holder))
     ok_json(client.post("/api/goal", json={"position_m": GOAL}, headers=holder))
     wait_for(
-        lambda: np.allclose(robot(client)["commanded_m"], GOAL, atol=1e-6),
+        # to 1e-12 m: the approach's last ticks move it by nanometres, which `unmoved` sees
+        lambda: np.allclose(robot(client)["commanded_m"], GOAL, rtol=0, atol=1e-12),
         "the approach to the goal done (commanded at the goal)",
         seen=lambda: robot(client),
     )
