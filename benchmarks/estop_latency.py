@@ -85,13 +85,19 @@ def trial(page: Any, server: Server, how: str, box: dict) -> tuple[float, float,
         page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
         page.mouse.down()
         page.mouse.up()
-    received = until(
-        lambda: (
-            (s := server.get("/api/status"))["estop_received_unix_s"] != before
-            and s["estop_received_unix_s"]
-        ),
-        "the server's e-stop",
-    )
+    try:
+        received = until(
+            lambda: (
+                (s := server.get("/api/status"))["estop_received_unix_s"] != before
+                and s["estop_received_unix_s"]
+            ),
+            "the server's e-stop",
+        )
+    except TimeoutError:  # say what the page saw
+        seen = page.evaluate("window.deltadash.estops.slice(-2)")
+        focus = page.evaluate("document.activeElement && document.activeElement.id")
+        toast = page.locator("#toast").inner_text()
+        raise TimeoutError(f"no e-stop by {how}: {count} before, {seen}, {focus=}, {toast=}")
     record = until(
         lambda: page.evaluate(f"window.deltadash.estops[{count}]"), "the page's record of the press"
     )
