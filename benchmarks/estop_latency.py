@@ -97,7 +97,9 @@ def trial(page: Any, server: Server, how: str, box: dict) -> tuple[float, float,
         seen = page.evaluate("window.deltadash.estops.slice(-2)")
         focus = page.evaluate("document.activeElement && document.activeElement.id")
         toast = page.locator("#toast").inner_text()
-        raise TimeoutError(f"no e-stop by {how}: {count} before, {seen}, {focus=}, {toast=}")
+        raise TimeoutError(
+            f"no e-stop by {how}: {count} before, {seen}, {focus=}, {toast=}"
+        ) from None
     record = until(
         lambda: page.evaluate(f"window.deltadash.estops[{count}]"), "the page's record of the press"
     )
