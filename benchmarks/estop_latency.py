@@ -68,7 +68,7 @@ def _canvas(frame: Any) -> bool:
         return False
 
 
-def trial(page: Any, server: Server, how: str, box: dict) -> tuple[float, float, float]:
+def trial(page: Any, server: Server, how: str) -> tuple[float, float, float]:
     """One press: (page event -> server, of which page event -> request sent, driver ->
     server) [ms]."""
     if server.get("/api/status")["estopped"]:
@@ -81,7 +81,9 @@ def trial(page: Any, server: Server, how: str, box: dict) -> tuple[float, float,
     pressed = time.time()
     if how == "key":
         page.keyboard.press("Space")
-    else:  # a press on the button (it stops on press), without Playwright's click checks
+    else:  # a press on the button (it stops on press), without Playwright's click checks;
+        # where it is now: the header reflows as its texts change
+        box = page.locator("#estop").bounding_box(timeout=300_000)
         page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
         page.mouse.down()
         page.mouse.up()
@@ -125,13 +127,12 @@ def main() -> None:
     with (
         tempfile.TemporaryDirectory() as folder,
         serve(Path(folder), scene=True) as server,
-        chromium_page() as page,
+        chromium_page(1366, 900) as page,
     ):
         open_page(page, server, not args.no_embed)
         print(f"scene {'not ' if args.no_embed else ''}embedded; load {os.getloadavg()}")
         for how in inputs:
-            box = page.locator("#estop").bounding_box(timeout=300_000)
-            results = [trial(page, server, how, box) for _ in range(args.trials)]
+            results = [trial(page, server, how) for _ in range(args.trials)]
             print(f"{how} ({args.trials} presses)")
             print("  " + report("page event -> server", [r[0] for r in results]))
             print("  " + report("  of which event -> request sent", [r[1] for r in results]))
