@@ -73,6 +73,9 @@ class Controller:
         self._t0 = clock()
         self._snapshot = Snapshot()
         self.pose_status: Callable[[], dict] | None = None  # set by the world service
+        # wall-clock time [s since the epoch] the last e-stop request reached the server (set
+        # by POST /api/estop, before it is queued); None: none since start
+        self.estop_received_unix_s: float | None = None
 
     # ---- lifecycle ----
     def start(self) -> None:

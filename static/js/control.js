@@ -1,7 +1,7 @@
 // Operator commands: e-stop (Space / Esc), torque, reset, go-to, and hold-to-move jogs from
 // the pad, the arrow keys and a gamepad (they move only while held: see startHold).
 
-import { post, postControl, takeLease } from "./api.js";
+import { postControl, takeLease, token } from "./api.js";
 import { showError, showMessage, setText } from "./ui.js";
 
 const KEY_AXES = {
@@ -38,11 +38,27 @@ export async function command(path, body) {
   }
 }
 
-export function estop() {
-  // nothing before the request: not the confirmation, not a pending promise
-  post("/api/estop").then(() => showMessage("E-stop: nothing moves until Reset", "error", {
-    clearsWhen: (s) => !s.estopped,
-  })).catch(showError);
+// The e-stop never waits: the request leaves first, synchronously from the key or pointer
+// event, on its own keepalive fetch at high priority (not behind the page's other requests,
+// not after the lease or the token prompt: POST /api/estop needs neither); the page's
+// reaction comes after. Each press is recorded (window.deltadash.estops, Unix ms) so a test
+// can compare it with the server's arrival time (GET /api/status's estop_received_unix_s).
+const estops = [];
+window.deltadash = Object.assign(window.deltadash || {}, { estops });
+
+export function estop(event = null) {
+  const headers = token() ? { Authorization: `Bearer ${token()}` } : {};
+  const sent = fetch("/api/estop", { method: "POST", headers, keepalive: true, priority: "high" });
+  const sentMs = Date.now();
+  // event.timeStamp is when the input arrived, before any wait for the main thread
+  const eventMs = event ? performance.timeOrigin + event.timeStamp : sentMs;
+  estops.push({ source: event ? event.type : "call", event_unix_ms: eventMs, sent_unix_ms: sentMs });
+  sent
+    .then((response) => {
+      if (!response.ok) throw new Error(`E-stop refused by the server (HTTP ${response.status})`);
+      showMessage("E-stop: nothing moves until Reset", "error", { clearsWhen: (s) => !s.estopped });
+    })
+    .catch((err) => showError(new Error(`E-stop not confirmed: ${err.message}`)));
   answerConfirm(false); // a pending move is not wanted after an e-stop
 }
 
@@ -245,8 +261,9 @@ function typing(target) {
 function onKey(event) {
   // E-stop wins over everything, even a focused button (Space would otherwise click it).
   if (event.key === "Escape" || (event.key === " " && !typing(event.target))) {
+    if (!event.repeat) estop(event); // first, before anything else (a held key sends one)
     event.preventDefault();
-    estop();
+    event.stopImmediatePropagation();
     return;
   }
   const axis = KEY_AXES[event.key];
@@ -263,7 +280,11 @@ function onKeyUp(event) {
 }
 
 function bindButtons() {
-  document.getElementById("estop").addEventListener("click", estop);
+  // The button stops on press (pointerdown), not on release; a click with no pointer
+  // (detail 0: Enter on the focused button) stops too.
+  const stopButton = document.getElementById("estop");
+  stopButton.addEventListener("pointerdown", (event) => { if (event.button === 0) estop(event); });
+  stopButton.addEventListener("click", (event) => { if (event.detail === 0) estop(event); });
   const on = (id, path, body) => document.getElementById(id).addEventListener("click", () =>
     command(path, body).catch(showError));
   on("torque-on", "/api/torque", { enabled: true });
@@ -321,7 +342,7 @@ export function startControl(info) {
   if (info && info.confirm_move_m) confirmMoveM = info.confirm_move_m;
   if (info && Array.isArray(info.home_m)) homeM = info.home_m;
   bindButtons();
-  document.addEventListener("keydown", onKey);
+  window.addEventListener("keydown", onKey, { capture: true }); // before any other handler
   document.addEventListener("keyup", onKeyUp);
   // Losing focus or the tab going hidden ends any hold at once (the server's deadline would
   // anyway), and keyboard jog switches itself off: no stray jogs on return.

@@ -19,6 +19,15 @@ function softwareWebGL() {
   }
 }
 
+// The same machine under another site's name: a frame from another site gets its own
+// renderer process (chromium's site isolation), so viser's drawing cannot hold up this page's
+// main thread, where the e-stop key is handled. A port alone does not make another site.
+export function isolatedHost(hostname) {
+  if (hostname === "127.0.0.1" || hostname === "[::1]") return "localhost";
+  if (hostname === "localhost") return "127.0.0.1";
+  return null;
+}
+
 function show(url, embed) {
   const frame = document.getElementById("scene");
   const note = document.getElementById("scene-note");
@@ -43,14 +52,19 @@ export function startScene(info) {
     return;
   }
   const url = `${location.protocol}//${location.hostname}:${info.viser_port}/`;
+  const isolated = isolatedHost(location.hostname);
+  const frameUrl = isolated ? `${location.protocol}//${isolated}:${info.viser_port}/` : url;
   link.href = url;
   const saved = localStorage.getItem(CHOICE_KEY);
   toggle.checked = saved === null ? !softwareWebGL() : saved === "1";
   toggle.addEventListener("change", () => {
     localStorage.setItem(CHOICE_KEY, toggle.checked ? "1" : "0");
-    show(url, toggle.checked);
+    show(frameUrl, toggle.checked);
   });
-  show(url, toggle.checked);
+  show(frameUrl, toggle.checked);
+  // Keys go to the frame that has focus: once the pointer leaves the scene, focus comes back
+  // to this page, where Space and Esc are the e-stop.
+  document.getElementById("scene").addEventListener("mouseleave", () => window.focus());
   if (!toggle.checked && saved === null) {
     note.textContent = "This browser renders WebGL in software: the 3D scene would slow the plots, " +
       "so it is not shown here. Tick “show here” to embed it anyway, or open it in a new tab.";

@@ -37,7 +37,7 @@ def page(server: Server) -> Iterator[Any]:
         errors: list[str] = []
         page.on("pageerror", lambda exc: errors.append(str(exc)))
         # The scene has its own browser test; its software WebGL would take a core from this one.
-        scene = f"http://127.0.0.1:{server.get('/api/info')['viser_port']}/**"
+        scene = f"http://*:{server.get('/api/info')['viser_port']}/**"  # any host name
         page.route(scene, lambda route: route.fulfill(content_type="text/html", body=SCENE_STUB))
         page.goto(server.url + "/")
         yield page

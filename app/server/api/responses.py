@@ -139,6 +139,10 @@ class StatusOut(_Out):
     backend_description: str
     torque: bool
     estopped: bool
+    estop_received_unix_s: float | None = Field(
+        description="wall-clock time [s since the Unix epoch] the last POST /api/estop reached "
+        "the server, before it was queued to the loop; null: none since the server started"
+    )
     faults: list[FaultOut]
     faults_dropped: int = Field(description="older causes dropped from the bounded list")
     warning: str | None

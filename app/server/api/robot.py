@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import time
 from concurrent.futures import Future
 from dataclasses import asdict
 from typing import Annotated, Any
@@ -76,7 +77,10 @@ async def post_torque(body: TorqueRequest, controller: ControllerDep, _: Control
 @router.post("/estop", response_model=Accepted, responses=UNAVAILABLE)
 async def post_estop(controller: ControllerDep):
     """Stop at once; holds or releases torque per config. Open to anyone (no token, no
-    lease): whoever sees the robot about to hurt someone may stop it."""
+    lease): whoever sees the robot about to hurt someone may stop it. Its wall-clock time of
+    arrival is in GET /api/status (``estop_received_unix_s``): the page's latency is measured
+    from it."""
+    controller.estop_received_unix_s = time.time()
     return await _outcome(controller.estop())
 
 

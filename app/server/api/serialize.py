@@ -27,6 +27,7 @@ def status(controller: Controller) -> dict[str, Any]:
         "backend_description": controller.backend_description,
         "torque": snap.torque,
         "estopped": snap.estopped,
+        "estop_received_unix_s": controller.estop_received_unix_s,
         "faults": [f.as_dict() for f in snap.faults],
         "faults_dropped": snap.faults_dropped,
         "warning": snap.warning,
