@@ -264,6 +264,8 @@ function onKey(event) {
     if (!event.repeat) estop(event); // first, before anything else (a held key sends one)
     event.preventDefault();
     event.stopImmediatePropagation();
+    // Esc still closes what it closes elsewhere (the report's lightbox), after the e-stop
+    if (event.key === "Escape") document.querySelectorAll("dialog[open]").forEach((d) => d.close());
     return;
   }
   const axis = KEY_AXES[event.key];

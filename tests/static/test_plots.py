@@ -99,10 +99,13 @@ def x_range(page: Any) -> list[float]:
 
 
 def pixel_of(page: Any, t: float) -> tuple[float, float]:
-    """The page pixel of time ``t`` [s] half-way up the first subplot."""
+    """The page pixel of time ``t`` [s] half-way up the first subplot (scrolled into view:
+    panels above it, e.g. the first-steps guidance, can push it below the fold)."""
     return page.evaluate(
         """(t) => {
-          const p = document.getElementById('plot'), r = p.getBoundingClientRect();
+          const p = document.getElementById('plot');
+          p.scrollIntoView({block: 'center'});
+          const r = p.getBoundingClientRect();
           const xa = p._fullLayout.xaxis, ya = p._fullLayout.yaxis;
           return [r.left + xa._offset + xa.l2p(t), r.top + ya._offset + ya._length / 2];
         }""",
@@ -127,6 +130,8 @@ def test_pause_freezes_the_plot_and_resume_continues(page: Any, server: Server) 
 
 
 def test_the_cursor_reads_out_the_drawn_values_at_the_hovered_time(page: Any) -> None:
+    set_paused(page, False)
+    wait_for(lambda: min(drawn(page)[0][0]) < -3.5, "samples drawn at t = -3 s", PAGE_WAIT_S)
     set_paused(page, True)
     data = drawn(page)
     readout = page.locator("#plot-readout")
@@ -135,9 +140,11 @@ def test_the_cursor_reads_out_the_drawn_values_at_the_hovered_time(page: Any) ->
         x, y = pixel_of(page, -3.0)
         page.mouse.move(x - 1, y)  # a move per try: a busy page may miss one
         page.mouse.move(x, y)
-        return readout.get_attribute("data-t") is not None
+        shown = readout.get_attribute("data-t")
+        # a layout that moved between reading the pixel and the move hovers elsewhere: again
+        return shown is not None and abs(float(shown) - -3.0) < 0.1
 
-    wait_for(hovered, "the cursor readout", timeout_s=PAGE_WAIT_S)
+    wait_for(hovered, "the cursor readout at t = -3 s", timeout_s=PAGE_WAIT_S)
     t = float(readout.get_attribute("data-t"))
     assert abs(t - -3.0) < 0.1, t  # a pixel is ~0.03 s, a sample 0.02 s
     j = int(readout.get_attribute("data-index"))
