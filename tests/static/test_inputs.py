@@ -38,7 +38,7 @@ def page(server: Server) -> Iterator[Any]:
     with chromium_page(1366, 900) as page:
         errors: list[str] = []
         page.on("pageerror", lambda exc: errors.append(str(exc)))
-        scene = f"http://127.0.0.1:{server.get('/api/info')['viser_port']}/**"
+        scene = f"http://*:{server.get('/api/info')['viser_port']}/**"  # any host name
         page.route(scene, lambda route: route.fulfill(content_type="text/html", body=SCENE_STUB))
         page.goals = []  # every POST /api/goal body the page sent, in order
         page.on("request", lambda r: record_goal(page, r))
