@@ -168,6 +168,7 @@ async function render() {
     await window.Plotly.react("plot", fullTraces(data), layout(), CONFIG);
     hookEvents();
     plotStats.fullDraws += 1;
+    if (cursorT !== null) placeCursor(cursorT); // a new layout (margins, range) moves the time's pixel
   } else {
     await window.Plotly.animate("plot", { data: asTraces(data), traces: TRACES.map((_, i) => i) },
       { transition: { duration: 0 }, frame: { duration: 0, redraw: false }, mode: "immediate" });
@@ -317,7 +318,10 @@ function onDoubleClick() {
 
 // The cursor: one vertical line per column of subplots at time t (three absolutely placed
 // divs over the plot; moving them costs no plotly redraw).
+let cursorT = null; // the time the cursor stands at [s], null when hidden
+
 function placeCursor(t) {
+  cursorT = t;
   const plot = document.getElementById("plot");
   const full = plot._fullLayout;
   if (!full || !full.xaxis) return;
@@ -345,6 +349,7 @@ function placeCursor(t) {
 }
 
 function hideCursor() {
+  cursorT = null;
   document.querySelectorAll("#plot .plot-cursor").forEach((line) => { line.hidden = true; });
 }
 

@@ -15,7 +15,12 @@ from urllib.parse import urlsplit
 
 import pytest
 
-from tests.support.browser import PAGE_WAIT_S, browser_skip_reason, chromium_page, page_condition
+from tests.support.browser import (
+    PAGE_WAIT_S,
+    browser_skip_reason,
+    dashboard_page,
+    page_condition,
+)
 from tests.support.server import Server, wait_for
 
 SKIP = browser_skip_reason()
@@ -24,12 +29,8 @@ pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=s
 
 @pytest.fixture(scope="module")
 def page(server: Server) -> Iterator[Any]:
-    with chromium_page(1366, 900) as page:
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        page.goto(server.url + "/", wait_until="commit", timeout=PAGE_WAIT_S * 1e3)
+    with dashboard_page(server, stub_scene=False) as page:  # the real scene: the hard case
         yield page
-        assert not errors, f"JavaScript errors on the page: {errors}"
 
 
 def scene_frame(page: Any) -> Any:

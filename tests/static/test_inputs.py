@@ -20,31 +20,25 @@ import pytest
 
 from tests.support import wait as waiting
 from tests.support.browser import (
-    PAGE_WAIT_S,
     browser_skip_reason,
-    chromium_page,
+    dashboard_page,
     page_condition,
 )
 from tests.support.server import Server, wait_for
 
 SKIP = browser_skip_reason()
 pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
-SCENE_STUB = "<p>3D scene (viser): stubbed in this test</p>"
 TRIPLE_MM = re.compile(r"\((-?\d+\.\d+), (-?\d+\.\d+), (-?\d+\.\d+)\) mm")
 
 
 @pytest.fixture(scope="module")
 def page(server: Server) -> Iterator[Any]:
-    with chromium_page(1366, 900) as page:
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        scene = f"http://*:{server.get('/api/info')['viser_port']}/**"  # any host name
-        page.route(scene, lambda route: route.fulfill(content_type="text/html", body=SCENE_STUB))
+    def listen(page: Any) -> None:
         page.goals = []  # every POST /api/goal body the page sent, in order
         page.on("request", lambda r: record_goal(page, r))
-        page.goto(server.url + "/", timeout=PAGE_WAIT_S * 1e3)  # a loaded machine is slow
+
+    with dashboard_page(server, on_page=listen) as page:
         yield page
-        assert not errors, f"JavaScript errors on the page: {errors}"
 
 
 def record_goal(page: Any, request: Any) -> None:
@@ -68,7 +62,11 @@ def torque_on(page: Any, server: Server, button: str = "#torque-on") -> None:
     # clicked until accepted: the relaxed twin's arm may still swing past its joint limits
     # (a click in the page: a button the accepted torque disabled meanwhile ignores it)
     click = "sel => document.querySelector(sel).click()"
-    wait_for(lambda: status(server)["torque"] or page.evaluate(click, button), "torque on")
+    wait_for(
+        lambda: status(server)["torque"] or page.evaluate(click, button),
+        "torque on",
+        seen=server.brief,
+    )
 
 
 def type_goal(page: Any, x: str, y: str, z: str) -> None:
@@ -110,9 +108,8 @@ def arrive(page: Any, server: Server, point_m: list[float], what: str) -> None:
             return False
         return at_rest_near(server, point_m)
 
-    def seen() -> str:
-        s = status(server)
-        return f"mode {s['mode']}, measured {s['ee']['position_m']}, faults {s['faults']}"
+    def seen() -> dict[str, Any]:
+        return {**server.brief(), "toast": text(page, "#toast")}
 
     waiting.wait_for(step, what, poll_s=0.1, seen=seen)
 
@@ -183,6 +180,7 @@ def test_goals_are_typed_sent_and_shown_to_a_hundredth_of_a_mm(page: Any, server
     wait_for(
         lambda: status(server)["goal"]["position_m"] == pytest.approx(goal, abs=1e-9),
         "the server's goal to the hundredth of a mm",
+        seen=lambda: {**server.brief(), "toast": text(page, "#toast")},
     )
     wait_for(lambda: text(page, "#pos-goal").startswith("10.01, -0.01,"), "the goal shown in mm")
 

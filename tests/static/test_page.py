@@ -19,7 +19,7 @@ from tests.support import wait as waiting
 from tests.support.browser import (
     PAGE_WAIT_S,
     browser_skip_reason,
-    chromium_page,
+    dashboard_page,
     page_condition,
     save_artifact,
 )
@@ -28,20 +28,27 @@ from tests.support.server import Server, wait_for
 SKIP = browser_skip_reason()
 pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
 STEP_M = 0.005  # how far a held jog must go before the test lets go
-SCENE_STUB = "<p style='font: 14px sans-serif'>3D scene (viser): stubbed in this test</p>"
 
 
 @pytest.fixture(scope="module")
 def page(server: Server) -> Iterator[Any]:
-    with chromium_page(1366, 900) as page:
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        # The scene has its own browser test; its software WebGL would take a core from this one.
-        scene = f"http://*:{server.get('/api/info')['viser_port']}/**"  # any host name
-        page.route(scene, lambda route: route.fulfill(content_type="text/html", body=SCENE_STUB))
-        page.goto(server.url + "/")
+    with dashboard_page(server) as page:
         yield page
-        assert not errors, f"JavaScript errors on the page: {errors}"
+
+
+def until(
+    server: Server, condition: Any, what: str, timeout_s: float = 60.0, page: Any = None
+) -> Any:
+    """wait_for on the robot: a timeout prints the server's mode, faults and points (and the
+    page's toast, given the page)."""
+
+    def seen() -> dict[str, Any]:
+        brief = server.brief()
+        if page is not None:
+            brief["toast"] = page.locator("#toast").inner_text()
+        return brief
+
+    return wait_for(condition, what, timeout_s, seen=seen)
 
 
 def measured(server: Server) -> list[float]:
@@ -86,7 +93,9 @@ def test_header_fills_in_from_the_server(page: Any, server: Server) -> None:
 
 def test_go_to_then_jog_by_key_and_by_pad(page: Any, server: Server) -> None:
     # clicked until accepted: the twin's arm may still swing past its joint limits
-    wait_for(lambda: server.get("/api/status")["torque"] or page.click("#torque-on"), "torque on")
+    until(
+        server, lambda: server.get("/api/status")["torque"] or page.click("#torque-on"), "torque on"
+    )
     page.click("#goal-form button[type=submit]")  # the form's default goal: (0, 0, -240) mm
 
     def arrived_or_confirmed() -> bool:  # from the hanging arm it is a long move: confirm it
@@ -94,23 +103,25 @@ def test_go_to_then_jog_by_key_and_by_pad(page: Any, server: Server) -> None:
             page.click("#confirm-yes")
         return abs(measured(server)[2] + 0.24) < 0.002
 
-    wait_for(arrived_or_confirmed, "arrival at z = -240 mm")
+    until(server, arrived_or_confirmed, "arrival at z = -240 mm")
     shown = text(page, "#pos-meas")
 
     page.check("#jog-keys")  # hold-to-move: it jogs while the key is down, stops on release
     x_before = measured(server)[0]
     page.keyboard.down("ArrowRight")
-    wait_for(lambda: measured(server)[0] > x_before + STEP_M, "+x while the arrow key is held")
+    until(server, lambda: measured(server)[0] > x_before + STEP_M, "+x while the arrow key is held")
     page.keyboard.up("ArrowRight")
-    wait_for(lambda: commanded_still(server), "the jog to stop when the key is released")
+    until(server, lambda: commanded_still(server), "the jog to stop when the key is released")
     wait_for(lambda: text(page, "#pos-meas") != shown, "the page's measured position to change")
 
     z_before = measured(server)[2]
     page.hover("[data-jog='z+']")
     page.mouse.down()
-    wait_for(lambda: measured(server)[2] > z_before + STEP_M, "+z while the pad button is held")
+    until(
+        server, lambda: measured(server)[2] > z_before + STEP_M, "+z while the pad button is held"
+    )
     page.mouse.up()
-    wait_for(lambda: commanded_still(server), "the jog to stop when the button is released")
+    until(server, lambda: commanded_still(server), "the jog to stop when the button is released")
     shot(page, "jogged")
 
 
@@ -119,10 +130,12 @@ def test_a_held_jog_stops_by_itself_when_the_link_is_lost(page: Any, server: Ser
     page.check("#jog-keys")
     x_before = measured(server)[0]
     page.keyboard.down("ArrowLeft")
-    wait_for(lambda: measured(server)[0] < x_before - 0.002, "-x while the key is held")
+    until(server, lambda: measured(server)[0] < x_before - 0.002, "-x while the key is held")
     page.route("**/api/jog", lambda route: route.abort())  # the link drops mid-jog
     try:
-        stopped = wait_for(lambda: commanded_still(server), "the server to stop the jog itself")
+        stopped = until(
+            server, lambda: commanded_still(server), "the server to stop the jog itself"
+        )
         assert "no heartbeat" in (server.get("/api/status")["notice"] or "")
         assert server.get("/api/status")["ee"]["commanded_m"] == stopped
     finally:
@@ -154,7 +167,8 @@ def test_gamepad_jogs_only_with_the_deadman_held(page: Any, server: Server) -> N
     assert server.get("/api/status")["goal"]["position_m"] == goal
 
     page.evaluate(FAKE_PAD, {"x": 1.0, "held": True})
-    wait_for(
+    until(
+        server,
         lambda: server.get("/api/status")["goal"]["position_m"][0] > goal[0] + 0.002,
         "+x goal from the stick with the deadman held",
     )
@@ -193,10 +207,14 @@ def plotted_span_mm(page: Any) -> float:
 def ready_to_run(page: Any, server: Server) -> None:
     """No e-stop or fault, torque on, the arm at rest: a run's own start."""
     page.click("#reset")
-    wait_for(lambda: server.get("/api/status")["mode"] in ("idle", "jog"), "no e-stop or fault")
+    until(
+        server, lambda: server.get("/api/status")["mode"] in ("idle", "jog"), "no e-stop or fault"
+    )
     # clicked until accepted: the twin's arm may still swing past its joint limits
-    wait_for(lambda: server.get("/api/status")["torque"] or page.click("#torque-on"), "torque on")
-    wait_for(lambda: commanded_still(server), "the arm at rest")
+    until(
+        server, lambda: server.get("/api/status")["torque"] or page.click("#torque-on"), "torque on"
+    )
+    until(server, lambda: commanded_still(server), "the arm at rest")
 
 
 def start_from_page(page: Any, server: Server) -> dict:
@@ -215,7 +233,13 @@ def start_from_page(page: Any, server: Server) -> dict:
             page.click("#sine-start")
         return False
 
-    wait_for(started, "the run to start (a refusal shows in the toast)")
+    until(
+        server,
+        started,
+        "the run to start (a refusal shows in the toast)",
+        PAGE_WAIT_S,
+        page,
+    )
     return server.get("/api/runs")[0]
 
 

@@ -16,7 +16,7 @@ from tests.support import wait as waiting
 from tests.support.browser import (
     PAGE_WAIT_S,
     browser_skip_reason,
-    chromium_page,
+    dashboard_page,
     page_condition,
     save_artifact,
 )
@@ -24,21 +24,14 @@ from tests.support.server import Server, wait_for
 
 SKIP = browser_skip_reason()
 pytestmark = [pytest.mark.browser, pytest.mark.skipif(SKIP is not None, reason=str(SKIP))]
-SCENE_STUB = "<p>3D scene (viser): stubbed in this test</p>"
 ROBOT_RGB = (0x18, 0x64, 0xAB)  # workspace2d.js COLOURS.robot
 REACHABLE_RGB = (0xD3, 0xF9, 0xD8)  # COLOURS.reachable
 
 
 @pytest.fixture(scope="module")
 def page(server: Server) -> Iterator[Any]:
-    with chromium_page(1366, 900) as page:
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
-        scene = f"http://*:{server.get('/api/info')['viser_port']}/**"  # any host name
-        page.route(scene, lambda route: route.fulfill(content_type="text/html", body=SCENE_STUB))
-        page.goto(server.url + "/", timeout=PAGE_WAIT_S * 1e3)  # a loaded machine is slow
+    with dashboard_page(server) as page:
         yield page
-        assert not errors, f"JavaScript errors on the page: {errors}"
 
 
 def pixels_of(page: Any, canvas: str, rgb: tuple[int, int, int]) -> int:

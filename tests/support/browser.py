@@ -81,6 +81,43 @@ def chromium_page(width: int = 1280, height: int = 800) -> Iterator[Any]:
             context.close()
 
 
+SCENE_STUB = "<p style='font: 14px sans-serif'>3D scene (viser): stubbed in this test</p>"
+
+
+@contextmanager
+def dashboard_page(
+    server: Any,
+    width: int = 1366,
+    height: int = 900,
+    *,
+    stub_scene: bool = True,
+    on_page: Any = None,
+) -> Iterator[Any]:
+    """The dashboard of ``server`` (a tests.support.server.Server) in a fresh chromium page,
+    asserting afterwards that no JavaScript error happened on it.
+
+    ``stub_scene``: the embedded 3D scene is answered with a short note under any host name
+    (the page embeds it under the other one of localhost / 127.0.0.1): its software WebGL
+    would take a core from the test; the scene has its own tests. ``on_page(page)`` runs
+    before the page loads (e.g. to listen to its requests). Loading waits only for the
+    first bytes: a loaded machine can take longer than Playwright's 30 s to fire "load",
+    so tests wait on the conditions they need.
+    """
+    with chromium_page(width, height) as page:
+        errors: list[str] = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        if stub_scene:
+            scene = f"http://*:{server.get('/api/info')['viser_port']}/**"
+            page.route(
+                scene, lambda route: route.fulfill(content_type="text/html", body=SCENE_STUB)
+            )
+        if on_page is not None:
+            on_page(page)
+        page.goto(server.url + "/", wait_until="commit", timeout=PAGE_WAIT_S * 1e3)
+        yield page
+        assert not errors, f"JavaScript errors on the page: {errors}"
+
+
 def box_of(locator: Any, what: str, timeout_s: float = PAGE_WAIT_S) -> dict[str, float]:
     """The bounding box of ``locator`` once it is laid out with a size; fail naming ``what``.
 

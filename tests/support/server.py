@@ -34,9 +34,15 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
-def wait_for(condition: Callable[[], Any], what: str, timeout_s: float = WAIT_S) -> Any:
+def wait_for(
+    condition: Callable[[], Any],
+    what: str,
+    timeout_s: float = WAIT_S,
+    *,
+    seen: Callable[[], Any] | None = None,
+) -> Any:
     """tests.support.wait.wait_for, polling a subprocess server at a gentler 10 Hz."""
-    return waiting.wait_for(condition, what, timeout_s, poll_s=0.1)
+    return waiting.wait_for(condition, what, timeout_s, poll_s=0.1, seen=seen)
 
 
 @dataclass
@@ -56,6 +62,27 @@ class Server:
         )
         with urllib.request.urlopen(request, timeout=10) as response:
             return json.load(response)
+
+    def brief(self) -> dict[str, Any]:
+        """What a timed-out wait on the robot should print: mode, torque, e-stop, faults,
+        the last notice, the run phase, the measured and commanded points [mm]."""
+        try:
+            status = self.get("/api/status")
+        except (urllib.error.URLError, OSError) as exc:
+            return {"status": f"unreadable: {exc}"}
+        mm = lambda v: None if v is None else [round(1e3 * c, 2) for c in v]  # noqa: E731
+        return {
+            "mode": status["mode"],
+            "torque": status["torque"],
+            "estopped": status["estopped"],
+            "faults": [f"{f['source']}: {f['reason']}" for f in status["faults"]],
+            "warning": status["warning"],
+            "notice": status["notice"],
+            "phase": status["phase"],
+            "measured_mm": mm(status["ee"]["position_m"]),
+            "commanded_mm": mm(status["ee"].get("commanded_m")),
+            "loop_hz": status["loop"].get("measured_hz"),
+        }
 
     def up(self) -> bool:
         try:
