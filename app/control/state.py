@@ -102,3 +102,20 @@ class Snapshot:
     def tracking_error_m(self) -> np.ndarray:
         """Commanded minus measured platform position [m]."""
         return self.point_commanded_m - self.point_measured_m
+
+    @property
+    def has_setpoint(self) -> bool:
+        """The loop holds the arm to a setpoint: torque on, no e-stop, no fault, a goal."""
+        return (
+            self.torque
+            and not self.estopped
+            and not self.faults
+            and bool(np.all(np.isfinite(self.goal_m)))
+        )
+
+    @property
+    def shown_error_m(self) -> np.ndarray:
+        """The tracking error an operator is shown [m], (3,): NaN (unknown) without a
+        setpoint, where commanded minus measured is a stale figure (e.g. a relaxed arm
+        falling away from the last command after torque off)."""
+        return self.tracking_error_m if self.has_setpoint else np.full(3, np.nan)

@@ -2,7 +2,7 @@
 // the pad, the arrow keys and a gamepad (they move only while held: see startHold).
 
 import { postControl, takeLease, token } from "./api.js";
-import { showError, showMessage, setText } from "./ui.js";
+import { operatorText, parseDecimal, showError, showMessage, setText } from "./ui.js";
 
 const KEY_AXES = {
   ArrowRight: [0, 1], ArrowLeft: [0, -1], ArrowUp: [1, 1], ArrowDown: [1, -1],
@@ -29,7 +29,8 @@ export async function command(path, body) {
     return await postControl(path, body);
   } catch (err) {
     if (err.status === 409 && err.message.includes("control is held by")) {
-      if (window.confirm(`${err.message}\n\nTake control?`)) {
+      // asked in the page (window.confirm would block the page, and its e-stop keys)
+      if (await askConfirm(`${operatorText(err).text} Take control from there?`, "Take control")) {
         await takeLease(true);
         return postControl(path, body);
       }
@@ -83,17 +84,11 @@ export function askConfirm(text, yesLabel) {
 }
 
 // ---- typed goals: decimal point or comma, to 0.01 mm, shown before they are sent ----
-const DECIMAL = /^[+\-\u2212]?(\d+([.,]\d*)?|[.,]\d+)$/;
 
-// A typed number in mm: "12.5", "12,5" (a decimal comma) and "-240" are numbers; "1,234.5",
-// "12,5,0", "" and "1e3" are refused with the reason. Rounded to 0.01 mm.
+// A typed number in mm (ui.js parseDecimal: "12,5" is 12.5), rounded to 0.01 mm.
 export function parseMm(text) {
-  const t = String(text).trim().replace("\u2212", "-");
-  if (!t) return { error: "is empty" };
-  if (!DECIMAL.test(t)) return { error: `"${text}" is not a number (e.g. 12.5 or 12,5)` };
-  const value = Number(t.replace(",", "."));
-  if (!Number.isFinite(value)) return { error: `"${text}" is not a number` };
-  return { value: Math.round(value * 100) / 100 };
+  const parsed = parseDecimal(text);
+  return parsed.error ? parsed : { value: Math.round(parsed.value * 100) / 100 };
 }
 
 const fmt2 = (v) => v.toFixed(2);

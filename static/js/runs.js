@@ -5,7 +5,7 @@
 import { get, getBlob, post, mm, fixed } from "./api.js";
 import { command } from "./control.js";
 import { escape } from "./status.js";
-import { operatorText, showError, showMessage, setText } from "./ui.js";
+import { operatorText, parseDecimal, showError, showMessage, setText } from "./ui.js";
 
 const RUNS_POLL_MS = 2000;
 const PREVIEW_DELAY_MS = 300;
@@ -14,21 +14,38 @@ let previewTimer = null;
 const picked = new Set(); // run ids ticked for comparing
 let compareUrl = null; // the object URL of the shown comparison plot
 
-// Form fields (mm, deg) -> the API's body (m, rad).
+// Form fields (mm, Hz, deg, s; a decimal comma is a decimal point) -> the API's body (m, rad),
+// or { error } naming the first field that is not a number (its box is marked).
 function sinusoidBody() {
-  const f = new FormData(document.getElementById("sine-form"));
-  const triple = (name, scale) => [0, 1, 2].map((i) => Number(f.get(`${name}${i}`)) * scale);
-  return {
+  const form = document.getElementById("sine-form");
+  let error = null;
+  const number = (name, scale) => {
+    const input = form.elements[name];
+    const parsed = parseDecimal(input.value);
+    input.setAttribute("aria-invalid", parsed.error ? "true" : "false");
+    if (parsed.error && !error) error = `${input.getAttribute("aria-label") || name}: ${parsed.error}`;
+    return parsed.error ? null : parsed.value * scale;
+  };
+  const triple = (name, scale) => [0, 1, 2].map((i) => number(`${name}${i}`, scale));
+  const body = {
     amplitude_m: triple("amp", 1e-3), frequency_hz: triple("freq", 1),
     phase_rad: triple("phase", Math.PI / 180), offset_m: triple("off", 1e-3),
-    duration_s: Number(f.get("duration")), feedforward: f.get("feedforward") === "on",
+    duration_s: number("duration", 1), feedforward: form.elements.feedforward.checked,
   };
+  return error ? { error } : body;
 }
 
 async function preview() {
   const out = document.getElementById("sine-preview");
+  const body = sinusoidBody();
+  if (body.error) { // nothing asked of the server about a form that is not numbers
+    out.textContent = body.error;
+    out.title = "";
+    out.className = "preview bad";
+    return;
+  }
   try {
-    const c = await post("/api/tests/sinusoid/check", sinusoidBody());
+    const c = await post("/api/tests/sinusoid/check", body);
     const speed = c.peak_joint_speed_rad_s === null ? "–" : fixed(c.peak_joint_speed_rad_s, 2);
     const head = `peak joint speed ${speed} rad/s (limit ${fixed(c.joint_speed_limit_rad_s, 1)}), ` +
       `peak platform speed ${fixed(c.peak_speed_m_s, 2)} m/s: `;
@@ -50,6 +67,10 @@ function schedulePreview() {
 async function start(event) {
   event.preventDefault();
   const body = sinusoidBody();
+  if (body.error) {
+    showMessage(`Not started: ${body.error}`, "error");
+    return;
+  }
   try {
     const { run_id } = await command("/api/tests/sinusoid", body);
     active = { id: run_id, kind: "sinusoid", description: "", progress: null, at: 0, filled: true };

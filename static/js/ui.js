@@ -47,6 +47,19 @@ export function showError(err) {
   showMessage(text, "error", { detail, clearsWhen });
 }
 
+const DECIMAL = /^[+\-\u2212]?(\d+([.,]\d*)?|[.,]\d+)$/;
+
+// A typed decimal number: "12.5", "12,5" (a decimal comma) and "-240" are numbers; "1,234.5",
+// "12,5,0", "" and "1e3" are refused with the reason ({ error }), never read another way.
+export function parseDecimal(text) {
+  const t = String(text).trim().replace("\u2212", "-");
+  if (!t) return { error: "is empty" };
+  if (!DECIMAL.test(t)) return { error: `"${text}" is not a number (e.g. 12.5 or 12,5)` };
+  const value = Number(t.replace(",", "."));
+  if (!Number.isFinite(value)) return { error: `"${text}" is not a number` };
+  return { value };
+}
+
 const METRE_FIELDS = /\b(position|delta|amplitude|offset)_m\b/g;
 
 // "[0.0300, 0.0000, -0.2300] m" -> "(30.0, 0.0, -230.0) mm"; "0.5 m" -> "500.0 mm".

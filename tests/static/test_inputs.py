@@ -23,6 +23,7 @@ from tests.support.browser import (
     browser_skip_reason,
     dashboard_page,
     page_condition,
+    toasts,
 )
 from tests.support.server import Server, wait_for
 
@@ -109,7 +110,7 @@ def arrive(page: Any, server: Server, point_m: list[float], what: str) -> None:
         return at_rest_near(server, point_m)
 
     def seen() -> dict[str, Any]:
-        return {**server.brief(), "toast": text(page, "#toast")}
+        return {**server.brief(), "messages": toasts(page)}
 
     waiting.wait_for(step, what, poll_s=0.1, seen=seen)
 
@@ -143,7 +144,19 @@ def test_first_steps_say_torque_on_then_go_home(page: Any, server: Server) -> No
     assert distance > info["confirm_move_m"] * 1000
     assert len(page.goals) == sent
     page.click("#confirm-yes")
-    wait_for(lambda: len(page.goals) > sent, "the goal request")
+
+    def sent_home() -> bool:  # a click a busy page lost leaves the question open: again
+        if len(page.goals) > sent:
+            return True
+        if visible(page, "#confirm"):
+            page.click("#confirm-yes")
+        return False
+
+    wait_for(
+        sent_home,
+        "the goal request",
+        seen=lambda: {"confirm shown": visible(page, "#confirm"), "messages": toasts(page)},
+    )
     assert page.goals[sent] == pytest.approx(home, abs=1e-12)
     arrive(page, server, home, "arrival at the home point")
     wait_for(lambda: not visible(page, "#first-steps"), "the guidance to go once home")
@@ -180,7 +193,7 @@ def test_goals_are_typed_sent_and_shown_to_a_hundredth_of_a_mm(page: Any, server
     wait_for(
         lambda: status(server)["goal"]["position_m"] == pytest.approx(goal, abs=1e-9),
         "the server's goal to the hundredth of a mm",
-        seen=lambda: {**server.brief(), "toast": text(page, "#toast")},
+        seen=lambda: {**server.brief(), "messages": toasts(page)},
     )
     wait_for(lambda: text(page, "#pos-goal").startswith("10.01, -0.01,"), "the goal shown in mm")
 
@@ -326,3 +339,62 @@ def test_values_are_marked_stale_when_the_status_stops(page: Any) -> None:
     finally:
         page.unroute("**/api/status")
     page_condition(page, "() => !document.body.classList.contains('stale')", "fresh again")
+
+
+def test_sinusoid_fields_read_a_decimal_comma_and_refuse_what_is_not_a_number(
+    page: Any, server: Server
+) -> None:
+    checks: list[dict] = []  # every preview request's body
+    starts: list[dict] = []  # every run start's body
+
+    def listen(request: Any) -> None:
+        if request.method == "POST" and request.url.endswith("/api/tests/sinusoid/check"):
+            checks.append(json.loads(request.post_data))
+        elif request.method == "POST" and request.url.endswith("/api/tests/sinusoid"):
+            starts.append(json.loads(request.post_data))
+
+    amp_x = page.locator("#sine-form input[name=amp0]")
+    page.on("request", listen)
+    try:
+        amp_x.fill("12,5")  # a decimal comma: 12.5 mm, never 125 mm nor 0
+        wait_for(
+            lambda: any(c["amplitude_m"][0] == pytest.approx(0.0125) for c in checks),
+            "a preview of 12.5 mm",
+            seen=lambda: checks[-1:],
+        )
+        assert amp_x.get_attribute("aria-invalid") == "false"
+        amp_x.fill("1,2,5")  # not a number in any reading: refused, named, not sent
+        wait_for(
+            lambda: "amplitude x mm" in text(page, "#sine-preview"),
+            "the preview to name the bad field",
+            seen=lambda: text(page, "#sine-preview"),
+        )
+        assert "not a number" in text(page, "#sine-preview")
+        assert amp_x.get_attribute("aria-invalid") == "true"
+        page.click("#sine-start")
+        wait_for(lambda: "Not started: amplitude x mm" in text(page, "#toast"), "the refusal")
+        amp_x.fill("50")  # a later, harmless preview: what was asked before it has arrived
+        wait_for(
+            lambda: checks and checks[-1]["amplitude_m"][0] == pytest.approx(0.05),
+            "a preview of 50 mm",
+        )
+    finally:
+        page.remove_listener("request", listen)
+    assert not starts, starts
+    # every preview asked for 12.5 mm or 50 mm: nothing else was ever sent
+    assert {round(c["amplitude_m"][0], 6) for c in checks} <= {0.0125, 0.05}, checks
+
+
+def test_taking_control_from_another_client_is_asked_in_the_page(page: Any, server: Server) -> None:
+    server.post("/api/lease", {"client": "bench laptop", "take_over": True})
+    assert server.get("/api/lease")["holder"] == "bench laptop"
+    page.click("#reset")  # a command: the lease is another's, so the page asks first
+    wait_for(lambda: visible(page, "#confirm"), "the take-control question in the page")
+    assert "bench laptop" in text(page, "#confirm-text")
+    assert text(page, "#confirm-yes") == "Take control"
+    page.click("#confirm-yes")
+    wait_for(
+        lambda: (server.get("/api/lease")["holder"] or "").startswith("dashboard-"),
+        "the page to hold control",
+        seen=lambda: server.get("/api/lease"),
+    )

@@ -22,6 +22,7 @@ from tests.support.browser import (
     dashboard_page,
     page_condition,
     save_artifact,
+    toasts,
 )
 from tests.support.server import Server, wait_for
 
@@ -45,7 +46,7 @@ def until(
     def seen() -> dict[str, Any]:
         brief = server.brief()
         if page is not None:
-            brief["toast"] = page.locator("#toast").inner_text()
+            brief["messages"] = toasts(page)
         return brief
 
     return wait_for(condition, what, timeout_s, seen=seen)

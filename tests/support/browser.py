@@ -82,6 +82,26 @@ def chromium_page(width: int = 1280, height: int = 800) -> Iterator[Any]:
 
 
 SCENE_STUB = "<p style='font: 14px sans-serif'>3D scene (viser): stubbed in this test</p>"
+# Every message the page showed, in order (window.__toasts), for a timed-out wait to print.
+RECORD_TOASTS = """
+document.addEventListener("DOMContentLoaded", () => {
+  const toast = document.getElementById("toast");
+  if (!toast) return;
+  window.__toasts = [];
+  new MutationObserver(() => {
+    const said = toast.textContent;
+    if (said && window.__toasts[window.__toasts.length - 1] !== said) window.__toasts.push(said);
+  }).observe(toast, { childList: true, characterData: true, subtree: true });
+});
+"""
+
+
+def toasts(page: Any) -> list[str]:
+    """The messages the page has shown so far (dashboard_page records them)."""
+    try:
+        return page.evaluate("window.__toasts || []")
+    except Exception as exc:  # a page mid-navigation: say so rather than fail the report
+        return [f"unreadable: {exc}"]
 
 
 @contextmanager
@@ -111,6 +131,7 @@ def dashboard_page(
             page.route(
                 scene, lambda route: route.fulfill(content_type="text/html", body=SCENE_STUB)
             )
+        page.add_init_script(RECORD_TOASTS)
         if on_page is not None:
             on_page(page)
         page.goto(server.url + "/", wait_until="commit", timeout=PAGE_WAIT_S * 1e3)

@@ -58,7 +58,9 @@ class PlatformStatus(_Out):
 
     position_m: MaybeVector3
     commanded_m: MaybeVector3
-    error_m: MaybeVector3 = Field(description="commanded - measured [m]")
+    error_m: MaybeVector3 = Field(
+        description="commanded - measured [m]; null without a setpoint (torque off, e-stop, fault)"
+    )
     external_m: MaybeVector3
 
 
@@ -185,7 +187,9 @@ class TelemetryMessage(_Out):
     measured_joints_rad: MaybeVector3
     commanded_m: MaybeVector3
     measured_m: MaybeVector3
-    error_m: MaybeVector3 = Field(description="commanded - measured [m]")
+    error_m: MaybeVector3 = Field(
+        description="commanded - measured [m]; null without a setpoint (torque off, e-stop, fault)"
+    )
     loop: TelemetryLoop
     faults: list[FaultOut]
     world: WorldFrame | None

@@ -47,7 +47,7 @@ def status(controller: Controller) -> dict[str, Any]:
         "ee": {
             "position_m": floats(snap.point_measured_m),
             "commanded_m": floats(snap.point_commanded_m),
-            "error_m": floats(snap.tracking_error_m),
+            "error_m": floats(snap.shown_error_m),
             "external_m": floats(snap.external_m),
         },
         "goal": {"position_m": floats(snap.goal_m)},
@@ -88,7 +88,7 @@ def telemetry(snap: Snapshot, controller: Controller) -> dict[str, Any]:
         "measured_joints_rad": floats(snap.joints_measured_rad),
         "commanded_m": floats(snap.point_commanded_m),
         "measured_m": floats(snap.point_measured_m),
-        "error_m": floats(snap.tracking_error_m),
+        "error_m": floats(snap.shown_error_m),
         "loop": {
             "measured_hz": window.measured_hz,
             "jitter_p99_ms": window.jitter_p99_ms,

@@ -13,7 +13,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.config import load_settings
-from app.control.state import Snapshot
+from app.control.state import Fault, Snapshot
 from app.server import create_app
 from app.server.api import serialize
 from app.server.api.deps import get_runs
@@ -60,6 +60,38 @@ def test_telemetry_in_hold_mode_has_the_world_frame():
     assert parsed.world is not None and parsed.world.error_m == [0.0, 0.0, 0.5]
     assert parsed.measured_m == [None, None, None]  # unknown is null, not NaN
     assert np.isnan(snap.point_measured_m).all()
+
+
+def _telemetry(snap: Snapshot) -> TelemetryMessage:
+    window = SimpleNamespace(measured_hz=200.0, jitter_p99_ms=0.1)
+    timing = SimpleNamespace(last_window=lambda: window, overruns=0)
+    return TelemetryMessage.model_validate(
+        serialize.telemetry(snap, SimpleNamespace(timing=timing))
+    )
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"torque": False},
+        {"estopped": True},
+        {"faults": (Fault("following", "following error 0.4 rad on joint 2"),)},
+        {"goal_m": np.array([0.0, np.nan, -0.24])},
+    ],
+    ids=["torque off", "e-stop", "fault", "no goal"],
+)
+def test_telemetry_error_is_null_without_a_setpoint(change):
+    """Commanded minus measured is shown only while the loop holds a setpoint: a relaxed
+    arm falling away from its last command has no tracking error to plot."""
+    held = dict(
+        torque=True,
+        goal_m=np.array([0.0, 0.0, -0.24]),
+        point_commanded_m=np.array([0.0, 0.0, -0.24]),
+        point_measured_m=np.array([0.001, -0.002, -0.2435]),
+    )
+    shown = _telemetry(Snapshot(**held)).error_m
+    assert shown == pytest.approx([-0.001, 0.002, 0.0035])  # goal - measured, as held
+    assert _telemetry(Snapshot(**{**held, **change})).error_m == [None, None, None]
 
 
 def test_openapi_has_response_schemas_and_error_responses(bare):
