@@ -60,7 +60,15 @@ class Segment:
         return self.kind in ("rapid", "linear", "arc")
 
     def curve(self) -> Curve:
-        """This segment's geometry by arc length (a point for dwells and pauses)."""
+        """This segment's geometry by arc length (a point for dwells and pauses); built
+        once (the planner asks for it several times per segment)."""
+        cached = self.__dict__.get("_curve")
+        if cached is None:
+            cached = self._build_curve()
+            object.__setattr__(self, "_curve", cached)
+        return cached
+
+    def _build_curve(self) -> Curve:
         start, end = np.asarray(self.start_m), np.asarray(self.end_m)
         if self.kind != "arc":
             delta = end - start
