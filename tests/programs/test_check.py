@@ -104,3 +104,29 @@ def test_a_program_over_the_line_limit_is_refused(settings):
 def test_a_program_that_does_not_move_is_checked_where_the_tool_is(settings):
     report = check_program("(nothing)\nM2", settings).report
     assert report.ok and report.duration_s == 0 and report.samples == 1
+
+
+def test_the_torque_line_is_the_twins_servo():
+    """The check's torque-speed line is the XM430-W210 the simulator's servos model."""
+    from app.programs.check import verify_limits
+    from hardware.sim.xm430 import RPM, XM430_W210
+
+    servo = verify_limits(load_settings()).servo
+    assert servo.stall_nm == XM430_W210.stall_torque_nm
+    assert servo.no_load_rpm * RPM == pytest.approx(XM430_W210.no_load_speed_rad_s)
+
+
+def test_the_singularity_margin_is_checked_on_every_line(settings):
+    text = "G90 G1 F1200 Z-220\nX10\nG4 P0.1\nG0 X0"
+    assert check_program(text, settings).report.ok
+    strict = load_settings(limits={"min_dexterity": 0.99})
+    report = check_program(text, strict).report
+    assert {v.line for v in report.violations if v.kind == "singularity"} == {1, 2, 3, 4}
+    assert report.worst_dexterity < 0.99
+
+
+def test_a_linear_delta_is_checked_without_a_torque_model():
+    linear = load_settings(robot={"type": "linear"})
+    report = check_program("G1 F600 Z-300", linear, start_m=(0.0, 0.0, -0.3)).report
+    assert report.worst_torque_ratio is None
+    assert all(v.kind != "torque" for v in report.violations)

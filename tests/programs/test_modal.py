@@ -36,12 +36,12 @@ def test_incremental_and_absolute_programs_reach_the_same_points(steps):
     """G91 steps and G90 running sums are the same path (and back to G90 is absolute)."""
     relative = "G91 F100\n" + "\n".join(f"G1 X{x} Y{y} Z{z}" for x, y, z in steps)
     totals = np.cumsum(np.array(steps), axis=0) + np.array(START) * 1e3
-    absolute = "G90 F100\n" + "\n".join(f"G1 X{x!r} Y{y!r} Z{z!r}" for x, y, z in totals.tolist())
+    absolute = "G90 F100\n" + "\n".join(f"G1 X{x:.9f} Y{y:.9f} Z{z:.9f}" for x, y, z in totals)
     a, b = run(relative), run(absolute)
     moved = [i for i, s in enumerate(np.array(steps)) if np.any(s != 0)]
     assert len(a.segments) == len(moved)
-    np.testing.assert_allclose(ends(a), ends(b), atol=1e-12)
-    np.testing.assert_allclose(ends(a), totals[moved] * 1e-3, atol=1e-12)
+    np.testing.assert_allclose(ends(a), ends(b), atol=1e-11)
+    np.testing.assert_allclose(ends(a), totals[moved] * 1e-3, atol=1e-11)
 
 
 def test_missing_axes_keep_their_value_in_both_modes():
@@ -54,7 +54,9 @@ def test_missing_axes_keep_their_value_in_both_modes():
 def test_inches_are_25_4_mm_feeds_included(point, feed):
     x, y, z = point
     inch = run(f"G20 G90 G1 F{feed} X{x} Y{y} Z{z}", start=ZERO)
-    mm = run(f"G21 G90 G1 F{feed * 25.4!r} X{x * 25.4!r} Y{y * 25.4!r} Z{z * 25.4!r}", start=ZERO)
+    mm = run(
+        f"G21 G90 G1 F{feed * 25.4:.9f} X{x * 25.4:.9f} Y{y * 25.4:.9f} Z{z * 25.4:.9f}", start=ZERO
+    )
     if not inch.segments:
         assert not mm.segments
         return
@@ -174,3 +176,28 @@ def test_g64_is_accepted_and_noted_as_exact_stop():
     assert program.segments[0].blend_m == pytest.approx(1e-4)
     assert program.segments[1].blend_m is None
     assert any("G64" in note for note in program.notes)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.floats(1.0, 50.0),  # radius [mm]
+    st.floats(0.05, 2 * math.pi - 0.05),  # the end's angle on the circle
+    st.floats(0, 2 * math.pi),  # the start's angle
+    st.sampled_from(["G2", "G3"]),
+)
+def test_the_radius_form_finds_the_centre_of_the_offset_form(radius, turn, begin, direction):
+    """Any arc given by I J is the same arc given by R (R < 0 beyond 180 deg)."""
+    start = np.array([math.cos(begin), math.sin(begin), 0.0]) * radius
+    end_angle = begin + (turn if direction == "G3" else -turn)
+    end = np.array([math.cos(end_angle), math.sin(end_angle), 0.0]) * radius
+    offsets = -start
+    start_m = tuple(start * 1e-3)
+    words = f"X{end[0]:.9f} Y{end[1]:.9f}"
+    by_offsets = run(f"F100 {direction} {words} I{offsets[0]:.9f} J{offsets[1]:.9f}", start=start_m)
+    r = radius if turn <= math.pi else -radius
+    by_radius = run(f"F100 {direction} {words} R{r:.9f}", start=start_m)
+    a, b = by_offsets.segments[0], by_radius.segments[0]
+    np.testing.assert_allclose(a.centre_m, (0.0, 0.0, 0.0), atol=1e-9)
+    np.testing.assert_allclose(b.centre_m, a.centre_m, atol=1e-7)
+    assert b.sweep_rad == pytest.approx(a.sweep_rad, abs=1e-6)
+    assert abs(a.sweep_rad) == pytest.approx(turn, abs=1e-9)
