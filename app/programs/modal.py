@@ -130,7 +130,7 @@ def _apply_modes(state: ModalState, groups: dict[str, int], values: dict[str, Wo
             p = values.get("P")
             if p is not None and p.value < 0:
                 raise ProgramError(n, p.text, "the G64 tolerance must be >= 0")
-            state.blend_m = p.value * state.unit_m if p is not None else 0.0
+            state.blend_m = p.value * state.unit_m if p is not None else math.inf
     if "distance" in groups:
         state.absolute = groups["distance"] == 900
     if "arc_distance" in groups:
@@ -314,11 +314,6 @@ def interpret(lines: list[Line], start_m, work_offset_m) -> Program:
             _collect(line)
             continue
         step(state, line, program)
-    if any(s.blend_m is not None and s.moves for s in program.segments):
-        program.notes.append(
-            "G64 is accepted but not blended yet: every corner is an exact stop (the path is "
-            "exact, within any P tolerance)"
-        )
     return program
 
 

@@ -171,33 +171,7 @@ def test_words_outside_the_subset_are_refused_with_line_and_word(text, line, wor
     assert (caught.value.line, caught.value.word) == (line, word)
 
 
-def test_g64_is_accepted_and_noted_as_exact_stop():
-    program = run("G64 P0.1\nG1 F100 X1\nG61\nG1 X2")
-    assert program.segments[0].blend_m == pytest.approx(1e-4)
-    assert program.segments[1].blend_m is None
-    assert any("G64" in note for note in program.notes)
-
-
-@settings(max_examples=60, deadline=None)
-@given(
-    st.floats(1.0, 50.0),  # radius [mm]
-    st.floats(0.05, 2 * math.pi - 0.05),  # the end's angle on the circle
-    st.floats(0, 2 * math.pi),  # the start's angle
-    st.sampled_from(["G2", "G3"]),
-)
-def test_the_radius_form_finds_the_centre_of_the_offset_form(radius, turn, begin, direction):
-    """Any arc given by I J is the same arc given by R (R < 0 beyond 180 deg)."""
-    start = np.array([math.cos(begin), math.sin(begin), 0.0]) * radius
-    end_angle = begin + (turn if direction == "G3" else -turn)
-    end = np.array([math.cos(end_angle), math.sin(end_angle), 0.0]) * radius
-    offsets = -start
-    start_m = tuple(start * 1e-3)
-    words = f"X{end[0]:.9f} Y{end[1]:.9f}"
-    by_offsets = run(f"F100 {direction} {words} I{offsets[0]:.9f} J{offsets[1]:.9f}", start=start_m)
-    r = radius if turn <= math.pi else -radius
-    by_radius = run(f"F100 {direction} {words} R{r:.9f}", start=start_m)
-    a, b = by_offsets.segments[0], by_radius.segments[0]
-    np.testing.assert_allclose(a.centre_m, (0.0, 0.0, 0.0), atol=1e-9)
-    np.testing.assert_allclose(b.centre_m, a.centre_m, atol=1e-7)
-    assert b.sweep_rad == pytest.approx(a.sweep_rad, abs=1e-6)
-    assert abs(a.sweep_rad) == pytest.approx(turn, abs=1e-9)
+def test_g64_sets_the_blend_tolerance_and_g61_clears_it():
+    program = run("G64 P0.1\nG1 F100 X1\nG64\nG1 X2\nG61\nG1 X3")
+    assert [s.blend_m for s in program.segments] == [pytest.approx(1e-4), math.inf, None]
+    assert run("G20 G64 P0.1 G1 F1 X1").segments[0].blend_m == pytest.approx(0.1 * 0.0254)

@@ -118,3 +118,56 @@ def test_the_run_managers_planner_accepts_the_program_path():
     speed, accel, jerk = path.peaks()
     sampled = np.linalg.norm(path.derivatives(path.sample_times(0.001), 1), axis=1).max()
     assert sampled <= speed * (1 + 1e-9)
+
+
+SQUARE = "G1 F3000 X20\nY20\nX0\nY0"
+
+
+def corners_of(text):
+    segments = interpret(tokenize(text), START, (0.0, 0.0, 0.0)).segments
+    return np.array([s.end_m for s in segments])
+
+
+@pytest.mark.parametrize("tolerance_mm", [0.001, 0.05, 10.0])
+def test_g64_blends_corners_within_its_tolerance(tolerance_mm):
+    """Under G64 P the path does not stop at a corner, stays within P of it, and keeps
+    the speed and acceleration limits; the jerk of a 90 deg blend is up to sqrt(2) J."""
+    exact = plan(SQUARE)
+    blended = plan(f"G64 P{tolerance_mm}\n" + SQUARE)
+    assert blended.duration_s < exact.duration_s
+    overlaps = np.array(blended.overlaps_s)
+    assert (overlaps > 0).all()
+    t = blended.sample_times(0.0005)
+    p, v, a, j = blended.evaluate(t, (0, 1, 2, 3))
+    corners = corners_of(SQUARE)[:-1]
+    for corner, start in zip(corners, blended.start_s[1:], strict=True):
+        during = (t >= start) & (t <= start + overlaps.max())
+        deviation = np.linalg.norm(p[during] - corner, axis=1)
+        assert deviation.max() <= tolerance_mm * 1e-3 * (1 + 1e-9)
+        mid = start + 0.5 * overlaps[0]
+        assert np.linalg.norm(blended.derivatives(np.array(mid), 1)) > 0  # no stop
+    assert np.linalg.norm(v, axis=1).max() <= 0.05 * (1 + 1e-9)
+    assert np.linalg.norm(a, axis=1).max() <= LIMITS.feed_accel * (1 + 1e-9)
+    assert np.linalg.norm(j, axis=1).max() <= np.sqrt(2) * LIMITS.feed_jerk * (1 + 1e-9)
+    np.testing.assert_allclose(p[-1], [0.0, 0.0, -0.24], atol=1e-15)
+
+
+def test_a_blended_path_is_continuous_and_its_derivatives_agree():
+    path = plan("G64 P1\nG1 F3000 X20\nG3 X30 Y10 I0 J10\nG1 Y30\nG0 X0")
+    assert sum(path.overlaps_s) > 0
+    dt = 1e-5
+    t = np.linspace(0.001, path.duration_s - 0.001, 4001)
+    for order in (1, 2):
+        central = (path.derivatives(t + dt, order - 1) - path.derivatives(t - dt, order - 1)) / (
+            2 * dt
+        )
+        scale = np.abs(path.derivatives(t, order)).max()
+        np.testing.assert_allclose(central, path.derivatives(t, order), atol=2e-3 * scale)
+
+
+def test_collinear_moves_under_g64_run_on_and_a_dwell_still_stops():
+    path = plan("G64\nG1 F3000 X10\nX20\nG4 P0.1\nX30")
+    assert path.overlaps_s[0] > 0 and path.overlaps_s[1:] == (0.0, 0.0)
+    speed_at_x10 = np.linalg.norm(path.derivatives(np.array(path.start_s[1]), 1))
+    assert speed_at_x10 > 0
+    np.testing.assert_allclose(path.derivatives(path.start_s[2:3], 1), 0.0, atol=1e-15)
