@@ -280,10 +280,14 @@ def step(state: ModalState, line: Line, program: Program) -> None:
             if state.motion in (20, 30):
                 segment = _arc(state, values, state.motion, end, n, word)
             elif np.linalg.norm(end - state.position_m) > 0:
-                kind = "rapid" if state.motion == 0 else "linear"
-                feed = None if state.motion == 0 else _feed(state, n, word)
                 start = _vec(state.position_m)
-                segment = Segment(n, kind, start, _vec(end), feed_m_s=feed, blend_m=state.blend_m)
+                if state.motion == 0:
+                    segment = Segment(n, "rapid", start, _vec(end), blend_m=state.blend_m)
+                else:
+                    feed = _feed(state, n, word)
+                    segment = Segment(
+                        n, "linear", start, _vec(end), feed_m_s=feed, blend_m=state.blend_m
+                    )
             if segment is not None:
                 program.segments.append(segment)
             state.position_m = end

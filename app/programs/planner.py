@@ -160,7 +160,7 @@ class ProgramPath:
         )
         geometry = [tab[n] for n in ("base", "u", "r0", "dr", "e1", "e2", "phi0", "w")]
         need = max(orders)
-        p = [shape(s, *geometry, order=i) for i in range(need + 1)]
+        p = [shape(s, *geometry, i) for i in range(need + 1)]  # type: ignore[call-arg]
         sd_, sdd_, sddd_ = sd[:, None], sdd[:, None], sddd[:, None]
         chain = {
             0: lambda: p[0],

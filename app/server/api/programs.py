@@ -74,7 +74,7 @@ class ProgramErrorOut(BaseModel):
     word: str = Field(description="the word at fault ('' when none is)")
 
 
-NOT_READABLE = {
+NOT_READABLE: dict[int, dict[str, Any]] = {
     422: {"model": ProgramErrorOut, "description": "the program cannot be read or planned"}
 }
 
