@@ -8,6 +8,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from app.programs.modal import interpret
 from app.programs.planner import PlanLimits, plan_program
@@ -171,3 +173,45 @@ def test_collinear_moves_under_g64_run_on_and_a_dwell_still_stops():
     speed_at_x10 = np.linalg.norm(path.derivatives(np.array(path.start_s[1]), 1))
     assert speed_at_x10 > 0
     np.testing.assert_allclose(path.derivatives(path.start_s[2:3], 1), 0.0, atol=1e-15)
+
+
+moves = st.lists(
+    st.tuples(
+        st.sampled_from(["G0", "G1", "G2", "G3", "G4"]),
+        st.tuples(*[st.integers(-20, 20)] * 3),
+        st.integers(100, 6000),  # feed [mm/min]
+    ),
+    min_size=1,
+    max_size=6,
+)
+
+
+@settings(max_examples=40, deadline=None)
+@given(moves, st.booleans())
+def test_random_programs_pass_through_every_programmed_point(program, blend):
+    """Under G61 the path is at each move's end when the next starts, at rest; in any mode
+    it ends at the last point, never jumps between samples and its lines never go back."""
+    lines = ["G64 P0.5" if blend else "G61", "G91"]
+    for code, (x, y, z), feed in program:
+        if code == "G4":
+            lines.append("G4 P0.1")
+        elif code in ("G2", "G3"):  # a half circle of radius |x| + 1 about a point on x
+            r = abs(x) + 1
+            lines.append(f"{code} X{2 * r} Y0 Z{z} I{r} J0 F{feed}")
+        else:
+            lines.append(f"{code} X{x} Y{y} Z{z} F{feed}")
+    segments = interpret(tokenize("\n".join(lines)), START, (0.0, 0.0, 0.0)).segments
+    if not segments:
+        return
+    path = plan_program(segments, LIMITS)
+    t = path.sample_times(LIMITS.period_s)
+    p = path.derivatives(t, 0)
+    np.testing.assert_allclose(p[-1], segments[-1].end_m, atol=1e-12)
+    steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    assert steps.max(initial=0) <= LIMITS.rapid_speed * LIMITS.period_s * (1 + 1e-9)
+    assert (np.diff(path.line_at(t)) >= 0).all()
+    if not blend:
+        ends = path.start_s[1:]
+        expected = np.array([s.end_m for s in segments[:-1]]).reshape(-1, 3)
+        np.testing.assert_allclose(path.derivatives(ends, 0), expected, atol=1e-12)
+        np.testing.assert_allclose(path.derivatives(ends, 1), 0.0, atol=1e-12)
