@@ -225,6 +225,45 @@ class WorldSettings(_Section):
     )
 
 
+class ProgramSettings(_Section):
+    """G-code programs (app/programs/): how they are planned and what their check accepts."""
+
+    chord_tolerance_m: float = Field(
+        1e-5,
+        gt=0,
+        description="largest distance between an arc and the loop's chord from one sample "
+        "to the next (caps the speed on arcs) [m]",
+    )
+    max_acceleration_m_s2: float = Field(
+        2.0, gt=0, description="path acceleration of G1/G2/G3, tangential and normal [m/s^2]"
+    )
+    max_jerk_m_s3: float = Field(50.0, gt=0, description="path jerk of G1/G2/G3 [m/s^3]")
+    joint_acceleration_rad_s2: float = Field(
+        200.0, gt=0, description="largest joint acceleration a program may ask [rad/s^2]"
+    )
+    max_torque_ratio: float = Field(
+        0.8,
+        gt=0,
+        le=1.0,
+        description="largest |torque| / the servo's torque at that speed (the rotor "
+        "inertia is uncertain by x3: keep a margin)",
+    )
+    payload_kg: float = Field(0.0, ge=0, description="load on the platform for the torque check")
+    start_m: tuple[float, float, float] = Field(
+        (0.0, 0.0, -0.24), description="where an offline check assumes the tool starts [m]"
+    )
+    work_offset_m: tuple[float, float, float] = Field(
+        (0.0, 0.0, 0.0), description="G54: the program origin in the base frame [m]"
+    )
+    max_lines: int = Field(100_000, ge=1, description="longest program accepted [lines]")
+    max_samples: int = Field(
+        1_000_000, ge=1000, description="longest planned program, in loop periods [samples]"
+    )
+    path_points: int = Field(
+        2000, ge=2, le=100_000, description="points of the decimated path in a report"
+    )
+
+
 class Settings(BaseSettings):
     """Everything ``deltadash serve`` can be told."""
 
@@ -240,6 +279,7 @@ class Settings(BaseSettings):
     server: ServerSettings = ServerSettings()
     runs: RunSettings = RunSettings()
     world: WorldSettings = WorldSettings()
+    programs: ProgramSettings = ProgramSettings()
 
     @classmethod
     def settings_customise_sources(

@@ -1,7 +1,8 @@
 """The ``deltadash`` command line: one module per sub-command in this package.
 
 ``serve`` (serve.py), ``run`` (run.py), ``runs`` (runs.py), ``design`` (design/), ``home``
-(home.py), ``ik`` and ``fk`` (kinematics.py); ``emulate`` (emulate.py).
+(home.py), ``ik`` and ``fk`` (kinematics.py); ``emulate`` (emulate.py); ``gcode``
+(gcode.py).
 
 Building the parser imports no heavy library (fastapi, uvicorn, mujoco, matplotlib, scipy,
 viser, pydantic): each handler imports what it needs, so ``deltadash --help``, ``ik`` and
@@ -13,7 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from app.cli import design, emulate, home, kinematics, run, runs, serve
+from app.cli import design, emulate, gcode, home, kinematics, run, runs, serve
 from kinematics import DeltaError
 
 DESCRIPTION = """\
@@ -29,6 +30,7 @@ examples:
   deltadash ik 0 0 -240                    joint angles for the point (0, 0, -240) mm
   deltadash fk 30 30 30                    platform point for joint angles in degrees
   deltadash design size                    motor sizing, and why it differs from the thesis
+  deltadash gcode check examples/circle.ngc  a G-code program checked offline
 
 Run "deltadash COMMAND --help" for a command's options."""
 
@@ -49,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     design.add_parser(commands)
     home.add_parser(commands)
     emulate.add_parser(commands)
+    gcode.add_parser(commands)
     kinematics.add_parsers(commands)
     return parser
 

@@ -22,7 +22,7 @@ from app.control.authority import Authority
 from app.control.controller import Controller
 from app.runs.manager import RunManager
 from app.scene import start_scene
-from app.server.api import compare, dashboard, mav, robot, runs, telemetry, workspace
+from app.server.api import compare, dashboard, mav, programs, robot, runs, telemetry, workspace
 from app.server.api.deps import require_read_token
 from app.server.backends import open_backend
 from app.server.errors import install_error_handlers
@@ -85,6 +85,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
     app.include_router(runs.router, prefix="/api", dependencies=reads)
     app.include_router(mav.router, prefix="/api", dependencies=reads)
     app.include_router(workspace.router, prefix="/api", dependencies=reads)
+    app.include_router(programs.router, prefix="/api", dependencies=reads)
     # /api/info (the page asks it whether to prompt for the token), sinusoid check, /vendor
     app.include_router(dashboard.router)
     if (STATIC_DIR / "index.html").exists():

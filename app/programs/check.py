@@ -1,0 +1,194 @@
+"""A program's text to its report: parse, plan, sample at the loop period, verify.
+
+What the API (POST /api/programs/check) and the CLI (``deltadash gcode check``) give.
+Needs no server: the robot, the gate's limits and the loop period come from the settings
+(the default config's robot when none is given).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from app.config import Settings
+from app.control.commands import CommandContext
+from app.control.gate import Gate
+from app.programs.errors import ProgramError
+from app.programs.modal import interpret
+from app.programs.planner import PlanLimits, ProgramPath, plan_program
+from app.programs.tokens import tokenize
+from app.programs.verify import Verification, VerifyLimits, Violation, verify_path
+from kinematics.dynamics import THESIS_MASS
+from kinematics.sizing import XM430_W210_12V
+
+
+@dataclass(frozen=True)
+class ProgramReport:
+    """The check's answer. ok: no violation; duration_s [s] and length_m [m] of the
+    planned path; violations (by time); path_m: the path decimated for drawing (M, 3) [m];
+    peaks over the samples: joint speed [rad/s] and acceleration [rad/s^2], lowest
+    1/cond(J), highest torque ratio (None: no torque model for this robot); lines,
+    segments, samples, period_s [s], chord_tolerance_m [m]; start_m and work_offset_m
+    (G54) [m] as used; notes: what the operator should know (M0 pauses, G64)."""
+
+    ok: bool
+    duration_s: float
+    length_m: float
+    violations: list[Violation]
+    path_m: list[list[float]]
+    peak_joint_speed_rad_s: float | None
+    peak_joint_acceleration_rad_s2: float | None
+    worst_dexterity: float | None
+    worst_torque_ratio: float | None
+    lines: int
+    segments: int
+    samples: int
+    period_s: float
+    chord_tolerance_m: float
+    start_m: list[float]
+    work_offset_m: list[float]
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (NaN becomes None)."""
+        out = asdict(self)
+        for violation in out["violations"]:
+            violation["point_m"] = list(violation["point_m"])
+        return out
+
+
+@dataclass(frozen=True)
+class CheckedProgram:
+    """The report and the timed path it was made from (what a run would play)."""
+
+    report: ProgramReport
+    path: ProgramPath
+
+
+def _finite(value: float | None) -> float | None:
+    return None if value is None or not math.isfinite(value) else value
+
+
+def plan_limits(settings: Settings) -> PlanLimits:
+    jog, programs = settings.jog, settings.programs
+    return PlanLimits(
+        jog.max_velocity_m_s,
+        jog.max_acceleration_m_s2,
+        jog.max_jerk_m_s3,
+        programs.max_acceleration_m_s2,
+        programs.max_jerk_m_s3,
+        programs.chord_tolerance_m,
+        1.0 / settings.loop.rate_hz,
+    )
+
+
+def verify_limits(settings: Settings) -> VerifyLimits:
+    programs = settings.programs
+    robot_type = settings.robot.type
+    return VerifyLimits(
+        programs.joint_acceleration_rad_s2,
+        XM430_W210_12V if robot_type == "rotary" else None,
+        THESIS_MASS.with_payload(programs.payload_kg) if robot_type == "rotary" else None,
+        programs.max_torque_ratio,
+    )
+
+
+def _decimate(points: np.ndarray, count: int) -> np.ndarray:
+    if len(points) <= count:
+        return points
+    index = np.unique(np.concatenate([np.linspace(0, len(points) - 1, count).round(), [0]]))
+    return points[index.astype(int)]
+
+
+def check_program(
+    text: str,
+    settings: Settings,
+    *,
+    gate: Gate | None = None,
+    start_m: Any = None,
+    work_offset_m: Any = None,
+    near: Any = None,
+) -> CheckedProgram:
+    """Parse, plan and verify ``text`` with ``settings``' robot and limits.
+
+    Args:
+        gate: the limits in force (default: built from ``settings``, as the loop does).
+        start_m: where the tool is (3,) [m] (default ``programs.start_m``).
+        work_offset_m: the G54 origin (3,) [m] (default ``programs.work_offset_m``).
+        near: the joints the loop is at (3,) [rad] (default: the knee-out branch at the
+            start).
+
+    Raises:
+        ProgramError: a program that cannot be read or planned (its line and word), or
+            one over ``programs.max_lines`` or ``programs.max_samples``.
+    """
+    programs = settings.programs
+    gate = gate or CommandContext.from_settings(settings).gate
+    start = np.asarray(programs.start_m if start_m is None else start_m, dtype=np.float64)
+    offset = np.asarray(
+        programs.work_offset_m if work_offset_m is None else work_offset_m, dtype=np.float64
+    )
+    for name, value in (("start_m", start), ("work_offset_m", offset)):
+        if value.shape != (3,) or not np.isfinite(value).all():
+            raise ProgramError(0, "", f"{name}: expected 3 finite numbers [m]")
+    line_count = text.count("\n") + 1
+    if line_count > programs.max_lines:
+        raise ProgramError(
+            programs.max_lines + 1,
+            "",
+            f"the program has {line_count} lines, over programs.max_lines = {programs.max_lines}",
+        )
+    program = interpret(tokenize(text), start, offset)
+    limits = plan_limits(settings)
+    path = plan_program(program.segments, limits)
+    period_s = limits.period_s
+    if path.duration_s / period_s > programs.max_samples:
+        last = program.segments[-1].line if program.segments else 0
+        raise ProgramError(
+            last,
+            "",
+            f"the program lasts {path.duration_s:.0f} s, over programs.max_samples = "
+            f"{programs.max_samples} loop periods ({programs.max_samples * period_s:.0f} s)",
+        )
+    if path.segments:
+        times = path.sample_times(period_s)
+        points, velocity, acceleration = path.evaluate(times, (0, 1, 2))
+        lines = path.line_at(times)
+    else:  # nothing moves: the tool stays where it is
+        times, lines = np.zeros(1), np.zeros(1, dtype=int)
+        points, velocity, acceleration = start[None, :], np.zeros((1, 3)), np.zeros((1, 3))
+    near_joints = np.full(3, np.nan) if near is None else np.asarray(near, dtype=np.float64)
+    result: Verification = verify_path(
+        gate,
+        verify_limits(settings),
+        times,
+        lines,
+        points,
+        velocity,
+        acceleration,
+        near_joints,
+        period_s,
+    )
+    report = ProgramReport(
+        ok=not result.violations,
+        duration_s=path.duration_s,
+        length_m=path.length_m,
+        violations=result.violations,
+        path_m=_decimate(points, programs.path_points).tolist(),
+        peak_joint_speed_rad_s=_finite(result.peak_joint_speed_rad_s),
+        peak_joint_acceleration_rad_s2=_finite(result.peak_joint_acceleration_rad_s2),
+        worst_dexterity=_finite(result.worst_dexterity),
+        worst_torque_ratio=_finite(result.worst_torque_ratio),
+        lines=program.lines,
+        segments=len(program.segments),
+        samples=len(times),
+        period_s=period_s,
+        chord_tolerance_m=programs.chord_tolerance_m,
+        start_m=start.tolist(),
+        work_offset_m=offset.tolist(),
+        notes=program.notes,
+    )
+    return CheckedProgram(report, path)

@@ -1,0 +1,85 @@
+"""G-code text to words: comments ``( )`` and ``;`` removed, whitespace ignored (as
+LinuxCNC ignores it), every word a letter and a number.
+
+No package from the index fits (none is installed; the ones published are unmaintained or
+for 3D printers' dialects), and the grammar of our subset is one regular expression.
+What the tokenizer cannot read is refused with its line and the text; what it reads but
+the modal machine does not support is refused there (app/programs/modal.py).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from app.programs.errors import ProgramError
+
+_WORD = re.compile(r"([A-Z])([+-]?(?:\d+\.?\d*|\.\d+))")
+
+
+@dataclass(frozen=True)
+class Word:
+    """One word: ``letter`` (upper case), its ``value`` and the ``text`` as written
+    (``"G1"``, ``"X-10.5"``), for messages."""
+
+    letter: str
+    value: float
+    text: str
+
+
+@dataclass(frozen=True)
+class Line:
+    """The words of one program line; ``number``: its line in the file (1-based)."""
+
+    number: int
+    words: tuple[Word, ...]
+
+
+def _strip_comments(text: str, number: int) -> str:
+    out: list[str] = []
+    depth_open = False
+    for char in text:
+        if depth_open:
+            if char == "(":
+                raise ProgramError(number, "(", "comments cannot nest")
+            depth_open = char != ")"
+        elif char == "(":
+            depth_open = True
+        elif char == ";":
+            break
+        elif char == ")":
+            raise ProgramError(number, ")", "closing a comment that was not opened")
+        else:
+            out.append(char)
+    if depth_open:
+        raise ProgramError(number, "(", "comment not closed on its line")
+    return "".join(out)
+
+
+def tokenize_line(text: str, number: int) -> Line:
+    """One line of text -> its words.
+
+    Raises:
+        ProgramError: an unclosed or nested comment, or text that is not a letter and a
+            number (``#1``, ``/``, ``X``, ``G1.2.3``), naming the text at fault.
+    """
+    code = "".join(_strip_comments(text, number).split()).upper()
+    if code == "%":  # program delimiter, as LinuxCNC allows
+        return Line(number, ())
+    words: list[Word] = []
+    at = 0
+    while at < len(code):
+        match = _WORD.match(code, at)
+        if match is None:
+            rest = code[at : at + 12]
+            raise ProgramError(
+                number, rest, "not a word (a letter and a number, e.g. G1 or X-10.5)"
+            )
+        words.append(Word(match[1], float(match[2]), match[0]))
+        at = match.end()
+    return Line(number, tuple(words))
+
+
+def tokenize(program: str) -> list[Line]:
+    """A program's text -> its lines of words, empty lines included (numbers stay right)."""
+    return [tokenize_line(text, i) for i, text in enumerate(program.splitlines(), start=1)]

@@ -1,0 +1,65 @@
+"""POST /api/programs/check: the report of a program, 422 for one that cannot be read."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.support.wait import ok_json
+
+START = [0.0, 0.0, -0.22]
+GOOD = "G21 G90\nG1 F1200 X10 Y0 Z-220\nG3 X-10 Y0 R10\nG4 P0.1\nM2"
+
+
+def check(client, gcode, **extra):
+    return client.post("/api/programs/check", json={"gcode": gcode, **extra})
+
+
+def test_a_passing_program_answers_its_report(client):
+    body = ok_json(check(client, GOOD, start_m=START))
+    assert body["ok"] is True and body["violations"] == []
+    assert body["length_m"] == pytest.approx(0.01 + np.pi * 0.01)
+    assert body["duration_s"] > 0.1
+    path = np.array(body["path_m"])
+    assert path.shape[1] == 3 and 2 <= len(path) <= 2000
+    np.testing.assert_allclose(path[0], START)
+    np.testing.assert_allclose(path[-1], [-0.01, 0.0, -0.22], atol=1e-12)
+    for key in ("peak_joint_speed_rad_s", "worst_dexterity", "worst_torque_ratio"):
+        assert body[key] > 0
+
+
+def test_a_failing_program_is_a_200_naming_line_kind_time_and_point(client):
+    body = ok_json(check(client, "G90 G1 F1200 Z-220\nZ-40\nZ-220", start_m=START))
+    assert body["ok"] is False
+    first = body["violations"][0]
+    assert set(first) == {"line", "kind", "message", "t_s", "point_m"}
+    assert first["line"] == 2
+    assert {v["line"] for v in body["violations"]} <= {2, 3}
+    ceiling = [v for v in body["violations"] if v["kind"] == "ceiling"]
+    assert ceiling and ceiling[0]["point_m"][2] > -0.06
+
+
+@pytest.mark.parametrize(
+    ("gcode", "line", "word"),
+    [("G21\nG1 F100 X1 A5", 2, "A5"), ("G1 F100 X1\n\nG92 X0", 3, "G92"), ("G1 (x", 1, "(")],
+)
+def test_a_program_that_cannot_be_read_is_a_422_naming_line_and_word(client, gcode, line, word):
+    response = check(client, gcode, start_m=START)
+    assert response.status_code == 422, response.text
+    body = response.json()
+    assert (body["line"], body["word"]) == (line, word)
+    assert body["detail"].startswith(f"line {line}: {word}: ")
+
+
+def test_a_bad_body_is_a_422_naming_the_field(client):
+    response = client.post("/api/programs/check", json={"program": "G1"})
+    assert response.status_code == 422
+    assert "gcode" in response.json()["detail"]
+    response = check(client, "G1", start_m=[0, 0])
+    assert response.status_code == 422 and "start_m" in response.json()["detail"]
+
+
+def test_without_a_start_the_check_starts_where_the_robot_is(client):
+    status = ok_json(client.get("/api/status"))
+    body = ok_json(check(client, "(nothing to do)"))
+    np.testing.assert_allclose(body["start_m"], status["ee"]["position_m"], atol=5e-3)
