@@ -42,6 +42,7 @@ for (const a of AXES) for (const k of KINDS) series[`${k}_${a}`] = new Ring(CAPA
 export const plotStats = {
   samples: 0, frames: 0, fullDraws: 0, fps: 0, drawMs: 0, connected: false,
   dropped: 0, paused: false, windowS: 10, zoom: null,
+  pausedDraws: 0, // draws begun while paused: after a pause, the one that fixes what is shown
 };
 window.deltadashPlot = plotStats;
 
@@ -160,6 +161,7 @@ function updateRanges(data) {
 }
 
 async function render() {
+  const wasPaused = paused;
   const data = paused && shown ? shown : frameData();
   const begin = performance.now();
   const full = relayoutNeeded;
@@ -175,6 +177,7 @@ async function render() {
   }
   shown = data;
   plotStats.drawMs = performance.now() - begin;
+  if (wasPaused) plotStats.pausedDraws += 1;
 }
 
 function countFrame(now) {

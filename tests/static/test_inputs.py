@@ -42,6 +42,13 @@ def page(server: Server) -> Iterator[Any]:
         yield page
 
 
+def goals_after(page: Any, sent: int) -> bool:
+    """Whether the page has sent a goal since ``sent`` were recorded. Playwright delivers a
+    page's events (the recorded requests) only during a call into it: make one first."""
+    page.evaluate("0")
+    return len(page.goals) > sent
+
+
 def record_goal(page: Any, request: Any) -> None:
     if request.method == "POST" and request.url.endswith("/api/goal"):
         page.goals.append(json.loads(request.post_data)["position_m"])
@@ -79,7 +86,7 @@ def go_and_wait_sent(page: Any, expect_m: list[float]) -> None:
     """Submit the form and wait until the page has sent ``expect_m`` (no confirmation)."""
     sent = len(page.goals)
     page.click("#goal-form button[type=submit]")
-    wait_for(lambda: len(page.goals) > sent, "the goal request")
+    wait_for(lambda: goals_after(page, sent), "the goal request")
     assert page.goals[sent:] == [pytest.approx(expect_m, abs=1e-12)], page.goals[sent:]
 
 
@@ -146,7 +153,7 @@ def test_first_steps_say_torque_on_then_go_home(page: Any, server: Server) -> No
     page.click("#confirm-yes")
 
     def sent_home() -> bool:  # a click a busy page lost leaves the question open: again
-        if len(page.goals) > sent:
+        if goals_after(page, sent):
             return True
         if visible(page, "#confirm"):
             page.click("#confirm-yes")
@@ -353,15 +360,15 @@ def test_sinusoid_fields_read_a_decimal_comma_and_refuse_what_is_not_a_number(
         elif request.method == "POST" and request.url.endswith("/api/tests/sinusoid"):
             starts.append(json.loads(request.post_data))
 
+    def asked(amplitude_m: float) -> bool:
+        text(page, "#sine-preview")  # a call into Playwright: it delivers the page's events
+        return any(c["amplitude_m"][0] == pytest.approx(amplitude_m) for c in checks)
+
     amp_x = page.locator("#sine-form input[name=amp0]")
     page.on("request", listen)
     try:
         amp_x.fill("12,5")  # a decimal comma: 12.5 mm, never 125 mm nor 0
-        wait_for(
-            lambda: any(c["amplitude_m"][0] == pytest.approx(0.0125) for c in checks),
-            "a preview of 12.5 mm",
-            seen=lambda: checks[-1:],
-        )
+        wait_for(lambda: asked(0.0125), "a preview of 12.5 mm", seen=lambda: checks[-1:])
         assert amp_x.get_attribute("aria-invalid") == "false"
         amp_x.fill("1,2,5")  # not a number in any reading: refused, named, not sent
         wait_for(
@@ -374,10 +381,7 @@ def test_sinusoid_fields_read_a_decimal_comma_and_refuse_what_is_not_a_number(
         page.click("#sine-start")
         wait_for(lambda: "Not started: amplitude x mm" in text(page, "#toast"), "the refusal")
         amp_x.fill("50")  # a later, harmless preview: what was asked before it has arrived
-        wait_for(
-            lambda: checks and checks[-1]["amplitude_m"][0] == pytest.approx(0.05),
-            "a preview of 50 mm",
-        )
+        wait_for(lambda: asked(0.05), "a preview of 50 mm", seen=lambda: checks[-1:])
     finally:
         page.remove_listener("request", listen)
     assert not starts, starts

@@ -75,6 +75,14 @@ def page(server: Server) -> Iterator[Any]:
         yield page
 
 
+READOUT = """() => {
+  const out = document.getElementById("plot-readout");
+  const values = Object.fromEntries(
+    [...out.querySelectorAll("output[data-series]")].map((o) => [o.dataset.series, o.textContent]));
+  return { ...values, time_s: out.dataset.t, index: out.dataset.index };
+}"""
+
+
 def drawn(page: Any) -> Any:
     return json.loads(page.evaluate(DRAWN))
 
@@ -84,9 +92,16 @@ def paused(page: Any) -> bool:
 
 
 def set_paused(page: Any, want: bool) -> None:
+    """Pause or resume; a pause returns once what is shown is final (a draw begun before
+    the pause may still finish and change it: the pause's own draw comes after it)."""
+    draws = page.evaluate("window.deltadashPlot.pausedDraws")
     if paused(page) != want:
         page.click("#plot-pause")
     wait_for(lambda: paused(page) == want, f"the plots {'paused' if want else 'running'}")
+    if want:
+        page_condition(
+            page, f"() => window.deltadashPlot.pausedDraws > {draws}", "the paused plot drawn"
+        )
 
 
 def x_range(page: Any) -> list[float]:
@@ -158,15 +173,16 @@ def test_the_cursor_reads_out_the_drawn_values_at_the_hovered_time(page: Any) ->
         return shown is not None and abs(float(shown) - -3.0) < 0.1
 
     wait_for(hovered, "the cursor readout at t = -3 s", timeout_s=PAGE_WAIT_S)
-    t = float(readout.get_attribute("data-t"))
+    # read in one go: a hover the page handles late may rewrite the readout between reads
+    shown = page.evaluate(READOUT)
+    t, j = float(shown["time_s"]), int(shown["index"])
+    assert shown["t"] == f"{t:.2f}"  # the time shown [s before now]
     assert abs(t - -3.0) < 0.1, t  # a pixel is ~0.03 s, a sample 0.02 s
-    j = int(readout.get_attribute("data-index"))
     assert data[0][0][j] == pytest.approx(t)
     # each series' readout is its drawn value at that sample (goal, measured, error per axis)
     for i, key in enumerate(f"{k}_{a}" for a in "xyz" for k in ("goal", "measured", "error")):
-        shown = readout.locator(f"output[data-series='{key}']").inner_text()
         value = data[i][1][j]
-        assert shown == ("–" if value is None else f"{value:.2f}"), (key, shown, value)
+        assert shown[key] == ("–" if value is None else f"{value:.2f}"), (key, shown, value)
     # the cursor line stands at the read-out time in the first column
     # (a redraw after the pause may re-lay the plot out: the line follows its time)
     line = page.locator("#plot .plot-cursor").first
@@ -285,7 +301,6 @@ def test_the_files_column_is_fully_visible(page: Any, size: tuple[int, int]) -> 
     try:
         cell = page.locator(f"tr[data-run='{LOADED}'] td.files")
         wait_for(lambda: cell.locator("a").count() == 4, "the four file links")
-        cell.scroll_into_view_if_needed()
 
         def inside() -> str | None:
             """None when every link lies inside the panel and the viewport, else why not."""
@@ -307,6 +322,11 @@ def test_the_files_column_is_fully_visible(page: Any, size: tuple[int, int]) -> 
         last: dict[str, str | None] = {}
 
         def fits() -> bool:
+            try:  # the row is re-drawn each poll: scroll whichever is there now
+                cell.evaluate("e => e.scrollIntoView({block: 'center'})", timeout=5_000)
+            except Exception as exc:  # between two draws: no row to scroll this time
+                last["why"] = f"not scrolled into view: {exc}"
+                return False
             last["why"] = inside()
             return last["why"] is None
 
