@@ -268,7 +268,7 @@ def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -
     run = wait_for(
         lambda: [r for r in server.get("/api/runs") if r["state"] != "running"],
         "the run to end",
-        timeout_s=60,
+        timeout_s=PAGE_WAIT_S,
     )[0]
     assert run["state"] == "done", run
     row = page.locator(f"tr[data-run='{run['run_id']}']")
@@ -293,7 +293,15 @@ def test_a_page_reloaded_mid_run_shows_its_real_progress_and_parameters(
         progress = server.get(f"/api/runs/{run_id}")["progress"] or {}
         return progress.get("test_elapsed_s", 0.0) / progress.get("test_duration_s", 1.0)
 
-    wait_for(lambda: share() >= 0.3, "a third of the test part done")
+    wait_for(
+        lambda: share() >= 0.3,
+        "a third of the test part done",
+        PAGE_WAIT_S,
+        seen=lambda: {
+            **{k: server.get(f"/api/runs/{run_id}")[k] for k in ("state", "progress")},
+            **server.brief(),
+        },
+    )
     page.reload()  # the form's fields are back to their defaults (10 s, 50 mm)
     # A bar restarted at 0 on the reload stays behind the server's progress by what was
     # done before it (0.3); one that goes on from the server's figure keeps up with it.
@@ -319,7 +327,11 @@ def test_a_page_reloaded_mid_run_shows_its_real_progress_and_parameters(
     assert page.locator("input[name=amp0]").input_value() == "30"
     assert "amplitude 30 / 50 / 80 mm" in text(page, "#run-params")
     shot(page, "reloaded-mid-run")
-    wait_for(lambda: server.get(f"/api/runs/{run_id}")["state"] != "running", "the run to end", 90)
+    wait_for(
+        lambda: server.get(f"/api/runs/{run_id}")["state"] != "running",
+        "the run to end",
+        PAGE_WAIT_S,
+    )
 
 
 def test_two_runs_compared_side_by_side(page: Any, server: Server) -> None:
