@@ -158,3 +158,11 @@ def test_the_dry_run_predicts_an_error_for_each_line_and_moves_nothing(fresh):
         assert entry["max_m"] <= body["max_m"] < 0.05
     assert len(body["rmse_m"]) == 3 and all(np.isfinite(body["rmse_m"]))
     assert _status(fresh)["commanded_rad"] == before["commanded_rad"]
+
+
+def test_too_long_a_program_for_the_dry_run_is_a_422_naming_the_limit(fresh):
+    response = fresh.post("/api/programs/dry-run", json={"gcode": "G4 P100\nM2"})
+    assert response.status_code == 422, response.text
+    assert "programs.dry_run_max_s" in response.json()["detail"]
+    unreadable = fresh.post("/api/programs/dry-run", json={"gcode": "G1 F100 X1 A5"})
+    assert unreadable.status_code == 422 and unreadable.json()["word"] == "A5"
