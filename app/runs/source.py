@@ -33,10 +33,11 @@ class TrajectorySource:
         commanded = self.plan.point_at(self.t_s + self.lead_s) if self.lead_s else goal
         self.finished = self.t_s >= self.plan.duration_s
         phase = self.plan.phase_at(self.t_s)
-        if self._line_at is not None:
-            # the approach is before the first line; the stop ends the last
+        if self._line_at is not None:  # only in the timed part: the approach and the
+            # stop (both of zero length for a program that starts where the robot is) are not
+            # the program's
             timed = min(max(self.t_s - self.plan.approach_s, 0.0), self.plan.params.duration_s)
-            self.program_line = int(self._line_at(timed))
+            self.program_line = int(self._line_at(timed)) if phase == "timed" else None
         return Setpoint(
             point_m=commanded,
             goal_m=goal,

@@ -37,6 +37,7 @@ from app.server.api.runs import start_run
 from app.server.errors import CONTROL, UNAUTHORISED, UNAVAILABLE
 
 router = APIRouter(prefix="/programs", tags=["programs"])
+START_TOLERANCE_M = 0.002  # as the run manager's start check
 
 
 class ProgramRequest(BaseModel):
@@ -231,8 +232,8 @@ def dry_run_program(
 async def run_program(
     request: Request, body: RunProgramRequest, runs: RunsDep, _: ControlClient
 ) -> Any:
-    """Check the program from where the robot is (start_m, if given, is ignored: a run
-    starts where the robot is) and, only if it passes, run it as a run of kind "program";
+    """Check the program from where the robot is (a run starts there: a start_m more than
+    2 mm away is a 422) and, only if it passes, run it as a run of kind "program";
     422 with the violations (detail names the first) when it fails, and nothing moves.
     Its progress carries program_line; its stats program.lines, the error per line."""
     controller = runs.controller
@@ -240,9 +241,20 @@ async def run_program(
     if isinstance(checked, JSONResponse):
         return checked
     program = checked[0]
-    if not program.report.ok:
-        return _refused(program)
     report = program.report
+    if body.start_m is not None:  # a run starts where the robot is: say so, never ignore it
+        distance = float(np.linalg.norm(np.asarray(body.start_m) - report.start_m))
+        if distance > START_TOLERANCE_M:
+            where = ", ".join(f"{v * 1e3:.1f}" for v in report.start_m)
+            return JSONResponse(
+                {
+                    "detail": f"start_m: a program runs from where the robot is, ({where}) mm, "
+                    f"{distance * 1e3:.1f} mm from start_m; leave start_m out or move there"
+                },
+                status_code=422,
+            )
+    if not report.ok:
+        return _refused(program)
     record = {
         "gcode": body.gcode,
         "lines": report.lines,

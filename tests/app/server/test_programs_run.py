@@ -166,3 +166,13 @@ def test_too_long_a_program_for_the_dry_run_is_a_422_naming_the_limit(fresh):
     assert "programs.dry_run_max_s" in response.json()["detail"]
     unreadable = fresh.post("/api/programs/dry-run", json={"gcode": "G1 F100 X1 A5"})
     assert unreadable.status_code == 422 and unreadable.json()["word"] == "A5"
+
+
+def test_a_start_away_from_the_robot_is_a_422_and_nothing_moves(fresh):
+    ok_json(fresh.post("/api/torque", json={"enabled": True}))
+    before = _status(fresh)
+    away = [before["goal_m"][0] + 0.01, before["goal_m"][1], before["goal_m"][2]]
+    response = fresh.post("/api/programs/run", json={"gcode": PROGRAM, "start_m": away})
+    assert response.status_code == 422, response.text
+    assert response.json()["detail"].startswith("start_m: ")
+    assert _status(fresh)["commanded_rad"] == before["commanded_rad"]
