@@ -176,3 +176,24 @@ def test_a_start_away_from_the_robot_is_a_422_and_nothing_moves(fresh):
     assert response.status_code == 422, response.text
     assert response.json()["detail"].startswith("start_m: ")
     assert _status(fresh)["commanded_rad"] == before["commanded_rad"]
+
+
+@pytest.mark.slow  # a run of seconds
+def test_a_program_run_aborts_like_any_run_with_the_lines_it_executed(fresh):
+    ok_json(fresh.post("/api/torque", json={"enabled": True}))
+    program = "G21 G90\nG0 X5 Y0 Z-225\nG4 P30\nG1 F1500 X10\nM2"  # G0: no test ends there
+    run_id = ok_json(fresh.post("/api/programs/run", json={"gcode": program}))["run_id"]
+    wait_for(
+        lambda: (_run(fresh, run_id)["progress"] or {}).get("program_line") == 3,
+        "the dwell on line 3",
+        seen=lambda: _run(fresh, run_id),
+    )
+    ok_json(fresh.post(f"/api/runs/{run_id}/abort"))
+    wait_for(
+        lambda: _run(fresh, run_id)["state"] != "running",
+        "the run to end",
+        seen=lambda: _run(fresh, run_id),
+    )
+    run = _run(fresh, run_id)
+    assert run["state"] == "aborted" and run["progress"] is None
+    assert [e["line"] for e in run["stats"]["program"]["lines"]] == [2, 3]  # never line 4
