@@ -155,10 +155,10 @@ def check(
     """Plan the program and check every loop sample (workspace with margin and ceiling,
     IK on the followed branch, joint limits, speed and acceleration, singularity margin,
     servo torque); all violations by line. Moves nothing."""
-    checked = _check(body, controller, settings)
-    if isinstance(checked, JSONResponse):
-        return checked
-    checked, notes = checked
+    outcome = _check(body, controller, settings)
+    if isinstance(outcome, JSONResponse):
+        return outcome
+    checked, notes = outcome
     report = checked.report.to_dict()
     report["notes"] = notes + report["notes"]
     return report

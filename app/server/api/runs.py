@@ -157,7 +157,8 @@ async def start_run(
     if the answer can still reach the caller: in time, and to a client still connected.
     ``record``: the parameters saved in run.json (default: ``params``' fields)."""
     began = time.monotonic()
-    prepared = await asyncio.to_thread(runs.prepare, params, kind, record)
+    args = (params, kind) if record is None else (params, kind, record)
+    prepared = await asyncio.to_thread(runs.prepare, *args)
     took_s, limit_s = time.monotonic() - began, runs.controller.settings.runs.plan_timeout_s
     if took_s > limit_s:
         raise PlanningTimeout(
