@@ -1,8 +1,9 @@
 """POST /api/programs/run and /api/programs/dry-run on the simulated robot as the run
 tests have it (tests/runs): the servo emulator, its servos moving the MuJoCo twin, behind
-the real Dynamixel driver (the "sim" backend relaxes the arm past its joint limits when
-torque goes off between tests, so the shared app could not turn it on again): a passing program runs end to end with its error per
-line; a failing one is a 422 with its violations and nothing moves; no lease, no run."""
+the real Dynamixel driver. (The "sim" backend lets the arm fall past its joint limits
+when torque goes off between tests, so a shared app could not turn it on again.) A
+passing program runs end to end with its error per line; a failing one is a 422 with its
+violations and nothing moves; no lease, no run."""
 
 from __future__ import annotations
 
