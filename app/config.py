@@ -262,6 +262,13 @@ class ProgramSettings(_Section):
     path_points: int = Field(
         2000, ge=2, le=100_000, description="points of the decimated path in a report"
     )
+    dry_run_max_s: float = Field(
+        60.0,
+        gt=0,
+        le=3600,
+        description="longest program the dry run plays on the twin [s] (its physics costs "
+        "about a millisecond of CPU per loop tick)",
+    )
 
 
 class Settings(BaseSettings):

@@ -1,11 +1,22 @@
-"""``deltadash gcode check FILE``: a G-code program checked on the virtual robot, offline.
+"""``deltadash gcode check FILE``: a G-code program checked on the virtual robot, offline;
+``deltadash gcode run FILE``: run on a server.
 
-The program is planned and every loop sample checked as the server's
+check: the program is planned and every loop sample checked as the server's
 ``POST /api/programs/check`` does (app/programs/check.py), with the config's robot and
 limits (the default config's without ``--config``), from ``programs.start_m`` or
 ``--start``. No server, no robot: nothing moves. The report is text in mm (per-line
-violations) or, with ``--json``, the API's answer (SI). Exit 0: the program passes;
-1: it has violations; 2: it cannot be read (its line and word) or bad input.
+violations) or, with ``--json``, the API's answer (SI). With ``--dry-run`` the path is
+also played on a headless twin (app/programs/dry_run.py): the predicted error per line.
+Exit 0: the program passes; 1: it has violations; 2: it cannot be read (its line and
+word) or bad input (or too long for the dry run).
+
+run: ``POST /api/programs/run`` on a running server (``--url``): takes the control
+lease (as ``deltadash run`` does), turns torque on, starts the program (the server
+checks it first: a failing program is refused with its violations), follows it with a
+progress bar naming the line in execution, gives control back and prints the error per
+program line. Exit 0: done; 1: the run did not finish (aborted, e-stop); 2: refused
+(violations, unreadable, control held by another client) or bad input; 3: the run could
+not be aborted or control given back at exit; 130: Ctrl-C (the run is aborted first).
 
 Only the standard library is imported at module level (``deltadash --help`` stays fast).
 """
@@ -14,7 +25,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +70,45 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         metavar=("X", "Y", "Z"),
         help="G54: the program origin in the base frame [mm] (default programs.work_offset_m)",
     )
+    check.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="also play the path on a headless twin: the predicted tracking error per line "
+        "(programs up to programs.dry_run_max_s)",
+    )
+    check.add_argument(
+        "--feedforward", action="store_true", help="the dry run with feed-forward, as a run"
+    )
     check.set_defaults(handler=_check)
+    run = sub.add_parser(
+        "run",
+        help="run a program on a running server (checked there first)",
+        description="Take control of the server at --url, turn torque on and run FILE "
+        "(POST /api/programs/run: the server checks it from where the robot is and refuses "
+        "it with its violations if it fails); print the error per program line at the end.",
+        epilog="Exit 0: done; 1: the run did not finish; 2: refused or bad input; 3: the run "
+        "could not be aborted or control given back; 130: Ctrl-C (the run is aborted).",
+    )
+    run.add_argument("file", metavar="FILE", help="the program (text)")
+    run.add_argument(
+        "--url", default="http://127.0.0.1:8000", help="the server (default %(default)s)"
+    )
+    run.add_argument("--feedforward", action="store_true", help="command the path ahead")
+    run.add_argument(
+        "--token", default=os.environ.get("DELTADASH_TOKEN"), help="the server's token"
+    )
+    run.add_argument(
+        "--take-over", action="store_true", help="take control from another client that holds it"
+    )
+    run.add_argument(
+        "--work-offset",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        help="G54: the program origin in the base frame [mm] (default programs.work_offset_m)",
+    )
+    run.add_argument("--json", action="store_true", help="print the run as JSON")
+    run.set_defaults(handler=_run)
 
 
 def _mm(point: Any) -> str:
@@ -95,9 +146,23 @@ def format_report(name: str, report: dict[str, Any], settings: Any) -> str:
     return "\n".join(out)
 
 
+def format_line_errors(per_line: list[dict[str, Any]], text: str, title: str) -> str:
+    """The error per program line as a table in mm, each row with the line's own text."""
+    source = text.splitlines()
+    out = [title, f"  {'line':>5} {'samples':>7} {'RMSE mm':>8} {'max mm':>8}  program"]
+    for e in per_line:
+        words = source[e["line"] - 1].strip() if 0 < e["line"] <= len(source) else ""
+        out.append(
+            f"  {e['line']:>5} {e['samples']:>7} {e['rmse_m'] * 1e3:8.3f} "
+            f"{e['max_m'] * 1e3:8.3f}  {words[:50]}"
+        )
+    return "\n".join(out)
+
+
 def _check(args: argparse.Namespace) -> int:
     from app.config import ConfigError, load_settings
     from app.programs.check import check_program
+    from app.programs.dry_run import DryRunRefused, dry_run
     from app.programs.errors import ProgramError
 
     try:
@@ -109,12 +174,124 @@ def _check(args: argparse.Namespace) -> int:
     start = None if args.start is None else [v * 1e-3 for v in args.start]
     offset = None if args.work_offset is None else [v * 1e-3 for v in args.work_offset]
     try:
-        report = check_program(text, settings, start_m=start, work_offset_m=offset).report
+        checked = check_program(text, settings, start_m=start, work_offset_m=offset)
     except ProgramError as exc:
         if args.json:
             print(json.dumps({"detail": str(exc), "line": exc.line or None, "word": exc.word}))
         print(f"error: {args.file}: {exc}", file=sys.stderr)
         return 2
+    report = checked.report
     body = report.to_dict()
-    print(json.dumps(body) if args.json else format_report(args.file, body, settings))
+    predicted = None
+    if args.dry_run:
+        try:
+            predicted = dry_run(checked, settings, feedforward=args.feedforward).to_dict()
+        except DryRunRefused as exc:
+            print(f"error: {args.file}: dry run: {exc}", file=sys.stderr)
+            return 2
+    if args.json:
+        print(json.dumps(body if predicted is None else {**body, "dry_run": predicted}))
+    else:
+        print(format_report(args.file, body, settings))
+        if predicted is not None:
+            rmse = ", ".join(f"{v * 1e3:.3f}" for v in predicted["rmse_m"])
+            title = (
+                f"dry run on the twin: RMSE x, y, z {rmse} mm, max {predicted['max_m'] * 1e3:.3f}"
+                " mm; predicted per line:"
+            )
+            print(format_line_errors(predicted["lines"], text, title))
     return 0 if report.ok else 1
+
+
+def _follow(url: str, body: dict[str, Any], headers: dict[str, str], problems: list[str]):
+    """Start the program, follow it to its end (aborting it if interrupted); the run."""
+    from app.cli import run as cli_run
+    from app.cli.progress import Progress
+
+    running = None
+    try:
+        cli_run._http(f"{url}/api/torque", "POST", {"enabled": True}, headers)
+        run_id = running = cli_run._http(f"{url}/api/programs/run", "POST", body, headers)["run_id"]
+        with Progress(1.0, f"program {run_id}", "s") as bar:  # its length: when known
+            while (run := cli_run._http(f"{url}/api/runs/{run_id}", headers=headers))[
+                "state"
+            ] == "running":
+                progress = run.get("progress") or {}
+                if progress.get("duration_s"):
+                    line = progress.get("program_line")
+                    label = f"line {line}" if line is not None else progress.get("phase")
+                    bar.update_to(
+                        progress.get("elapsed_s") or 0.0, label, total=progress["duration_s"]
+                    )
+                time.sleep(0.25)
+        running = None
+        return run
+    finally:
+        if running is not None:
+            cli_run._try(
+                problems, f"abort run {running}", url, f"/api/runs/{running}/abort", "POST", headers
+            )
+
+
+def _run(args: argparse.Namespace) -> int:
+    import urllib.error
+
+    from app.cli import run as cli_run
+
+    try:
+        text = Path(args.file).read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    url = args.url.rstrip("/")
+    body: dict[str, Any] = {"gcode": text, "feedforward": args.feedforward}
+    if args.work_offset is not None:
+        body["work_offset_m"] = [v * 1e-3 for v in args.work_offset]
+    problems: list[str] = []
+    code = 0
+    try:
+        headers = cli_run._take_control(url, args.token, args.take_over)
+        try:
+            run = _follow(url, body, headers, problems)
+        finally:
+            cli_run._try(problems, "give control back", url, "/api/lease", "DELETE", headers)
+    except cli_run.LeaseRefused as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        code = 2
+    except urllib.error.HTTPError as exc:
+        refusal = _refusal(exc)
+        print(f"error: {exc.code} {refusal.get('detail', exc.reason)}", file=sys.stderr)
+        for v in refusal.get("violations") or []:
+            print(
+                f"  line {v['line']}: {v['kind']} at t = {v['t_s']:.3f} s, "
+                f"{_mm(v['point_m'])}: {v['message']}",
+                file=sys.stderr,
+            )
+        code = 2
+    except (urllib.error.URLError, OSError) as exc:
+        print(f"error: {url}: {exc}", file=sys.stderr)
+        code = 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        code = 130
+    else:
+        base = f"{url}/api/runs/{run['run_id']}"
+        run["files"] = {name: f"{base}/{name}" for name in cli_run.FILES}
+        if args.json:
+            print(json.dumps(run, indent=1))
+        else:
+            cli_run.print_stats(run)
+            per_line = (run.get("stats") or {}).get("program", {}).get("lines") or []
+            print(format_line_errors(per_line, text, "tracking error per program line:"))
+        code = 0 if run["state"] == "done" else 1
+    for problem in problems:
+        print(f"error: {problem}", file=sys.stderr)
+    return 3 if problems else code
+
+
+def _refusal(exc: Any) -> dict[str, Any]:
+    try:
+        body = json.load(exc)
+    except (ValueError, AttributeError, OSError):
+        return {}
+    return body if isinstance(body, dict) else {}

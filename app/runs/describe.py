@@ -113,6 +113,14 @@ def _hold(p: dict[str, Any]) -> str:
     )
 
 
+def _program(p: dict[str, Any]) -> str:
+    return (
+        f"G-code program: {number(p.get('lines'), 12)} lines, {number(p.get('segments'), 12)} "
+        f"segments, {number(p.get('duration_s'))} s, path {mm(p.get('length_m'))}, work "
+        f"offset {_scaled(p.get('work_offset_m') or [], 1e3)} mm"
+    )
+
+
 def _ms(value_s: Any) -> Any:
     return value_s * 1e3 if _real(value_s) else None
 
@@ -152,6 +160,7 @@ _SENTENCES = {
     "step": _step,
     "waypoints": _waypoints,
     "hold": _hold,
+    "program": _program,
 }
 
 

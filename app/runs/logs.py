@@ -80,6 +80,7 @@ COLUMNS = [
     "sim_time_s",
     "stale",
     "feedback_age_ms",
+    "line",  # a G-code program's line in execution (app/programs); None for other runs
 ]
 
 SCHEMA = {
@@ -201,7 +202,7 @@ class RunLog:
             self._channel, stamp, json.dumps(row).encode(), stamp, self._sequence
         )
         self._sequence += 1
-        self._csv.writerow(["" if row[c] is None else row[c] for c in COLUMNS])
+        self._csv.writerow(["" if row.get(c) is None else row[c] for c in COLUMNS])
         if time.monotonic() - self._last_flush > self.FLUSH_EVERY_S:
             self._flush()
 

@@ -126,17 +126,22 @@ class RunManager:
         """Plan, check, start and record a sinusoid run; raises before anything moves."""
         return self.start(params, "sinusoid")
 
-    def start(self, params: TimedPath, kind: str) -> Run:
+    def start(self, params: TimedPath, kind: str, record: dict[str, Any] | None = None) -> Run:
         """Plan, check, start and record a run of any timed path; raises before any motion."""
-        return self.launch(self.prepare(params, kind))
+        return self.launch(self.prepare(params, kind, record))
 
-    def prepare(self, params: TimedPath, kind: str) -> PreparedRun:
+    def prepare(
+        self, params: TimedPath, kind: str, record: dict[str, Any] | None = None
+    ) -> PreparedRun:
         """Plan and check a run from where the robot is now; nothing moves. The slow half of
-        :meth:`start`, so a caller can decide, after it, whether the run is still wanted."""
+        :meth:`start`, so a caller can decide, after it, whether the run is still wanted.
+        ``record``: the parameters saved in run.json (default: the path's own fields, for
+        the dataclass paths; a G-code program saves its text instead)."""
         self._refuse_if_busy()
         plan, start = self.plan(params)
         lead = self.controller.settings.runs.feedforward_lead_s if params.feedforward else 0.0
-        return PreparedRun(kind, asdict(params), lead, TrajectorySource(plan, lead), start)
+        saved = asdict(params) if record is None else record  # type: ignore[call-overload]
+        return PreparedRun(kind, saved, lead, TrajectorySource(plan, lead), start)
 
     def launch(self, prepared: PreparedRun) -> Run:
         """Start and record a prepared run. The loop refuses it if the robot has left the
@@ -200,10 +205,14 @@ class RunManager:
         if not isinstance(source, Progressing):
             return None
         values = asdict(source.progress())
-        return {
+        out = {
             k: v if not isinstance(v, float) or math.isfinite(v) else None
             for k, v in values.items()
         }
+        line = getattr(source, "program_line", None)  # a G-code program's line in execution
+        if line is not None:
+            out["program_line"] = line
+        return out
 
     def close(self) -> None:
         """At shutdown: stop the active run (its log is finalised) and drop the plan."""

@@ -21,7 +21,7 @@ from app.runs.health import assess
 from app.runs.logs import RunLog
 from app.runs.report import write_report
 from app.runs.run import Run
-from app.runs.stats import error_stats, window_mask
+from app.runs.stats import error_stats, line_stats, window_mask
 
 if TYPE_CHECKING:
     from app.control.controller import Controller
@@ -64,6 +64,7 @@ def row_of(snap: Snapshot, t_s: float) -> dict[str, Any]:
     row["sim_time_s"] = _values(np.array([snap.sim_time_s]))[0]
     row["stale"] = snap.stale
     row["feedback_age_ms"] = snap.feedback_age_ms
+    row["line"] = None  # a program's line: set by the recorder from its source
     return row
 
 
@@ -72,7 +73,9 @@ def _columns(rows: list[dict[str, Any]], prefix: str) -> np.ndarray:
 
 
 def run_stats(rows: list[dict[str, Any]], skip_s: float, dt_s: float) -> dict[str, Any]:
-    """Tracking stats (goal vs FK) over the test part, and world stats for hold runs."""
+    """Tracking stats (goal vs FK) over the test part, world stats for hold runs and, for a
+    G-code program (rows with a ``line``), ``program.lines``: the error per program line
+    over every sample of the timed part (app/runs/stats.py line_stats)."""
     times = np.array([r["t_s"] for r in rows])
     active = np.array([r["phase"] in ("timed", "hold") for r in rows], dtype=bool)
     if active.any():  # the approach and the first moments are not the test
@@ -92,6 +95,12 @@ def run_stats(rows: list[dict[str, Any]], skip_s: float, dt_s: float) -> dict[st
             _columns(rows, "world_goal"), world_measured, active & ~outside
         )
         stats["world"] = world
+    lines = [r.get("line") for r in rows]
+    if any(v is not None for v in lines):  # a G-code program: the error per line, every
+        timed = np.array([r["phase"] == "timed" for r in rows], dtype=bool)  # sample of it
+        error = _columns(rows, "goal") - _columns(rows, "measured")
+        kept = [v if t else None for v, t in zip(lines, timed, strict=True)]
+        stats["program"] = {"lines": line_stats(np.array(kept, dtype=object), error)}
     return stats
 
 
@@ -122,7 +131,9 @@ class Recorder:
         if self._t0 is None:
             self._t0 = snap.time_s
             self.log.start_ns = time.time_ns()  # log times: UTC wall clock of this tick
-        self._queue.put(row_of(snap, snap.time_s - self._t0))
+        row = row_of(snap, snap.time_s - self._t0)
+        row["line"] = getattr(self.source, "program_line", None)  # a G-code program's line
+        self._queue.put(row)
 
     def _why_stopped(self, snap: Snapshot) -> str:
         if snap.estopped:

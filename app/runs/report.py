@@ -139,10 +139,20 @@ def report_figure(
     t, both = break_gaps(times[shown], np.hstack([reference, measured]), period_s)
     gaps = int(t.size - shown.sum())
     axis_stats = stats.get("world", stats.get("tracking")) or {}
+    per_line = (stats.get("program") or {}).get("lines") or []
     with plt.rc_context(STYLE):
-        figure, axes = plt.subplots(
-            2, 3, figsize=(11, 7.2), sharex=True, gridspec_kw={"height_ratios": [2, 1]}
-        )
+        if per_line:  # a G-code program: a third row, the error per program line
+            figure = plt.figure(figsize=(11, 9.6))
+            grid = figure.add_gridspec(3, 3, height_ratios=[2, 1, 1.2])
+            axes = np.empty((2, 3), dtype=object)
+            for i in range(3):
+                axes[0, i] = figure.add_subplot(grid[0, i], sharex=axes[0, 0] if i else None)
+                axes[1, i] = figure.add_subplot(grid[1, i], sharex=axes[0, 0])
+            _per_line(figure.add_subplot(grid[2, :]), per_line)
+        else:
+            figure, axes = plt.subplots(
+                2, 3, figsize=(11, 7.2), sharex=True, gridspec_kw={"height_ratios": [2, 1]}
+            )
         for i, name in enumerate(AXES):
             top, bottom = axes[0, i], axes[1, i]
             top.plot(t, both[:, i] * 1e3, label="goal", **GOAL)
@@ -162,6 +172,29 @@ def report_figure(
         figure.text(0.01, 0.01, _caption(times, scored, skip_s, gaps), fontsize=8)
         figure.tight_layout(rect=(0, 0.03, 1, 0.8))
     return figure
+
+
+def _per_line(axis: Any, per_line: list[dict[str, Any]]) -> None:
+    """Bars of the RMSE and the largest |error| per program line [mm], the worst named."""
+    labels = [str(e["line"]) for e in per_line]
+    x = np.arange(len(per_line))
+    rmse = np.array([e["rmse_m"] for e in per_line], dtype=float) * 1e3
+    worst = np.array([e["max_m"] for e in per_line], dtype=float) * 1e3
+    axis.bar(x - 0.2, rmse, 0.4, label="RMSE |e|", color="tab:blue")
+    axis.bar(x + 0.2, worst, 0.4, label="max |e|", color="tab:red")
+    step = max(1, len(labels) // 40)  # at most ~40 labels legible
+    axis.set_xticks(x[::step], labels[::step])
+    axis.set_xlabel("program line")
+    axis.set_ylabel("error [mm]")
+    top = int(np.nanargmax(worst)) if np.isfinite(worst).any() else None
+    title = "tracking error per program line (timed part, every sample)"
+    if top is not None:
+        title += (
+            f"; worst line {per_line[top]['line']}: RMSE {describe.number(rmse[top])} mm, "
+            f"max {describe.number(worst[top])} mm"
+        )
+    axis.set_title(title)
+    axis.legend(loc="upper right")
 
 
 def wrap(line: str, width: int) -> list[str]:

@@ -17,6 +17,9 @@ class TrajectorySource:
         self.lead_s = lead_s
         self.t_s = 0.0
         self.finished = False
+        # a G-code program's path (app/programs ProgramPath) says its line at each time
+        self._line_at = getattr(plan.params, "line_at", None)
+        self.program_line: int | None = None  # the line being executed (None: not a program)
 
     def progress(self) -> Progress:
         t, plan = self.t_s, self.plan  # t_s is one float: safe to read from another thread
@@ -29,9 +32,15 @@ class TrajectorySource:
         goal = self.plan.point_at(self.t_s)
         commanded = self.plan.point_at(self.t_s + self.lead_s) if self.lead_s else goal
         self.finished = self.t_s >= self.plan.duration_s
+        phase = self.plan.phase_at(self.t_s)
+        if self._line_at is not None:  # only in the timed part: the approach and the
+            # stop (both of zero length for a program that starts where the robot is) are not
+            # the program's
+            timed = min(max(self.t_s - self.plan.approach_s, 0.0), self.plan.params.duration_s)
+            self.program_line = int(self._line_at(timed)) if phase == "timed" else None
         return Setpoint(
             point_m=commanded,
             goal_m=goal,
-            phase=self.plan.phase_at(self.t_s),
+            phase=phase,
             finished=self.finished,
         )

@@ -62,3 +62,27 @@ def window_mask(times_s: np.ndarray, start_s: float | None, end_s: float | None)
     if end_s is not None:
         mask &= times <= end_s
     return mask
+
+
+def line_stats(lines: np.ndarray, error: np.ndarray) -> list[dict[str, Any]]:
+    """Tracking error per G-code program line: for each line in ``lines`` (N,) (None or
+    NaN: no line) in the order first met, its sample count, the RMSE of the error's
+    magnitude sqrt(mean |e|^2) and its largest magnitude max |e| [m], from ``error``
+    (N, 3) [m]; samples with a NaN error are left out."""
+    labels = np.asarray([np.nan if v is None else v for v in lines], dtype=np.float64)
+    magnitude = np.linalg.norm(np.asarray(error, dtype=np.float64).reshape(-1, 3), axis=1)
+    keep = np.isfinite(labels) & np.isfinite(magnitude)
+    labels, magnitude = labels[keep], magnitude[keep]
+    order = labels[np.sort(np.unique(labels, return_index=True)[1])]
+    out = []
+    for line in order:
+        values = magnitude[labels == line]
+        out.append(
+            {
+                "line": int(line),
+                "samples": int(values.size),
+                "rmse_m": float(np.sqrt(np.mean(values**2))),
+                "max_m": float(values.max()),
+            }
+        )
+    return out

@@ -76,10 +76,14 @@ def _ruckig(start: tuple, target: tuple, limits: tuple, velocity_only: bool) -> 
 
 
 class TimedPath(Protocol):
-    """A test path: position and derivatives at time t, its length and its peaks."""
+    """A test path: position and derivatives at time t, its length and its peaks (read
+    only: frozen dataclasses and properties, e.g. a G-code program's ProgramPath)."""
 
-    duration_s: float
-    feedforward: bool
+    @property
+    def duration_s(self) -> float: ...
+
+    @property
+    def feedforward(self) -> bool: ...
 
     def derivatives(self, t: np.ndarray, order: int) -> np.ndarray: ...
 

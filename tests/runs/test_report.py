@@ -141,3 +141,33 @@ def test_scored_mask_is_the_part_the_statistics_score():
     )
     assert error_stats(goal, measured, mask) == run_stats(rows, SKIP_S, PERIOD_S)["tracking"]
     assert times[mask][0] == pytest.approx(1.0 + SKIP_S, abs=PERIOD_S)
+
+
+def test_a_program_run_has_its_error_per_line_in_stats_and_report(tmp_path):
+    """Rows of a G-code program: the per-line stats are the error's magnitude grouped by
+    line (hand-computed on a made-up error), and the report draws one bar pair per line."""
+    rows = synthetic_rows()
+    timed = [r for r in rows if r["phase"] == "timed"]
+    for k, row in enumerate(timed):  # lines 3 then 7; the error is (3, 4, 0) mm on line 7
+        row["line"] = 3 if k < len(timed) // 2 else 7
+        if row["line"] == 7:
+            row["measured_x_m"] = row["goal_x_m"] - 0.003
+            row["measured_y_m"] = row["goal_y_m"] - 0.004
+            row["measured_z_m"] = row["goal_z_m"]
+    stats = run_stats(rows, SKIP_S, PERIOD_S)
+    per_line = stats["program"]["lines"]
+    assert [e["line"] for e in per_line] == [3, 7]
+    assert sum(e["samples"] for e in per_line) == len(timed)
+    assert per_line[1]["rmse_m"] == pytest.approx(0.005) and per_line[1]["max_m"] == pytest.approx(
+        0.005
+    )
+    run = run_of(tmp_path, "program", {"gcode": "G0 X0", "lines": 8, "segments": 2})
+    figure = report_figure(rows, report_lines(run, stats, None), stats, SKIP_S, PERIOD_S)
+    try:
+        text = texts_of(figure)
+        assert "G-code program: 8 lines" in text and "worst line 7" in text
+        bars = [a for a in figure.axes if a.get_xlabel() == "program line"]
+        assert len(bars) == 1 and len(bars[0].patches) == 2 * len(per_line)
+    finally:
+        plt.close(figure)
+    assert "program" not in run_stats(synthetic_rows(), SKIP_S, PERIOD_S)

@@ -1,28 +1,43 @@
-"""Programs resource: check a G-code program on the virtual robot before anything moves.
+"""Programs resource: check a G-code program on the virtual robot before anything moves,
+predict its tracking error on a headless twin, run it.
 
 ``POST /api/programs/check`` plans the program from where the robot is (or ``start_m``)
 and runs every loop sample through the gate's checks, the joint acceleration and the
 servo torque (app/programs/). Nothing moves: the answer is the report. A program that
 cannot be read is a 422 naming its line and word; one that reads but fails a check is a
 200 with ``ok: false`` and its violations.
+
+``POST /api/programs/dry-run`` checks it and plays the same path on a twin of its own
+(app/programs/dry_run.py), never the live robot: the predicted error per line.
+
+``POST /api/programs/run`` checks it from where the robot is and, only when it passes,
+starts a run of kind ``program`` (app/runs/: logs, stats, report, plus the error per
+program line); a failing check is a 422 with the violations and nothing moves.
 """
 
 from __future__ import annotations
 
+import asyncio
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.programs.check import check_program
+from app.control.errors import MotionRefused
+from app.programs.check import CheckedProgram, check_program
+from app.programs.dry_run import DryRunRefused, dry_run
 from app.programs.errors import ProgramError
-from app.server.api.deps import ControllerDep, SettingsDep, TokenChecked
+from app.server.api.deps import ControlClient, ControllerDep, RunsDep, SettingsDep, TokenChecked
 from app.server.api.models import ReachVector3
-from app.server.errors import UNAUTHORISED, UNAVAILABLE
+from app.server.api.responses import RunStarted
+from app.server.api.runs import start_run
+from app.server.errors import CONTROL, UNAUTHORISED, UNAVAILABLE
 
 router = APIRouter(prefix="/programs", tags=["programs"])
+START_TOLERANCE_M = 0.002  # as the run manager's start check
 
 
 class ProgramRequest(BaseModel):
@@ -35,6 +50,14 @@ class ProgramRequest(BaseModel):
     )
     work_offset_m: ReachVector3 | None = Field(
         None, description="G54: the program origin in the base frame [m] (default: config)"
+    )
+
+
+class RunProgramRequest(ProgramRequest):
+    """A program to run, as checked; feed-forward as the test runs have it."""
+
+    feedforward: bool = Field(
+        False, description="command the point runs.feedforward_lead_s ahead (servo lag)"
     )
 
 
@@ -74,8 +97,37 @@ class ProgramErrorOut(BaseModel):
     word: str = Field(description="the word at fault ('' when none is)")
 
 
+class ProgramRefusedOut(BaseModel):
+    detail: str = Field(description="the first violation: line N: kind: message")
+    violations: list[ViolationOut] = Field(description="all of them, as the check gives")
+
+
+class LineErrorOut(BaseModel):
+    line: int = Field(description="program line (1-based)")
+    samples: int = Field(description="loop ticks spent on the line")
+    rmse_m: float = Field(description="predicted sqrt(mean |goal - FK|^2) over the line [m]")
+    max_m: float = Field(description="predicted largest |goal - FK| over the line [m]")
+
+
+class DryRunOut(BaseModel):
+    """The dry run on the headless twin (app/programs/dry_run.py DryRun)."""
+
+    ok: bool = Field(description="the check passed")
+    duration_s: float = Field(description="the path played [s]")
+    lines: list[LineErrorOut] = Field(description="per program line, in execution order")
+    rmse_m: list[float] = Field(description="per axis x, y, z over the path [m]")
+    max_m: float = Field(description="largest |goal - FK| [m]")
+
+
 NOT_READABLE: dict[int, dict[str, Any]] = {
     422: {"model": ProgramErrorOut, "description": "the program cannot be read or planned"}
+}
+REFUSED: dict[int, dict[str, Any]] = {
+    422: {
+        "model": ProgramRefusedOut,
+        "description": "the program fails its check (its violations), or cannot be read "
+        "(detail, line, word); nothing moves",
+    }
 }
 
 
@@ -103,11 +155,32 @@ def check(
     """Plan the program and check every loop sample (workspace with margin and ceiling,
     IK on the followed branch, joint limits, speed and acceleration, singularity margin,
     servo torque); all violations by line. Moves nothing."""
-    start, near = (
-        (np.asarray(body.start_m), None) if body.start_m is not None else _start(controller)
+    outcome = _check(body, controller, settings)
+    if isinstance(outcome, JSONResponse):
+        return outcome
+    checked, notes = outcome
+    report = checked.report.to_dict()
+    report["notes"] = notes + report["notes"]
+    return report
+
+
+def _unreadable(exc: ProgramError) -> JSONResponse:
+    return JSONResponse(
+        {"detail": str(exc), "line": exc.line or None, "word": exc.word}, status_code=422
     )
+
+
+def _check(
+    body: ProgramRequest, controller, settings, from_robot: bool = False
+) -> tuple[CheckedProgram, list[str]] | JSONResponse:
+    """The check from ``start_m`` or where the robot is (always there with
+    ``from_robot``: a run starts where the robot is); the 422 of an unreadable program."""
+    given = body.start_m is not None and not from_robot
+    start, near = (np.asarray(body.start_m), None) if given else _start(controller)
     notes = []
     if start is None:
+        if from_robot:
+            raise MotionRefused("the robot's position is unknown: check the bus")
         notes.append("the robot's position is unknown: checked from programs.start_m")
     try:
         checked = check_program(
@@ -119,9 +192,78 @@ def check(
             near=near,
         )
     except ProgramError as exc:
-        return JSONResponse(
-            {"detail": str(exc), "line": exc.line or None, "word": exc.word}, status_code=422
-        )
-    report = checked.report.to_dict()
-    report["notes"] = notes + report["notes"]
-    return report
+        return _unreadable(exc)
+    return checked, notes
+
+
+def _refused(checked: CheckedProgram) -> JSONResponse:
+    violations = checked.report.to_dict()["violations"]
+    first = violations[0]
+    detail = (
+        f"line {first['line']}: {first['kind']}: {first['message']} "
+        f"({len(violations)} violation(s); the program was not run)"
+    )
+    return JSONResponse({"detail": detail, "violations": violations}, status_code=422)
+
+
+@router.post(
+    "/dry-run",
+    response_model=DryRunOut,
+    responses={**NOT_READABLE, **UNAUTHORISED, **UNAVAILABLE},
+)
+def dry_run_program(
+    body: RunProgramRequest, controller: ControllerDep, settings: SettingsDep, _: TokenChecked
+) -> Any:
+    """Check the program, then play its timed path on a headless twin of the robot (a
+    simulated bus of its own, stepped offline; never the live robot): the predicted
+    tracking error (goal - FK) per program line. Programs longer than
+    programs.dry_run_max_s are refused (422). Moves nothing."""
+    checked = _check(body, controller, settings)
+    if isinstance(checked, JSONResponse):
+        return checked
+    try:
+        result = dry_run(checked[0], settings, feedforward=body.feedforward)
+    except DryRunRefused as exc:
+        return JSONResponse({"detail": str(exc)}, status_code=422)
+    return result.to_dict()
+
+
+@router.post("/run", response_model=RunStarted, responses={**CONTROL, **REFUSED})
+async def run_program(
+    request: Request, body: RunProgramRequest, runs: RunsDep, _: ControlClient
+) -> Any:
+    """Check the program from where the robot is (a run starts there: a start_m more than
+    2 mm away is a 422) and, only if it passes, run it as a run of kind "program";
+    422 with the violations (detail names the first) when it fails, and nothing moves.
+    Its progress carries program_line; its stats program.lines, the error per line."""
+    controller = runs.controller
+    checked = await asyncio.to_thread(_check, body, controller, controller.settings, True)
+    if isinstance(checked, JSONResponse):
+        return checked
+    program = checked[0]
+    report = program.report
+    if body.start_m is not None:  # a run starts where the robot is: say so, never ignore it
+        distance = float(np.linalg.norm(np.asarray(body.start_m) - report.start_m))
+        if distance > START_TOLERANCE_M:
+            where = ", ".join(f"{v * 1e3:.1f}" for v in report.start_m)
+            return JSONResponse(
+                {
+                    "detail": f"start_m: a program runs from where the robot is, ({where}) mm, "
+                    f"{distance * 1e3:.1f} mm from start_m; leave start_m out or move there"
+                },
+                status_code=422,
+            )
+    if not report.ok:
+        return _refused(program)
+    record = {
+        "gcode": body.gcode,
+        "lines": report.lines,
+        "segments": report.segments,
+        "duration_s": report.duration_s,
+        "length_m": report.length_m,
+        "start_m": report.start_m,
+        "work_offset_m": report.work_offset_m,
+        "feedforward": body.feedforward,
+    }
+    path = replace(program.path, feedforward=body.feedforward)
+    return await start_run(request, runs, path, "program", record)

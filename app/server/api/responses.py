@@ -245,15 +245,31 @@ class RunHealth(BaseModel):
     thresholds: dict[str, float]
 
 
+class LineErrorOut(_Out):
+    """The tracking error over one G-code program line (|goal - FK| per sample)."""
+
+    line: int = Field(description="program line (1-based)")
+    samples: int = Field(description="loop samples spent on the line")
+    rmse_m: float = Field(description="sqrt(mean |e|^2) over the line [m]")
+    max_m: float = Field(description="largest |e| over the line [m]")
+
+
+class ProgramStats(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    lines: list[LineErrorOut] = Field(description="per program line, in execution order")
+
+
 class RunStats(BaseModel):
     """Empty while a run goes; tracking (goal vs FK), validation (FK vs external) when
-    measured, world for hold runs, and the loop's health."""
+    measured, world for hold runs, the loop's health and, for a G-code program, the error
+    per program line."""
 
     model_config = ConfigDict(extra="allow")  # runs saved by older versions load as they are
     tracking: ErrorStats | None = None
     validation: ErrorStats | None = None
     world: WorldStats | None = None
     health: RunHealth | None = None
+    program: ProgramStats | None = None
 
 
 class RunProgress(_Out):
@@ -264,6 +280,9 @@ class RunProgress(_Out):
     duration_s: float | None = Field(description="the whole run with approach and stop [s]")
     test_elapsed_s: float = Field(description="time into the test part [s]")
     test_duration_s: float | None = Field(description="the test part's length [s]")
+    program_line: int | None = Field(
+        None, description="a G-code program's line being executed (1-based); null otherwise"
+    )
 
 
 class RunOut(_Out):
@@ -271,7 +290,7 @@ class RunOut(_Out):
     far it is."""
 
     run_id: str
-    kind: str = Field(description="sinusoid | chirp | step | waypoints | hold")
+    kind: str = Field(description="sinusoid | chirp | step | waypoints | hold | program")
     params: dict[str, Any]
     conditions: dict[str, Any] = Field(description="robot, backend, loop rate, joints")
     state: str = Field(

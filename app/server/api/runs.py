@@ -146,11 +146,19 @@ def _run(runs: RunManager, run_id: str) -> Run:
     return run
 
 
-async def _start(request: Request, runs: RunManager, params: TimedPath, kind: str) -> dict:
+async def start_run(
+    request: Request,
+    runs: RunManager,
+    params: TimedPath,
+    kind: str,
+    record: dict[str, Any] | None = None,
+) -> dict:
     """Plan and check in a worker thread (other requests go on meanwhile), then start only
-    if the answer can still reach the caller: in time, and to a client still connected."""
+    if the answer can still reach the caller: in time, and to a client still connected.
+    ``record``: the parameters saved in run.json (default: ``params``' fields)."""
     began = time.monotonic()
-    prepared = await asyncio.to_thread(runs.prepare, params, kind)
+    args = (params, kind) if record is None else (params, kind, record)
+    prepared = await asyncio.to_thread(runs.prepare, *args)
     took_s, limit_s = time.monotonic() - began, runs.controller.settings.runs.plan_timeout_s
     if took_s > limit_s:
         raise PlanningTimeout(
@@ -167,19 +175,19 @@ async def _start(request: Request, runs: RunManager, params: TimedPath, kind: st
 @router.post("/tests/sinusoid", response_model=RunStarted, responses=CONTROL)
 async def start_sinusoid(request: Request, body: SinusoidRequest, runs: RunsDep, _: ControlClient):
     """Check the whole path, then run it; 422 names the first infeasible time and point."""
-    return await _start(request, runs, body.params(), "sinusoid")
+    return await start_run(request, runs, body.params(), "sinusoid")
 
 
 @router.post("/tests/chirp", response_model=RunStarted, responses=CONTROL)
 async def start_chirp(request: Request, body: ChirpRequest, runs: RunsDep, _: ControlClient):
     """A frequency sweep f0 -> f1 on one axis; checked like the sinusoid."""
-    return await _start(request, runs, body.params(), "chirp")
+    return await start_run(request, runs, body.params(), "chirp")
 
 
 @router.post("/tests/step", response_model=RunStarted, responses=CONTROL)
 async def start_step(request: Request, body: StepRequest, runs: RunsDep, _: ControlClient):
     """A step on one axis; small steps pass the joint-speed limit unchanged."""
-    return await _start(request, runs, body.params(), "step")
+    return await start_run(request, runs, body.params(), "step")
 
 
 @router.post("/tests/waypoints", response_model=RunStarted, responses=CONTROL)
@@ -187,7 +195,7 @@ async def start_waypoints(
     request: Request, body: WaypointsRequest, runs: RunsDep, _: ControlClient
 ):
     """Timed waypoints (pick-and-place, raster); checked like the sinusoid."""
-    return await _start(request, runs, body.params(), "waypoints")
+    return await start_run(request, runs, body.params(), "waypoints")
 
 
 def run_out(runs: RunManager, run: Run) -> dict[str, Any]:

@@ -34,10 +34,19 @@ COMMANDS = [
     ("/api/tests/step", {"duration_s": 1.0}),
     ("/api/tests/waypoints", {"points_m": [GOAL, GOAL], "times_s": [0.0, 1.0]}),
     ("/api/runs/nope/abort", None),
+    ("/api/programs/run", {"gcode": "G4 P0.5"}),
 ]
 # POST routes that need no lease: stopping, taking or giving back the lease, pose input
-# (it feeds a hold the lease holder started; it cannot start one) and the sinusoid preview
-NO_LEASE = {"/api/estop", "/api/lease", "/api/mav/pose", "/api/tests/sinusoid/check"}
+# (it feeds a hold the lease holder started; it cannot start one), the sinusoid preview and
+# a program's check and dry run (they move nothing: the dry run plays on a twin of its own)
+NO_LEASE = {
+    "/api/estop",
+    "/api/lease",
+    "/api/mav/pose",
+    "/api/tests/sinusoid/check",
+    "/api/programs/check",
+    "/api/programs/dry-run",
+}
 
 
 def _app(tmp_path_factory, **server) -> TestClient:
