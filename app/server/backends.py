@@ -31,10 +31,20 @@ def _calibrations(settings: Settings) -> tuple[JointCalibration, ...]:
     return tuple(JointCalibration(**joint.model_dump()) for joint in settings.hardware.joints)
 
 
-def _dynamixel(settings: Settings, port: str) -> DynamixelBus:
+# The emulator is software on the same machine: a loaded one can deschedule it for longer
+# than the SDK's ~34 ms status timeout (sized for real servos behind a USB latency timer),
+# and a reply that comes late is a missed read. Its bus waits at least this long.
+EMULATOR_REPLY_WAIT_S = 0.25
+
+
+def _dynamixel(settings: Settings, port: str, emulated: bool = False) -> DynamixelBus:
     hw = settings.hardware
     config = DynamixelConfig(
-        joints=_calibrations(settings), port=port, baudrate=hw.baud, max_tries=hw.max_tries
+        joints=_calibrations(settings),
+        port=port,
+        baudrate=hw.baud,
+        max_tries=hw.max_tries,
+        min_reply_wait_s=EMULATOR_REPLY_WAIT_S if emulated else 0.0,
     )
     return DynamixelBus(config)
 
@@ -119,7 +129,7 @@ def open_backend(settings: Settings, emulator_in_process: bool = False) -> Itera
         else:
             port = stack.enter_context(_emulator_process(ids))
             description = f"emulated XM430-W210 bus on {port} (dynamixel-sdk)"
-        bus = _dynamixel(settings, port)
+        bus = _dynamixel(settings, port, emulated=kind == "emulated")
         bus.connect()
         stack.callback(bus.disconnect)
         yield Backend(bus, kind, description, emulator)

@@ -74,6 +74,9 @@ class DynamixelConfig:
     [s] (a servo still booting, an emulator not yet scheduled on a loaded machine).
     reboot_timeout_s: how long a rebooted servo may stay silent before reboot() gives up
     [s] (per round of Reboot instructions, at most max_tries rounds).
+    min_reply_wait_s: the least time any status packet is waited for [s], over the SDK's
+    timeout (0: the SDK's alone). For an emulator, which a loaded machine can deschedule
+    for longer than a servo ever takes; real servos keep 0.
     """
 
     joints: tuple[JointCalibration, ...]
@@ -84,6 +87,7 @@ class DynamixelConfig:
     expected_model: int | None = MODEL_NUMBER_XM430_W210
     reboot_timeout_s: float = 2.0
     connect_timeout_s: float = 1.0
+    min_reply_wait_s: float = 0.0
 
     def __post_init__(self) -> None:
         ids = [joint.servo_id for joint in self.joints]
@@ -97,7 +101,7 @@ class DynamixelBus:
     def __init__(self, config: DynamixelConfig) -> None:
         self.config = config
         self.ids = tuple(joint.servo_id for joint in config.joints)
-        self.link = SdkLink(config.port, config.baudrate, config.max_tries)
+        self.link = SdkLink(config.port, config.baudrate, config.max_tries, config.min_reply_wait_s)
         self._goal_writer: sdk.GroupSyncWrite | None = None
         self._state_reader: sdk.GroupSyncRead | None = None
         self._setups: dict[int, ServoSetup] = {}  # per servo id, read at connect
@@ -436,6 +440,7 @@ class DynamixelBus:
         while pending:
             if self.config.rx_timeout_s is not None:  # else the SDK's, for the whole read
                 port.setPacketTimeoutMillis(self.config.rx_timeout_s * 1000.0)
+            self.link.wait_at_least(port)
             try:
                 status, result, note = self.link.receive(port, pending, STATE_BLOCK_SIZE)
             except (OSError, IndexError, ValueError) as exc:

@@ -89,12 +89,20 @@ class _Counters:
 class SdkLink:
     """Port, packet handler, retry policy and counters of one bus."""
 
-    def __init__(self, port_name: str, baudrate: int, max_tries: int = 3) -> None:
+    def __init__(
+        self, port_name: str, baudrate: int, max_tries: int = 3, min_reply_wait_s: float = 0.0
+    ) -> None:
+        """``min_reply_wait_s`` [s]: the least time a status packet is waited for, over the
+        SDK's own timeout (e.g. for an emulator, which a loaded machine can deschedule for
+        longer than any servo takes to answer); 0 keeps the SDK's."""
         if max_tries < 1:
             raise ValueError(f"max_tries {max_tries} must be >= 1")
+        if not min_reply_wait_s >= 0.0:
+            raise ValueError(f"min_reply_wait_s {min_reply_wait_s} must be >= 0")
         self.port_name = port_name
         self.baudrate = baudrate
         self.max_tries = max_tries
+        self.min_reply_wait_s = min_reply_wait_s
         self.port: sdk.PortHandler | None = None
         self.packets = sdk.PacketHandler(PROTOCOL_VERSION)
         self.lock = threading.RLock()  # the loop and an API call may share the bus
@@ -196,6 +204,12 @@ class SdkLink:
     def count_transaction(self) -> None:
         self._counters.transactions += 1
 
+    def wait_at_least(self, port: sdk.PortHandler) -> None:
+        """Raise the port's packet timeout, just set, to ``min_reply_wait_s`` if it is less."""
+        floor_ms = self.min_reply_wait_s * 1000.0
+        if floor_ms > port.packet_timeout:
+            port.setPacketTimeoutMillis(floor_ms)
+
     # -- status packets matched to their request -----------------------------------------
     def receive(
         self, port: sdk.PortHandler, ids: Collection[int], size: int
@@ -245,6 +259,7 @@ class SdkLink:
         if result != sdk.COMM_SUCCESS:
             return None, result, ""
         port.setPacketTimeout(size + 11)  # the SDK's timeout for a status of that size
+        self.wait_at_least(port)
         return self.receive(port, (servo_id,), size)
 
     # -- single-servo helpers ------------------------------------------------------------

@@ -103,3 +103,31 @@ def test_faults_are_bus_errors_and_unknown_faults_are_refused(bus, emulator) -> 
     assert issubclass(CommError, BusError)
     with pytest.raises(AttributeError, match="no fault named 'gremlins'"):
         emulator.inject(1, gremlins=True)
+
+
+@pytest.mark.slow  # reply timeouts of a slow servo
+def test_a_minimum_reply_wait_takes_answers_slower_than_the_sdk_timeout(
+    emulator: ServoEmulator,
+) -> None:
+    """An emulator a loaded machine deschedules answers later than the SDK's ~34 ms status
+    timeout: with ``min_reply_wait_s`` above its delay the bus reads and writes as usual;
+    without it, the same delay is a failed read."""
+    emulator.place({1: 1000, 2: 2000, 3: 3000})
+    hasty = DynamixelBus(make_config(emulator.port, max_tries=1))
+    hasty.connect()
+    emulator.inject(2, delay_s=0.08)  # over the SDK's timeout for any packet here
+    try:
+        with pytest.raises(CommError, match="servo 2"):
+            hasty.read_ticks()
+    finally:
+        hasty.disconnect()
+    patient = DynamixelBus(make_config(emulator.port, min_reply_wait_s=1.0))
+    patient.connect()
+    try:
+        assert patient.read_ticks() == {1: 1000, 2: 2000, 3: 3000}
+        patient.set_gains(PositionGains())  # a write to each servo: answered too
+        assert patient.stats.failures == 0
+    finally:
+        patient.disconnect()
+    with pytest.raises(ValueError, match="min_reply_wait_s"):
+        DynamixelBus(make_config(emulator.port, min_reply_wait_s=-1.0))
