@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from app.programs.check import check_program
 from app.programs.errors import ProgramError
-from app.server.api.deps import ControllerDep, SettingsDep, TokenChecked
+from app.server.api.deps import ControllerDep, SceneDep, SettingsDep, TokenChecked
 from app.server.api.models import ReachVector3
 from app.server.errors import UNAUTHORISED, UNAVAILABLE
 
@@ -98,7 +98,11 @@ def _start(controller) -> tuple[np.ndarray | None, np.ndarray | None]:
     responses={**NOT_READABLE, **UNAUTHORISED, **UNAVAILABLE},
 )
 def check(
-    body: ProgramRequest, controller: ControllerDep, settings: SettingsDep, _: TokenChecked
+    body: ProgramRequest,
+    controller: ControllerDep,
+    settings: SettingsDep,
+    _: TokenChecked,
+    scene: SceneDep,
 ) -> Any:
     """Plan the program and check every loop sample (workspace with margin and ceiling,
     IK on the followed branch, joint limits, speed and acceleration, singularity margin,
@@ -124,4 +128,6 @@ def check(
         )
     report = checked.report.to_dict()
     report["notes"] = notes + report["notes"]
+    if scene is not None:  # the checked path in the 3D scene, violations in red
+        scene.show_program(report)
     return report
