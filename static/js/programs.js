@@ -87,10 +87,13 @@ export function markLine(line) {
 
 // ---- the check's report ----
 
-function setResult(text, kind = "") {
+// ``answer``: the text is a check's answer (counted in data-answers: a test, or a reader,
+// tells a fresh answer from the last one when both read the same)
+function setResult(text, kind = "", answer = false) {
   const out = document.getElementById("prog-result");
   out.textContent = text;
   out.className = `preview ${kind}`;
+  if (answer) out.dataset.answers = String(Number(out.dataset.answers || 0) + 1);
 }
 
 function runnable() {
@@ -139,7 +142,7 @@ function showReport(report, text) {
   const n = report.violations.length;
   const lines = new Set(report.violations.map((v) => v.line)).size;
   setResult(report.ok ? `passes: ${fixed(report.duration_s, 2)} s, path ${fixed(report.length_m * 1000, 1)} mm` :
-    `fails: ${n} violation${n === 1 ? "" : "s"} on ${lines} line${lines === 1 ? "" : "s"}`, report.ok ? "ok" : "bad");
+    `fails: ${n} violation${n === 1 ? "" : "s"} on ${lines} line${lines === 1 ? "" : "s"}`, report.ok ? "ok" : "bad", true);
   document.getElementById("prog-figures").innerHTML = figures(report);
   showViolations(report.violations);
   markLine(null);
@@ -151,7 +154,7 @@ function showReport(report, text) {
 function showUnreadable(body, text) {
   checked = { text, report: null };
   const where = [body.line ? `line ${body.line}` : "", body.word ? `word "${body.word}"` : ""].filter(Boolean).join(", ");
-  setResult(`cannot be read${where ? ` (${where})` : ""}: ${body.detail}`, "bad");
+  setResult(`cannot be read${where ? ` (${where})` : ""}: ${body.detail}`, "bad", true);
   document.getElementById("prog-figures").innerHTML = "";
   showViolations([]);
   markLine(body.line || null);
@@ -172,7 +175,7 @@ async function check() {
     showReport(await post("/api/programs/check", { gcode: text }), text);
   } catch (err) {
     if (err.status === 422 && err.body && "line" in err.body) showUnreadable(err.body, text);
-    else setResult(`not checked: ${operatorText(err).text}`, "bad");
+    else setResult(`not checked: ${operatorText(err).text}`, "bad", true);
   } finally {
     checking = false;
     if (checked && checked.text !== textBox().value) edited(); // typed on meanwhile
