@@ -13,13 +13,15 @@ import { escape } from "./status.js";
 import { metresToMm, operatorText, setText, showError, showMessage } from "./ui.js";
 import { showProgram } from "./workspace2d.js";
 
-const RUNS_POLL_MS = 1000;
+const RUNS_POLL_MS = 1000; // while a program runs (its line moves on); else every IDLE_POLL_MS
+const IDLE_POLL_MS = 3000;
 const MAX_FILE_BYTES = 4 * 1024 * 1024; // [bytes] the server refuses more than 100,000 lines anyway
 let checked = null; // { text, report } of the last check answered (report.ok: it passes)
 let running = null; // { id, line } of the program run going on (from GET /api/runs)
 let marked = null; // the program line marked by a click on a violation (or a 422), 1-based
 let checking = false;
 let polling = false;
+let polledAt = -Infinity; // performance.now() of the last GET /api/runs
 
 const textBox = () => document.getElementById("prog-text");
 const mmPoint = (p) => `(${p.map((v) => (v * 1000).toFixed(1)).join(", ")}) mm`;
@@ -244,6 +246,7 @@ function abort() {
 async function pollRuns() {
   if (polling) return;
   polling = true;
+  polledAt = performance.now();
   try {
     const runs = await get("/api/runs");
     const now = runs.find((r) => r.state === "running" && r.kind === "program");
@@ -302,5 +305,5 @@ export function startPrograms() {
   renderGutter();
   updateButtons();
   pollRuns();
-  setInterval(pollRuns, RUNS_POLL_MS);
+  setInterval(() => { if (running || performance.now() - polledAt >= IDLE_POLL_MS) pollRuns(); }, RUNS_POLL_MS);
 }

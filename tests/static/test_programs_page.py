@@ -19,7 +19,13 @@ from typing import Any
 
 import pytest
 
-from tests.support.browser import PAGE_WAIT_S, browser_skip_reason, dashboard_page, toasts
+from tests.support.browser import (
+    PAGE_WAIT_S,
+    browser_skip_reason,
+    dashboard_page,
+    save_artifact,
+    toasts,
+)
 from tests.support.server import Server, wait_for
 
 SKIP = browser_skip_reason()
@@ -164,6 +170,9 @@ def test_a_failing_program_shows_its_violations_by_line(page: Any, server: Serve
             lambda c=canvas: page.locator(c).evaluate("e => ({...e.dataset})"),
         )
         assert int(page.locator(canvas).get_attribute("data-program-points")) > 100
+    for part, name in ((".programs", "program-panel"), (".workspace2d", "program-2d")):
+        shot = page.locator(part).screenshot(timeout=PAGE_WAIT_S * 1e3)
+        save_artifact(f"dashboard-{name}.png", shot)
 
 
 def test_a_passing_program_enables_run_until_it_is_edited(page: Any, server: Server) -> None:
