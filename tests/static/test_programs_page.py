@@ -120,9 +120,11 @@ def known_state(page: Any, server: Server) -> None:
     click_until(page, "#goal-form button[type=submit]", arrived, "the middle (0, 0, -240)", look)
 
 
-def check(page: Any, server: Server, text: str) -> str:
-    """Put ``text`` in the program box, press Check; the panel's fresh answer."""
-    page.fill("#prog-text", text)
+def check(page: Any, server: Server, text: str | None) -> str:
+    """Put ``text`` in the program box (None: keep what is there), press Check; the panel's
+    fresh answer."""
+    if text is not None:
+        page.fill("#prog-text", text)
     result = page.locator("#prog-result")
     before = int(result.get_attribute("data-answers") or 0)
     click_until(
@@ -177,7 +179,13 @@ def test_a_failing_program_shows_its_violations_by_line(page: Any, server: Serve
 
 def test_a_passing_program_enables_run_until_it_is_edited(page: Any, server: Server) -> None:
     known_state(page, server)
-    answer = check(page, server, (EXAMPLES / "circle.ngc").read_text())
+    page.fill("#prog-text", "")
+    page.set_input_files("#prog-file", str(EXAMPLES / "circle.ngc"))  # opened as a file
+    text = (EXAMPLES / "circle.ngc").read_text()
+    box = page.locator("#prog-text")
+    until(lambda: box.input_value() == text, "the file in the text box", box.input_value)
+    assert page.locator("#prog-file-name").inner_text() == "circle.ngc"
+    answer = check(page, server, None)
     assert answer.startswith("passes"), answer
     assert page.locator("#prog-violations").is_hidden()
     figures = page.locator("#prog-figures").inner_text()
