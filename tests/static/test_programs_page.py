@@ -275,3 +275,63 @@ def test_space_types_in_the_program_and_esc_still_estops(page: Any, server: Serv
     until(lambda: status(server)["estopped"], "the e-stop by Esc", seen(server, page))
     assert page.evaluate("window.deltadash.estops.length") == stops + 1
     click_until(page, "#reset", lambda: not status(server)["estopped"], "reset", seen(server, page))
+
+
+def test_run_sends_the_checked_text_and_shows_a_refusal_by_line(page: Any, server: Server) -> None:
+    """POST /api/programs/run answered here (its server side is another branch): the body
+    is the checked text and the feed-forward choice; a 422 with violations shows them."""
+    known_state(page, server)
+    text = (EXAMPLES / "circle.ngc").read_text()
+    answer = check(page, server, text)
+    assert answer.startswith("passes"), answer
+    sent: list[dict[str, Any]] = []
+    refusal = {
+        "detail": "the program fails its check from where the robot is",
+        "violations": [
+            {
+                "line": 4,
+                "kind": "ik",
+                "message": "no joint solution",
+                "t_s": 1.5,
+                "point_m": [0.02, 0.0, -0.24],
+            },
+        ],
+    }
+
+    def run(route: Any) -> None:
+        sent.append(json.loads(route.request.post_data))
+        if len(sent) == 1:
+            route.fulfill(
+                status=200,
+                content_type="application/json",
+                body=json.dumps({"run_id": "20261201-000001-prog"}),
+            )
+        else:
+            route.fulfill(status=422, content_type="application/json", body=json.dumps(refusal))
+
+    page.route("**/api/programs/run", run)
+    try:
+        page.check("#prog-ff", timeout=PAGE_WAIT_S * 1e3)
+        click_until(page, "#prog-run", lambda: sent, "the run posted", seen(server, page))
+        assert sent[0] == {"gcode": text, "feedforward": True}
+        state = page.locator("#prog-state")
+        until(
+            lambda: "20261201-000001-prog" in state.inner_text(),
+            "the run named",
+            seen(server, page),
+        )
+
+        click_until(
+            page, "#prog-run", lambda: len(sent) > 1, "the second run posted", seen(server, page)
+        )
+        result = page.locator("#prog-result")
+        until(
+            lambda: result.inner_text().startswith("not started"), "the refusal", seen(server, page)
+        )
+        lines = page.locator("#prog-violation-rows tr").evaluate_all(
+            "rs => rs.map(r => r.dataset.line)"
+        )
+        assert lines == ["4"]
+        assert page.locator("#prog-run").is_disabled()  # a refused run needs a new check
+    finally:
+        page.unroute("**/api/programs/run", run)
