@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -23,6 +23,7 @@ from app.scene.access import SceneAccess
 from app.scene.goal_store import FILE_NAME as POINTS_FILE
 from app.scene.goal_view import GoalView
 from app.scene.panel import ControlPanel
+from app.scene.program_view import ProgramView
 from app.scene.robot_view import RobotView
 from app.scene.run_panel import RunPanel
 from app.scene.workspace_view import WorkspaceView
@@ -92,6 +93,7 @@ class Scene:
         self.panel = ControlPanel(server, self.controller, self.goals, self.access)
         self.tests = RunPanel(server, self.runs, self.goals.show_path, self.access)
         self.world = WorldView(server, _mount(settings))
+        self.program = ProgramView(server)
         self._add_view_toggles(server)
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="deltadash-scene", daemon=True)
@@ -112,12 +114,21 @@ class Scene:
             self.gui_volume = gui.add_checkbox("Reachable volume", True)
             self.gui_ghost = gui.add_checkbox("Commanded pose (ghost)", True)
             self.gui_trail = gui.add_checkbox("Measured trail", True)
+            self.gui_program = gui.add_checkbox("Checked program", True)
         self.gui_tori.on_update(lambda e: setattr(self.workspace, "tori_visible", e.target.value))
         self.gui_volume.on_update(
             lambda e: setattr(self.workspace, "volume_visible", e.target.value)
         )
         self.gui_ghost.on_update(lambda e: setattr(self.ghost, "visible", e.target.value))
         self.gui_trail.on_update(lambda e: setattr(self.goals, "show_trail", e.target.value))
+        self.gui_program.on_update(lambda e: setattr(self.program, "visible", e.target.value))
+
+    def show_program(self, report: Mapping[str, Any] | None) -> None:
+        """Draw a checked program (POST /api/programs/check's report: its path and its
+        violations in red), or none; from any thread, a no-op before ``start()``."""
+        program: ProgramView | None = getattr(self, "program", None)
+        if program is not None:
+            program.show_report(report)
 
     def stop(self) -> None:
         """Stop the display thread and the viser server."""

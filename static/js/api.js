@@ -19,9 +19,11 @@ export function token() {
 }
 
 export class ApiError extends Error {
-  constructor(status, detail) {
+  // ``body``: the answer's whole JSON (e.g. a program's 422: line, word, violations), or null
+  constructor(status, detail, body = null) {
     super(detail);
     this.status = status;
+    this.body = body;
   }
 }
 
@@ -43,12 +45,13 @@ export function promptToken(reason, sent = null) {
   return tokenPrompt;
 }
 
-async function detailOf(response) {
+async function failure(response) {
   try {
     const body = await response.json();
-    return typeof body.detail === "string" ? body.detail : JSON.stringify(body.detail);
+    const detail = typeof body.detail === "string" ? body.detail : JSON.stringify(body.detail);
+    return new ApiError(response.status, detail, body);
   } catch {
-    return response.statusText || `HTTP ${response.status}`;
+    return new ApiError(response.status, response.statusText || `HTTP ${response.status}`);
   }
 }
 
@@ -67,7 +70,7 @@ export async function request(method, path, body, retried = false) {
       return request(method, path, body, true);
     }
   }
-  if (!response.ok) throw new ApiError(response.status, await detailOf(response));
+  if (!response.ok) throw await failure(response);
   return response.json();
 }
 
@@ -77,7 +80,7 @@ export const get = (path) => request("GET", path);
 export async function getBlob(path) {
   const headers = token() ? { Authorization: `Bearer ${token()}` } : {};
   const response = await fetch(path, { headers });
-  if (!response.ok) throw new ApiError(response.status, await detailOf(response));
+  if (!response.ok) throw await failure(response);
   return response.blob();
 }
 export const post = (path, body) => request("POST", path, body);

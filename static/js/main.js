@@ -4,6 +4,7 @@ import { get } from "./api.js";
 import { startControl } from "./control.js";
 import { renderHealth } from "./health.js";
 import { startPlots } from "./plots.js";
+import { startPrograms } from "./programs.js";
 import { onStatus, startRuns } from "./runs.js";
 import { startScene } from "./scene.js";
 import { setStreamOnline, startStatus, state } from "./status.js";
@@ -24,6 +25,7 @@ async function boot() {
   startRuns();
   startPlots(setStreamOnline);
   startWorkspace2d();
+  startPrograms();
 }
 
 boot();

@@ -20,7 +20,9 @@ const TYPED_DEBOUNCE_MS = 150;
 const COLOURS = {
   reachable: "#d3f9d8", outside: "#f1f3f5", edge: "#2b8a3e", robot: "#1864ab",
   goal: "#343a40", typed: "#e8590c", nearest: "#9c36b5", text: "#495057",
+  program: "#0b7285", violation: "#c92a2a",
 };
+const PROGRAM_POINTS = 2000; // at most this many of a checked path's points are drawn
 const XYZ = { x: 0, y: 1, z: 2 };
 
 const views = {
@@ -33,6 +35,9 @@ let lastDraw = 0;
 let drawTimer = null;
 let typedTimer = null;
 let typedAsked = 0; // the latest /nearest request; older answers are dropped
+// the last checked program (programs.js hands it here): path and violation points [m]
+let program = null; // { path: [[x, y, z], ...], violations: [[x, y, z], ...] }
+let programVersion = 0;
 
 const mmText = (p) => p.map((v) => (v * 1000).toFixed(1)).join(", ");
 
@@ -154,6 +159,7 @@ function drawView(name) {
     }
     marker(ctx, t.at(seen.typed, view), "typed");
   }
+  drawProgram(ctx, t, view, canvas);
   if (seen.goal) marker(ctx, t.at(seen.goal, view), "goal");
   if (seen.robot) {
     const at = t.at(seen.robot, view);
@@ -164,10 +170,46 @@ function drawView(name) {
   }
 }
 
+// The checked program's path projected on the view's plane, its violations as red crosses.
+function drawProgram(ctx, t, view, canvas) {
+  canvas.dataset.programPoints = program ? String(program.path.length) : "0";
+  canvas.dataset.programViolations = program ? String(program.violations.length) : "0";
+  if (!program) return;
+  ctx.save();
+  ctx.strokeStyle = COLOURS.program;
+  ctx.lineWidth = 1.5;
+  ctx.beginPath();
+  program.path.forEach((p, i) => (i ? ctx.lineTo(...t.at(p, view)) : ctx.moveTo(...t.at(p, view))));
+  ctx.stroke();
+  ctx.strokeStyle = COLOURS.violation;
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  for (const p of program.violations) {
+    const [x, y] = t.at(p, view);
+    ctx.moveTo(x - 5, y - 5); ctx.lineTo(x + 5, y + 5); ctx.moveTo(x + 5, y - 5); ctx.lineTo(x - 5, y + 5);
+  }
+  ctx.stroke();
+  ctx.restore();
+}
+
+// A check's report (path_m, violations[].point_m) to draw, or null to draw none.
+export function showProgram(report) {
+  if (!report || !Array.isArray(report.path_m)) {
+    program = null;
+  } else {
+    const step = Math.max(1, Math.ceil(report.path_m.length / PROGRAM_POINTS));
+    const path = report.path_m.filter((_, i) => i % step === 0 || i === report.path_m.length - 1);
+    const violations = (report.violations || []).map((v) => v.point_m).filter(Array.isArray);
+    program = { path, violations };
+  }
+  programVersion += 1;
+  schedule();
+}
+
 function draw() {
   drawTimer = null;
   if (document.hidden) return; // drawn again on the next change once visible
-  const key = JSON.stringify([seen, views.top.section?.at_m, views.side.section?.at_m,
+  const key = JSON.stringify([seen, programVersion, views.top.section?.at_m, views.side.section?.at_m,
     Boolean(views.top.image), Boolean(views.side.image), views.top.error, views.side.error]);
   if (key === drawnKey) return;
   drawnKey = key;

@@ -30,7 +30,14 @@ from app.control.errors import MotionRefused
 from app.programs.check import CheckedProgram, check_program
 from app.programs.dry_run import DryRunRefused, dry_run
 from app.programs.errors import ProgramError
-from app.server.api.deps import ControlClient, ControllerDep, RunsDep, SettingsDep, TokenChecked
+from app.server.api.deps import (
+    ControlClient,
+    ControllerDep,
+    RunsDep,
+    SceneDep,
+    SettingsDep,
+    TokenChecked,
+)
 from app.server.api.models import ReachVector3
 from app.server.api.responses import RunStarted
 from app.server.api.runs import start_run
@@ -150,7 +157,11 @@ def _start(controller) -> tuple[np.ndarray | None, np.ndarray | None]:
     responses={**NOT_READABLE, **UNAUTHORISED, **UNAVAILABLE},
 )
 def check(
-    body: ProgramRequest, controller: ControllerDep, settings: SettingsDep, _: TokenChecked
+    body: ProgramRequest,
+    controller: ControllerDep,
+    settings: SettingsDep,
+    _: TokenChecked,
+    scene: SceneDep,
 ) -> Any:
     """Plan the program and check every loop sample (workspace with margin and ceiling,
     IK on the followed branch, joint limits, speed and acceleration, singularity margin,
@@ -161,6 +172,8 @@ def check(
     checked, notes = outcome
     report = checked.report.to_dict()
     report["notes"] = notes + report["notes"]
+    if scene is not None:  # the checked path in the 3D scene, violations in red
+        scene.show_program(report)
     return report
 
 
