@@ -335,7 +335,7 @@ def test_a_page_reloaded_mid_run_shows_its_real_progress_and_parameters(
 
 
 def test_two_runs_compared_side_by_side(page: Any, server: Server) -> None:
-    done = [r for r in server.get("/api/runs") if r["state"] != "running"][:2]
+    done = [r for r in server.get("/api/runs") if r["state"] == "done"][:2]
     assert len(done) == 2, done
     for run in done:
         box = page.locator(f"tr[data-run='{run['run_id']}'] input.pick")

@@ -20,6 +20,7 @@ import pytest
 
 from tests.support.browser import (
     PAGE_WAIT_S,
+    PATIENT_SIM_ENV,
     box_of,
     browser_skip_reason,
     dashboard_page,
@@ -62,7 +63,7 @@ def server(tmp_path_factory) -> Iterator[Server]:
         _report_png(run.folder / "report.png")
         run.has_report = True
         run.save()
-    with serve(folder) as served:
+    with serve(folder, **PATIENT_SIM_ENV) as served:
         yield served
 
 

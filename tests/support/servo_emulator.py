@@ -25,9 +25,18 @@ def fast(emulator: ServoEmulator) -> ServoEmulator:
     return emulator
 
 
+# The emulator runs as a thread of the test: a loaded machine (CI runs beside two CPU
+# hogs) can deschedule it past the SDK's ~34 ms status timeout, and a reply that comes late
+# is a failed try. A config waits at least this long for each status packet, unless the
+# test sets its own timeout (rx_timeout_s) or floor: those test the timeouts themselves.
+EMULATOR_REPLY_WAIT_S = 0.25
+
+
 def make_config(port: str, **overrides: object) -> DynamixelConfig:
     joints = tuple(JointCalibration(servo_id) for servo_id in IDS)
     settings = {"joints": joints, "port": port, "baudrate": BAUD, **overrides}
+    if "rx_timeout_s" not in overrides:
+        settings.setdefault("min_reply_wait_s", EMULATOR_REPLY_WAIT_S)
     return DynamixelConfig(**settings)  # type: ignore[arg-type]
 
 

@@ -7,8 +7,6 @@ working once the fault is gone.
 
 from __future__ import annotations
 
-import time
-
 import pytest
 
 from hardware.bus import PositionGains
@@ -17,6 +15,7 @@ from hardware.dynamixel.driver import DynamixelBus
 from hardware.emulator import ServoEmulator
 from hardware.errors import BusError, CommError
 from tests.support.servo_emulator import make_config
+from tests.support.wait import wait_for
 
 
 @pytest.mark.parametrize("fault", ["drop_replies", "corrupt_replies", "wrong_id_replies"])
@@ -75,8 +74,14 @@ def test_late_replies_time_out_then_the_bus_resynchronises(emulator: ServoEmulat
             bus.read_state()
         assert 2 in info.value.ids and info.value.tries == 2
         emulator.clear_faults()
-        time.sleep(0.3)  # let the late replies land; the next request flushes them
-        assert bus.read_ticks() == {1: 11, 2: 22, 3: 33}
+
+        def resynchronised() -> bool:  # late replies land and are thrown away, then it reads
+            try:
+                return bus.read_ticks() == {1: 11, 2: 22, 3: 33}
+            except CommError:  # a late reply still in the way, or a loaded machine's miss
+                return False
+
+        wait_for(resynchronised, "the bus to read the true ticks again")
     finally:
         bus.disconnect()
 
@@ -113,7 +118,7 @@ def test_a_minimum_reply_wait_takes_answers_slower_than_the_sdk_timeout(
     timeout: with ``min_reply_wait_s`` above its delay the bus reads and writes as usual;
     without it, the same delay is a failed read."""
     emulator.place({1: 1000, 2: 2000, 3: 3000})
-    hasty = DynamixelBus(make_config(emulator.port, max_tries=1))
+    hasty = DynamixelBus(make_config(emulator.port, max_tries=1, min_reply_wait_s=0.0))
     hasty.connect()
     emulator.inject(2, delay_s=0.08)  # over the SDK's timeout for any packet here
     try:
