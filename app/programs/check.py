@@ -29,6 +29,7 @@ from kinematics.sizing import XM430_W210_12V
 class ProgramReport:
     """The check's answer. ok: no violation; duration_s [s] and length_m [m] of the
     planned path; violations (by time); path_m: the path decimated for drawing (M, 3) [m];
+    path_lines: the program line of each path_m point (M,) (None where nothing moves);
     peaks over the samples: joint speed [rad/s] and acceleration [rad/s^2], lowest
     1/cond(J), highest torque ratio (None: no torque model for this robot); lines,
     segments, samples, period_s [s], chord_tolerance_m [m]; start_m and work_offset_m
@@ -39,6 +40,7 @@ class ProgramReport:
     length_m: float
     violations: list[Violation]
     path_m: list[list[float]]
+    path_lines: list[int | None]
     peak_joint_speed_rad_s: float | None
     peak_joint_acceleration_rad_s2: float | None
     worst_dexterity: float | None
@@ -96,11 +98,11 @@ def verify_limits(settings: Settings) -> VerifyLimits:
     )
 
 
-def _decimate(points: np.ndarray, count: int) -> np.ndarray:
-    if len(points) <= count:
-        return points
-    index = np.unique(np.concatenate([np.linspace(0, len(points) - 1, count).round(), [0]]))
-    return points[index.astype(int)]
+def _decimated(length: int, count: int) -> np.ndarray:
+    """About ``count`` evenly spread indices into ``length`` samples, first and last kept."""
+    if length <= count:
+        return np.arange(length)
+    return np.unique(np.linspace(0, length - 1, count).round()).astype(int)
 
 
 def check_program(
@@ -172,12 +174,14 @@ def check_program(
         near_joints,
         period_s,
     )
+    drawn = _decimated(len(points), programs.path_points)
     report = ProgramReport(
         ok=not result.violations,
         duration_s=path.duration_s,
         length_m=path.length_m,
         violations=result.violations,
-        path_m=_decimate(points, programs.path_points).tolist(),
+        path_m=points[drawn].tolist(),
+        path_lines=[int(line) if line > 0 else None for line in lines[drawn]],
         peak_joint_speed_rad_s=_finite(result.peak_joint_speed_rad_s),
         peak_joint_acceleration_rad_s2=_finite(result.peak_joint_acceleration_rad_s2),
         worst_dexterity=_finite(result.worst_dexterity),

@@ -152,6 +152,15 @@ class Scene:
             except Exception:  # a drawing bug must not end the display (or the app)
                 log.exception("scene update failed")
 
+    def _program_line(self) -> int | None:
+        """The line a running G-code program executes now, None when none runs."""
+        runs = self.runs()
+        listed = runs.list() if runs is not None else []
+        latest = listed[0] if listed else None
+        if latest is None or latest.state != "running" or latest.kind != "program":
+            return None
+        return (runs.progress(latest.run_id) or {}).get("program_line")
+
     def update(self, now_s: float) -> None:
         """One display frame from the controller's latest snapshot, sent as one batch."""
         snap = self.controller.snapshot()
@@ -167,6 +176,7 @@ class Scene:
             if self.frames % PANEL_EVERY == 0:
                 self.panel.update(snap)
                 self.tests.update(now_s)
+                self.program.show_line(self._program_line())
         self.frames += 1
 
 

@@ -40,6 +40,15 @@ def test_a_program_inside_the_limits_passes(settings):
     np.testing.assert_allclose(report.path_m[0], settings.programs.start_m)
     np.testing.assert_allclose(report.path_m[-1], [0.0, 0.0, -0.22], atol=1e-12)
     json.dumps(report.to_dict(), allow_nan=False)  # JSON as it stands
+    # each drawn point carries the line the planned path is on at that point
+    assert len(report.path_lines) == len(report.path_m)
+    times = checked.path.sample_times(report.period_s)
+    points = checked.path.evaluate(times, (0,))[0]
+    lines = checked.path.line_at(times)
+    for point, line in zip(report.path_m, report.path_lines, strict=True):
+        at = np.flatnonzero(np.all(np.isclose(points, point, atol=1e-12), axis=1))
+        assert line in set(lines[at].tolist())
+    assert report.path_lines == sorted(report.path_lines)  # in program order
 
 
 def test_leaving_the_workspace_is_refused_at_its_line(settings):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import viser
 
-from app.scene.program_view import VIOLATION_COLOUR, ProgramView
+from app.scene.program_view import RUNNING_COLOUR, VIOLATION_COLOUR, ProgramView
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -87,3 +87,27 @@ def test_the_check_route_publishes_its_report_to_the_scene(app_client, scene):
     unreadable = app_client.post("/api/programs/check", json={"gcode": "G1 X1 Q5"})
     assert unreadable.status_code == 422
     assert scene.program.path is not None  # a program that cannot be read changes nothing
+
+
+def test_the_running_line_is_drawn_over_its_part_of_the_path(server):
+    view = ProgramView(server)
+    path = [[0.01 * i, 0.0, -0.24] for i in range(8)]
+    lines = [None, 3, 3, 4, 4, 4, 6, 6]  # path_lines: the line of each point
+    view.show_report({"path_m": path, "path_lines": lines, "violations": []})
+    assert "/program/running" not in nodes(server)
+    view.show_line(4)
+    segments = view.running.points
+    # line 4's points (3..5) and one point either side: the part joins the path around it
+    np.testing.assert_allclose(segments[:, 0], path[2:6], atol=1e-6)
+    np.testing.assert_allclose(segments[:, 1], path[3:7], atol=1e-6)
+    assert tuple(np.asarray(view.running.colors).reshape(-1, 3)[0]) == RUNNING_COLOUR
+    view.show_line(6)  # the next line: the last one's highlight goes
+    np.testing.assert_allclose(view.running.points[:, 0], path[5:7], atol=1e-6)
+    view.show_line(5)  # a line with no drawn point (e.g. a dwell): nothing highlighted
+    assert view.running is None and "/program/running" not in nodes(server)
+    view.show_line(3)
+    view.show_line(None)  # the run ended
+    assert "/program/running" not in nodes(server)
+    view.show_line(3)
+    view.show_report({"path_m": path[:2], "violations": []})  # a new check: no old highlight
+    assert view.running is None and view.running_line is None

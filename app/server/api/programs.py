@@ -84,6 +84,9 @@ class ProgramReportOut(BaseModel):
     length_m: float
     violations: list[ViolationOut]
     path_m: list[list[float]] = Field(description="the path decimated for drawing [m]")
+    path_lines: list[int | None] = Field(
+        description="the program line of each path_m point (null where nothing moves)"
+    )
     peak_joint_speed_rad_s: float | None
     peak_joint_acceleration_rad_s2: float | None
     worst_dexterity: float | None
