@@ -146,9 +146,25 @@ def format_report(name: str, report: dict[str, Any], settings: Any) -> str:
     return "\n".join(out)
 
 
+def read_program(path: str) -> str:
+    """A program file's text (UTF-8, which ASCII G-code is). ValueError naming the file and
+    the line of the first byte that is not UTF-8; OSError as the system says it."""
+    data = Path(path).read_bytes()
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise ValueError(
+            f"{path}: line {line}: byte 0x{data[exc.start]:02x} is not UTF-8 text "
+            "(save the program as UTF-8 or plain ASCII)"
+        ) from None
+
+
 def format_line_errors(per_line: list[dict[str, Any]], text: str, title: str) -> str:
     """The error per program line as a table in mm, each row with the line's own text."""
-    source = text.splitlines()
+    from app.programs.tokens import program_lines
+
+    source = program_lines(text)
     out = [title, f"  {'line':>5} {'samples':>7} {'RMSE mm':>8} {'max mm':>8}  program"]
     for e in per_line:
         words = source[e["line"] - 1].strip() if 0 < e["line"] <= len(source) else ""
@@ -167,8 +183,8 @@ def _check(args: argparse.Namespace) -> int:
 
     try:
         settings = load_settings(args.config)
-        text = Path(args.file).read_text()
-    except (ConfigError, OSError, UnicodeDecodeError) as exc:
+        text = read_program(args.file)
+    except (ConfigError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     start = None if args.start is None else [v * 1e-3 for v in args.start]
@@ -239,8 +255,8 @@ def _run(args: argparse.Namespace) -> int:
     from app.cli import run as cli_run
 
     try:
-        text = Path(args.file).read_text()
-    except (OSError, UnicodeDecodeError) as exc:
+        text = read_program(args.file)
+    except (OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     url = args.url.rstrip("/")

@@ -113,6 +113,7 @@ def check_program(
     start_m: Any = None,
     work_offset_m: Any = None,
     near: Any = None,
+    max_samples: tuple[int, str] | None = None,
 ) -> CheckedProgram:
     """Parse, plan and verify ``text`` with ``settings``' robot and limits.
 
@@ -122,6 +123,9 @@ def check_program(
         work_offset_m: the G54 origin (3,) [m] (default ``programs.work_offset_m``).
         near: the joints the loop is at (3,) [rad] (default: the knee-out branch at the
             start).
+        max_samples: a lower cap on the loop periods than ``programs.max_samples`` and the
+            setting's name, e.g. ``(runs.max_samples, "runs.max_samples")`` for a program
+            about to run: refused after planning, before the costly checks.
 
     Raises:
         ProgramError: a program that cannot be read or planned (its line and word), or
@@ -147,13 +151,16 @@ def check_program(
     limits = plan_limits(settings)
     path = plan_program(program.segments, limits)
     period_s = limits.period_s
-    if path.duration_s / period_s > programs.max_samples:
+    cap, name = (programs.max_samples, "programs.max_samples")
+    if max_samples is not None and max_samples[0] < cap:
+        cap, name = max_samples
+    if path.duration_s / period_s > cap:
         last = program.segments[-1].line if program.segments else 0
         raise ProgramError(
             last,
             "",
-            f"the program lasts {path.duration_s:.0f} s, over programs.max_samples = "
-            f"{programs.max_samples} loop periods ({programs.max_samples * period_s:.0f} s)",
+            f"the program lasts {path.duration_s:.0f} s, over {name} = "
+            f"{cap} loop periods ({cap * period_s:.0f} s)",
         )
     if path.segments:
         times = path.sample_times(period_s)

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from app.programs.errors import ProgramError
 
 _WORD = re.compile(r"([A-Z])([+-]?(?:\d+\.?\d*|\.\d+))")
+_NEWLINE = re.compile(r"\r\n|\n|\r")  # what an editor counts as a line break; not \f, U+2028
+MAX_MAGNITUDE = 1e6  # no coordinate, radius, feed or dwell of the subset is larger
 
 
 @dataclass(frozen=True)
@@ -75,11 +77,23 @@ def tokenize_line(text: str, number: int) -> Line:
             raise ProgramError(
                 number, rest, "not a word (a letter and a number, e.g. G1 or X-10.5)"
             )
-        words.append(Word(match[1], float(match[2]), match[0]))
+        value = float(match[2])
+        if not abs(value) <= MAX_MAGNITUDE:  # 400 digits are inf, 160 overflow later
+            raise ProgramError(
+                number, match[0][:24], f"out of range (at most {MAX_MAGNITUDE:,.0f} in size)"
+            )
+        words.append(Word(match[1], value, match[0]))
         at = match.end()
     return Line(number, tuple(words))
 
 
+def program_lines(program: str) -> list[str]:
+    """A program's lines as an editor numbers them: split at CR LF, LF or CR only (a form
+    feed or U+2028 inside a line is not a line break here), a leading byte-order mark
+    (Windows editors write one) dropped."""
+    return _NEWLINE.split(program.removeprefix("\ufeff"))
+
+
 def tokenize(program: str) -> list[Line]:
     """A program's text -> its lines of words, empty lines included (numbers stay right)."""
-    return [tokenize_line(text, i) for i, text in enumerate(program.splitlines(), start=1)]
+    return [tokenize_line(text, i) for i, text in enumerate(program_lines(program), start=1)]

@@ -44,3 +44,28 @@ def test_text_that_is_not_words_is_refused_with_its_line(text, word):
 def test_nested_comments_are_refused_as_linuxcnc_does():
     with pytest.raises(ProgramError, match="nest"):
         tokenize("G1 (a (b) c)")
+
+
+@pytest.mark.parametrize(
+    ("text", "word"),
+    [
+        ("G1 F" + "9" * 400, "F" + "9" * 23),  # inf as a float
+        ("G2 X1 Y0 R" + "1" * 160, "R" + "1" * 23),  # finite, but overflows the geometry
+        ("G1 X-2000000", "X-2000000"),
+    ],
+)
+def test_numbers_beyond_any_coordinate_are_refused_naming_the_word(text, word):
+    with pytest.raises(ProgramError) as info:
+        tokenize(f"G21\n{text}")
+    assert info.value.line == 2 and info.value.word == word
+    assert "out of range" in str(info.value)
+    assert tokenize("G1 X-1000000 F1000000")[0].words[1].value == -1e6  # the bound itself
+
+
+def test_lines_are_counted_as_an_editor_counts_them():
+    # a form feed or U+2028 inside a line is not a line break; CR LF, LF and CR are
+    lines = tokenize("G0 X0\x0cY0\r\nG1 X1 ; U+2028 \u2028 in a comment\rG92")
+    assert [line.number for line in lines] == [1, 2, 3]
+    assert [texts(line) for line in lines] == [["G0", "X0", "Y0"], ["G1", "X1"], ["G92"]]
+    # a byte-order mark (Windows editors write one) is not part of the first word
+    assert [w.text for w in tokenize("\ufeffG0 X1")[0].words] == ["G0", "X1"]

@@ -26,6 +26,7 @@ from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 
+from app.control.commands import require_motion
 from app.control.errors import MotionRefused
 from app.programs.check import CheckedProgram, check_program
 from app.programs.dry_run import DryRunRefused, dry_run
@@ -206,10 +207,18 @@ def _check(
             start_m=start,
             work_offset_m=body.work_offset_m,
             near=near,
+            # a run's log holds at most runs.max_samples: say so before the costly checks
+            max_samples=(settings.runs.max_samples, "runs.max_samples") if from_robot else None,
         )
     except ProgramError as exc:
         return _unreadable(exc)
     return checked, notes
+
+
+def _require_motion(controller) -> None:
+    """MotionRefused (409) when the robot may not move now, in the loop's own words (the
+    published snapshot has the loop state's torque, estopped and faults)."""
+    require_motion(controller.snapshot())  # type: ignore[arg-type]
 
 
 def _refused(checked: CheckedProgram) -> JSONResponse:
@@ -253,11 +262,21 @@ async def run_program(
     422 with the violations (detail names the first) when it fails, and nothing moves.
     Its progress carries program_line; its stats program.lines, the error per line."""
     controller = runs.controller
+    _require_motion(controller)  # torque off, e-stop, fault: said as such, before the check
     checked = await asyncio.to_thread(_check, body, controller, controller.settings, True)
     if isinstance(checked, JSONResponse):
         return checked
     program = checked[0]
     report = program.report
+    # the check took time: the path starts where the robot was then; if it has moved since,
+    # the run would add an approach the report never showed. Check again from where it is.
+    now, _ = _start(controller)
+    moved = np.inf if now is None else float(np.linalg.norm(now - np.asarray(report.start_m)))
+    if moved > START_TOLERANCE_M:
+        raise MotionRefused(
+            f"the robot moved {moved * 1e3:.1f} mm while the program was checked: "
+            "it runs only from where it was checked; check and run again"
+        )
     if body.start_m is not None:  # a run starts where the robot is: say so, never ignore it
         distance = float(np.linalg.norm(np.asarray(body.start_m) - report.start_m))
         if distance > START_TOLERANCE_M:

@@ -62,3 +62,12 @@ def test_the_start_is_in_mm(tmp_path, capsys):
     assert main(["gcode", "check", str(program), "--start", "10", "0", "-250", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["start_m"] == pytest.approx([0.01, 0.0, -0.25])
+
+
+def test_a_file_that_is_not_utf8_exits_2_naming_the_file_and_line(tmp_path, capsys):
+    program = tmp_path / "latin1.ngc"
+    program.write_bytes("G21\n(Stra\u00dfe)\nG0 X0\n".encode("latin-1"))
+    assert main(["gcode", "check", str(program)]) == 2
+    err = capsys.readouterr().err
+    assert f"{program}: line 2: byte 0xdf is not UTF-8 text" in err
+    assert "Traceback" not in err
