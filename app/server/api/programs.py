@@ -18,6 +18,7 @@ program line); a failing check is a 422 with the violations and nothing moves.
 from __future__ import annotations
 
 import asyncio
+import threading
 from dataclasses import replace
 from typing import Any
 
@@ -45,6 +46,11 @@ from app.server.api.runs import start_run
 from app.server.errors import CONTROL, UNAUTHORISED, UNAVAILABLE
 
 router = APIRouter(prefix="/programs", tags=["programs"])
+# A long program's check takes seconds of CPU and up to ~1 GB (programs.max_samples loop
+# samples of several arrays), in the server's thread pool beside the control loop: at most
+# this many at a time; another is answered 503 at once (nothing is queued).
+CONCURRENT_CHECKS = 2
+_checks = threading.BoundedSemaphore(CONCURRENT_CHECKS)
 START_TOLERANCE_M = 0.002  # as the run manager's start check
 
 
@@ -192,6 +198,24 @@ def _check(
 ) -> tuple[CheckedProgram, list[str]] | JSONResponse:
     """The check from ``start_m`` or where the robot is (always there with
     ``from_robot``: a run starts where the robot is); the 422 of an unreadable program."""
+    if not _checks.acquire(blocking=False):
+        return JSONResponse(
+            {
+                "detail": f"busy: {CONCURRENT_CHECKS} program checks are running; "
+                "try again when one has ended"
+            },
+            status_code=503,
+            headers={"Retry-After": "5"},
+        )
+    try:
+        return _check_now(body, controller, settings, from_robot)
+    finally:
+        _checks.release()
+
+
+def _check_now(
+    body: ProgramRequest, controller, settings, from_robot: bool
+) -> tuple[CheckedProgram, list[str]] | JSONResponse:
     given = body.start_m is not None and not from_robot
     start, near = (np.asarray(body.start_m), None) if given else _start(controller)
     notes = []
@@ -268,6 +292,11 @@ async def run_program(
         return checked
     program = checked[0]
     report = program.report
+    if not program.path.segments:  # empty, or comments only: a run of it would be nothing
+        return JSONResponse(
+            {"detail": "gcode: the program has no move or dwell: nothing to run"},
+            status_code=422,
+        )
     # the check took time: the path starts where the robot was then; if it has moved since,
     # the run would add an approach the report never showed. Check again from where it is.
     now, _ = _start(controller)

@@ -63,3 +63,22 @@ def test_without_a_start_the_check_starts_where_the_robot_is(client):
     status = ok_json(client.get("/api/status"))
     body = ok_json(check(client, "(nothing to do)"))
     np.testing.assert_allclose(body["start_m"], status["ee"]["position_m"], atol=5e-3)
+
+
+def test_checks_beyond_the_concurrent_limit_are_a_503_not_a_queue(client, monkeypatch):
+    """Each long check costs seconds of CPU and memory beside the control loop: when the
+    allowed number are running, another is refused at once, saying why."""
+    import threading
+
+    from app.server.api import programs
+
+    monkeypatch.setattr(programs, "_checks", threading.BoundedSemaphore(1))
+    programs._checks.acquire()  # one check running, of a limit of one
+    try:
+        response = client.post("/api/programs/check", json={"gcode": "G4 P0.1"})
+        assert response.status_code == 503, response.text
+        assert "program checks are running" in response.json()["detail"]
+        assert response.headers["retry-after"] == "5"
+    finally:
+        programs._checks.release()
+    assert ok_json(check(client, "G4 P0.1", start_m=START))["ok"]  # free again: answered

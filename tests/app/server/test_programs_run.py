@@ -250,3 +250,11 @@ def test_a_robot_that_moved_during_the_check_does_not_run_it(fresh, monkeypatch)
     assert "moved 5.0 mm while the program was checked" in response.json()["detail"]
     assert _status(fresh)["commanded_rad"] == before["commanded_rad"]
     assert all(r["state"] != "running" for r in ok_json(fresh.get("/api/runs")))
+
+
+@pytest.mark.parametrize("gcode", ["", "(only a comment)\n; and another\n%\n"])
+def test_a_program_with_nothing_to_do_is_not_run(fresh, gcode):
+    ok_json(fresh.post("/api/torque", json={"enabled": True}))
+    response = fresh.post("/api/programs/run", json={"gcode": gcode})
+    assert response.status_code == 422, response.text
+    assert "nothing to run" in response.json()["detail"]
