@@ -29,6 +29,7 @@ from gcode_check import program  # noqa: E402
 
 from app.config import load_settings  # noqa: E402
 from app.control.controller import Controller  # noqa: E402
+from app.control.errors import MotionRefused  # noqa: E402
 from app.programs.check import check_program  # noqa: E402
 from app.server.backends import open_backend  # noqa: E402
 
@@ -65,7 +66,12 @@ def main() -> None:
         controller = Controller(settings, opened.bus, opened.kind, opened.description)
         controller.start()
         try:
-            controller.set_torque(True).result(timeout=5.0)
+            for _ in range(40):  # the relaxed twin swings past a joint limit at first
+                try:
+                    controller.set_torque(True).result(timeout=5.0)
+                    break
+                except MotionRefused:
+                    time.sleep(0.5)
             check_program(text, settings, gate=controller.gate)  # warm-up (workspace cache)
             print(f"backend: {opened.description}; program: {args.lines} lines")
             busy, stop = threading.Event(), threading.Event()
