@@ -82,10 +82,14 @@ def chromium_page(width: int = 1280, height: int = 800) -> Iterator[Any]:
 
 
 # The page tests' servers: the simulator's process, starved on a loaded 2-core machine
-# with chromium beside it, can stand still past the 0.5 s stale-feedback limit and fault a
-# move or a run half-way (tests/control/test_freshness.py tests that fault); what the page
-# tests look at is the page, so their simulator may stall for up to 5 s.
-PATIENT_SIM_ENV = {"DELTADASH_SAFETY__STALE_FEEDBACK_S": "5"}
+# with chromium beside it, can stand still past the 0.5 s stale-feedback limit, or lag its
+# command past the following-error limit for over 0.5 s, and fault a move or a run
+# half-way (tests/control/ tests those faults); what the page tests look at is the page,
+# so their simulator may stall or lag for up to 5 s.
+PATIENT_SIM_ENV = {
+    "DELTADASH_SAFETY__STALE_FEEDBACK_S": "5",
+    "DELTADASH_SAFETY__FOLLOWING_ERROR_TIME_S": "5",
+}
 SCENE_STUB = "<p style='font: 14px sans-serif'>3D scene (viser): stubbed in this test</p>"
 # Every message the page showed, in order (window.__toasts), for a timed-out wait to print.
 RECORD_TOASTS = """
