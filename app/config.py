@@ -164,6 +164,13 @@ class SafetySettings(_Section):
     max_missed_reads: int = Field(10, ge=1, description="fault after this many failed reads")
     estop_action: Literal["hold", "release"] = Field("hold", description="torque on e-stop")
     torque_off_on_exit: bool = Field(True, description="relax the servos on shutdown")
+    torque_on_limit_slack_rad: float = Field(
+        0.09,
+        ge=0,
+        le=0.2,
+        description="torque on a relaxed arm resting up to this far past a joint limit [rad] "
+        "holds it at the limit (a few degrees' move back inside); farther: refused",
+    )
 
 
 class ServerSettings(_Section):

@@ -16,3 +16,12 @@ settings.register_profile(
 settings.register_profile("dev", max_examples=60, deadline=None)
 settings.register_profile("soak", max_examples=3000, deadline=None)  # by hand, before a release
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
+
+
+def pytest_unconfigure(config):  # pragma: no cover - diagnostics
+    import sys
+    import threading
+
+    alive = [t for t in threading.enumerate() if t is not threading.main_thread()]
+    if alive:
+        print("\nthreads alive at exit:", [(t.name, t.daemon) for t in alive], file=sys.stderr)

@@ -38,7 +38,9 @@ class CommandContext:
     jog_limits: per-axis Cartesian limits of jogs and Cartesian moves [m/s, m/s^2, m/s^3];
     joint_speed_rad_s: the joint speed limit that joint-space moves are scaled from;
     estop_action: "hold" (hold position with torque on) or "release" (torque off);
-    hold_timeout_s: a held jog stops this long after its last heartbeat [s].
+    hold_timeout_s: a held jog stops this long after its last heartbeat [s];
+    torque_on_slack_rad: how far past a joint limit a relaxed arm may rest and still be
+        taken back inside by torque on [rad].
     """
 
     robot: RotaryDelta | LinearDelta
@@ -49,6 +51,7 @@ class CommandContext:
     joint_speed_rad_s: float
     estop_action: Literal["hold", "release"]
     hold_timeout_s: float = 0.15
+    torque_on_slack_rad: float = 0.09
 
     @classmethod
     def from_settings(cls, settings: Settings) -> CommandContext:
@@ -74,6 +77,7 @@ class CommandContext:
             settings.limits.joint_speed_rad_s,
             settings.safety.estop_action,
             jog.hold_timeout_s,
+            settings.safety.torque_on_limit_slack_rad,
         )
 
 
@@ -262,9 +266,12 @@ def torque_to(state: LoopState, ctx: CommandContext, bus: ServoBus, enabled: boo
     """Torque on (holding where the robot is, so nothing moves) or off (stopping any source).
 
     Torque on while it is on keeps holding the commanded joints (not the sagged measured
-    ones); from off it holds the measured joints, where the relaxed arm is. MotionRefused
-    when those are outside the joint limits (a relaxed arm still swinging, or pushed past
-    them): holding there would command the servos beyond their limits.
+    ones); from off it holds the measured joints, where the relaxed arm is. A relaxed arm
+    hangs near its joint limits and can come to rest just past one (the twin rests at 95 deg
+    against a 94.5 deg limit): up to ``ctx.torque_on_slack_rad`` past, the hold is the
+    nearest joints inside the limits, a move of at most that much back inside. Farther
+    (a relaxed arm still swinging, or pushed past them): MotionRefused, since holding there
+    would command the servos beyond their limits.
     """
     if enabled:
         if state.estopped or state.faults:
@@ -272,7 +279,8 @@ def torque_to(state: LoopState, ctx: CommandContext, bus: ServoBus, enabled: boo
         if state.joints is None:
             raise MotionRefused("no joint state read yet: check the bus")
         hold, point = held(state)
-        _require_within_limits(ctx, hold)
+        if not state.torque:
+            hold, point = _into_limits(ctx, hold, point)
         bus.write_goal(hold)  # where it is, so enabling torque moves nothing
         bus.torque(True)
         state.commanded_rad, state.commanded_point_m, state.goal_m = hold, point, point.copy()
@@ -284,15 +292,28 @@ def torque_to(state: LoopState, ctx: CommandContext, bus: ServoBus, enabled: boo
     return enabled
 
 
-def _require_within_limits(ctx: CommandContext, joints_rad: np.ndarray) -> None:
-    low, high = ctx.gate.joint_min_rad, ctx.gate.joint_max_rad
+def _into_limits(
+    ctx: CommandContext, joints_rad: np.ndarray, point_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The hold for a relaxed arm at ``joints_rad`` (3,) [rad]: itself inside the limits,
+    the nearest joints inside them up to ``ctx.torque_on_slack_rad`` past, with its point
+    [m]; MotionRefused farther past."""
+    low, high = np.asarray(ctx.gate.joint_min_rad), np.asarray(ctx.gate.joint_max_rad)
     for i, (value, lo, hi) in enumerate(zip(joints_rad, low, high, strict=True)):
-        if not lo <= value <= hi:
+        if not lo - ctx.torque_on_slack_rad <= value <= hi + ctx.torque_on_slack_rad:
             raise MotionRefused(
                 f"joint {i + 1} is at {math.degrees(value):.1f} deg, outside its limits "
-                f"[{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg: torque on would hold it "
+                f"[{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg by more than "
+                f"{math.degrees(ctx.torque_on_slack_rad):.1f} deg: torque on would hold it "
                 "there; wait for the arm to come to rest inside them (or move it by hand)"
             )
+    inside = np.clip(joints_rad, low, high)
+    if np.array_equal(inside, joints_rad):
+        return joints_rad, point_m
+    fk = ctx.robot.fk(inside)
+    if not fk.ok:
+        raise MotionRefused("torque on: the joints inside the limits have no platform point")
+    return inside, np.asarray(fk.points, dtype=np.float64)
 
 
 def held(state: LoopState) -> tuple[np.ndarray, np.ndarray]:

@@ -9,10 +9,12 @@ never touch the bus: they are queued and run at the start of the next tick, in t
 
 from __future__ import annotations
 
+import atexit
 import logging
 import math
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from concurrent.futures import Future
 from queue import Empty, SimpleQueue
@@ -34,6 +36,19 @@ from hardware.errors import BusError
 
 log = logging.getLogger(__name__)
 Listener = Callable[[Snapshot], None]
+
+
+# Controllers whose thread ticks. The tick calls into native code (MuJoCo on the twin,
+# ruckig); a daemon thread still in it when the interpreter finalizes crashes the process
+# after its work is done ("terminate called without an active exception"), so a loop not
+# stopped by its owner is stopped at exit, before finalization.
+_RUNNING: weakref.WeakSet[Controller] = weakref.WeakSet()
+
+
+@atexit.register
+def _stop_all() -> None:
+    for controller in list(_RUNNING):
+        controller.halt()
 
 
 class Controller:
@@ -84,6 +99,15 @@ class Controller:
         self._publish()
         self._thread = threading.Thread(target=self._run, name="deltadash-control", daemon=True)
         self._thread.start()
+        _RUNNING.add(self)
+
+    def halt(self) -> None:
+        """Stop ticking and wait for the thread (no torque change: see stop())."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        _RUNNING.discard(self)
+        self.state.source = None  # ruckig objects must not outlive the interpreter's shutdown
 
     def stop(self) -> str | None:
         """Stop ticking; relax the servos if the config says so (safety.torque_off_on_exit).
@@ -91,10 +115,7 @@ class Controller:
         Returns None when the robot was left as the config says, else why not ("torque off
         at exit failed: ..."), so a command line can exit non-zero; the server logs it.
         """
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-        self.state.source = None  # ruckig objects must not outlive the interpreter's shutdown
+        self.halt()
         if self.settings.safety.torque_off_on_exit and self.state.torque:
             try:
                 self.bus.torque(False)

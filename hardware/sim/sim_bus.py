@@ -11,8 +11,10 @@ simulated time with `advance` (tests, headless runs, faster than real time).
 
 from __future__ import annotations
 
+import atexit
 import threading
 import time
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -62,6 +64,19 @@ class SimBusConfig:
     torque_on_at_start: bool = False
 
 
+# Buses whose physics thread runs. A daemon thread still inside MuJoCo when the interpreter
+# finalizes crashes the process (segfault or "terminate called without an active
+# exception") after the program's own work is done, so whatever was not disconnected is
+# stopped at exit, before finalization.
+_RUNNING: weakref.WeakSet[SimBus] = weakref.WeakSet()
+
+
+@atexit.register
+def _disconnect_all() -> None:
+    for bus in list(_RUNNING):
+        bus.disconnect()
+
+
 class SimBus:
     """ServoBus on the MuJoCo twin (joint order = the calibrations' order)."""
 
@@ -88,12 +103,14 @@ class SimBus:
             self._stop.clear()
             self._thread = threading.Thread(target=self._run, name="sim-physics", daemon=True)
             self._thread.start()
+            _RUNNING.add(self)
 
     def disconnect(self) -> None:
         if self._thread is not None:
             self._stop.set()
             self._thread.join(timeout=5.0)
             self._thread = None
+        _RUNNING.discard(self)
         self._connected = False
 
     def scan(self, ids: Sequence[int] | None = None) -> list[ServoInfo]:

@@ -214,7 +214,7 @@ TABLE = [  # given, command, then: one row per transition
     ),
     pytest.param(
         Given(), torque_on_swung_past_the_limits,
-        Then("idle", False, (), refused="joint 1 is at 121.9 deg, outside its limits"),
+        Then("idle", False, (), refused="joint 1 is at 121.9 deg, outside its limits .* by more"),
         id="torque on refused while the relaxed arm is past its joint limits",
     ),
     pytest.param(
@@ -462,6 +462,24 @@ def test_motion_is_allowed_exactly_when_not_refused(torque, estopped, faulted) -
         refused = True
     expected = torque and not estopped and not faulted
     assert commands.motion_allowed(state) == (not refused) == expected
+
+
+@pytest.mark.parametrize("past_rad", [0.001, 0.05, 0.09])
+def test_torque_on_a_relaxed_arm_resting_just_past_a_limit_holds_it_at_the_limit(past_rad):
+    """The twin's relaxed arm rests near its joint limits, at times just past one (95 deg
+    against 94.5): torque on takes it back to the limit rather than refusing for ever."""
+    state, ctx, bus = arrange(Given())
+    high = ctx.gate.joint_max_rad[1]
+    bus.position = np.array([HOME_RAD[0], high + past_rad, HOME_RAD[2]])
+    state.joints = bus.read_state()
+    state.point_m = ROBOT.fk(state.joints.position_rad).points
+    assert commands.torque_to(state, ctx, bus, True)
+    inside = [HOME_RAD[0], high, HOME_RAD[2]]
+    assert bus.calls[-2:] == [("write_goal", tuple(inside)), ("torque", True)]
+    np.testing.assert_allclose(state.commanded_rad, inside)
+    np.testing.assert_allclose(state.commanded_point_m, ROBOT.fk(np.array(inside)).points)
+    assert (np.asarray(ctx.gate.joint_min_rad) <= state.commanded_rad).all()
+    assert (state.commanded_rad <= np.asarray(ctx.gate.joint_max_rad)).all()
 
 
 # ---- the tick, without the thread ----
