@@ -135,6 +135,13 @@ class ProgramPath:
         """Program line (1-based) at times ``t`` (*,) [s]."""
         return self._table["line"][self.index_at(t)]
 
+    def lines_between(self, t0_s: float, t1_s: float) -> list[int]:
+        """Program lines (1-based) met from time ``t0_s`` to ``t1_s`` [s], in order: the
+        line at each end and every line between, so a late tick that crosses a short
+        line whole (a 0.1 s rapid inside a 150 ms stall) still meets it."""
+        k0, k1 = (int(k) for k in self.index_at(np.array([t0_s, t1_s])))
+        return [int(v) for v in self._table["line"][k0 : k1 + 1]]
+
     def evaluate(self, t: np.ndarray, orders: tuple[int, ...]) -> list[np.ndarray]:
         """d^k p / dt^k for each k in ``orders`` (0-3) at times ``t`` (N,): each (N, 3).
 

@@ -72,10 +72,14 @@ def _columns(rows: list[dict[str, Any]], prefix: str) -> np.ndarray:
     return np.array([[r[f"{prefix}_{a}_m"] for a in "xyz"] for r in rows], dtype=float)
 
 
-def run_stats(rows: list[dict[str, Any]], skip_s: float, dt_s: float) -> dict[str, Any]:
+def run_stats(
+    rows: list[dict[str, Any]], skip_s: float, dt_s: float, lines_met: list[int] | None = None
+) -> dict[str, Any]:
     """Tracking stats (goal vs FK) over the test part, world stats for hold runs and, for a
     G-code program (rows with a ``line``), ``program.lines``: the error per program line
-    over every sample of the timed part (app/runs/stats.py line_stats)."""
+    over every sample of the timed part (app/runs/stats.py line_stats). ``lines_met``: the
+    lines the source met in order (TrajectorySource.lines_met); one no sample shows (crossed
+    whole between two ticks) is listed with 0 samples and no error (None)."""
     times = np.array([r["t_s"] for r in rows])
     active = np.array([r["phase"] in ("timed", "hold") for r in rows], dtype=bool)
     if active.any():  # the approach and the first moments are not the test
@@ -100,8 +104,18 @@ def run_stats(rows: list[dict[str, Any]], skip_s: float, dt_s: float) -> dict[st
         timed = np.array([r["phase"] == "timed" for r in rows], dtype=bool)  # sample of it
         error = _columns(rows, "goal") - _columns(rows, "measured")
         kept = [v if t else None for v, t in zip(lines, timed, strict=True)]
-        stats["program"] = {"lines": line_stats(np.array(kept, dtype=object), error)}
+        per_line = line_stats(np.array(kept, dtype=object), error)
+        stats["program"] = {"lines": with_unsampled(per_line, lines_met or [])}
     return stats
+
+
+def with_unsampled(per_line: list[dict[str, Any]], lines_met: list[int]) -> list[dict[str, Any]]:
+    """``per_line`` (line_stats' entries) with an entry of 0 samples and no error for each
+    line in ``lines_met`` that has none, in the order the lines were met."""
+    sampled = {e["line"]: e for e in per_line}
+    order = list(dict.fromkeys([*lines_met, *sampled]))  # met first; then any others
+    empty = {"samples": 0, "rmse_m": None, "max_m": None}
+    return [sampled.get(line, {"line": line, **empty}) for line in order]
 
 
 class Recorder:
@@ -164,7 +178,12 @@ class Recorder:
             self.run.finish({}, abort_reason, 0)
             self.run.save()
             return
-        stats = run_stats(self._rows, self.skip_s, self.controller.period_s)
+        stats = run_stats(
+            self._rows,
+            self.skip_s,
+            self.controller.period_s,
+            getattr(self.source, "lines_met", None),
+        )
         stats["health"] = assess(self._rows, self.controller.settings.loop.rate_hz)
         # The record is final before the report is drawn (seconds of matplotlib on a loaded
         # machine): the run has ended, so it must not hold the robot's next run back.

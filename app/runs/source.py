@@ -19,7 +19,12 @@ class TrajectorySource:
         self.finished = False
         # a G-code program's path (app/programs ProgramPath) says its line at each time
         self._line_at = getattr(plan.params, "line_at", None)
+        self._lines_between = getattr(plan.params, "lines_between", None)
         self.program_line: int | None = None  # the line being executed (None: not a program)
+        # every line the timed part has met, in order, including one crossed whole between
+        # two ticks (a tick late by more than the line lasts), which no sample shows
+        self.lines_met: list[int] = []
+        self._timed_s: float | None = None  # the timed part's time at the last tick
 
     def progress(self) -> Progress:
         t, plan = self.t_s, self.plan  # t_s is one float: safe to read from another thread
@@ -38,6 +43,12 @@ class TrajectorySource:
             # the program's
             timed = min(max(self.t_s - self.plan.approach_s, 0.0), self.plan.params.duration_s)
             self.program_line = int(self._line_at(timed)) if phase == "timed" else None
+            if phase == "timed" and self._lines_between is not None:
+                since = 0.0 if self._timed_s is None else self._timed_s  # from its start
+                for line in self._lines_between(since, timed):
+                    if not self.lines_met or self.lines_met[-1] != line:
+                        self.lines_met.append(line)
+                self._timed_s = timed
         return Setpoint(
             point_m=commanded,
             goal_m=goal,

@@ -215,3 +215,34 @@ def test_random_programs_pass_through_every_programmed_point(program, blend):
         expected = np.array([s.end_m for s in segments[:-1]]).reshape(-1, 3)
         np.testing.assert_allclose(path.derivatives(ends, 0), expected, atol=1e-12)
         np.testing.assert_allclose(path.derivatives(ends, 1), 0.0, atol=1e-12)
+
+
+def test_a_tick_late_by_more_than_a_short_line_still_meets_it():
+    """A 200 ms stall crosses the 5 mm rapid (line 2) whole: no tick falls on it, yet the
+    run source lists it among the lines met, in program order."""
+    from app.runs.source import TrajectorySource
+
+    path = plan("G4 P0.05\nG0 X5\nG4 P0.5\nG1 F600 X0", start=(0.0, 0.0, -0.24))
+    rapid = path.end_s[1] - path.start_s[1]
+    assert 0.0 < 0.05 + rapid < 0.2, rapid
+    source = TrajectorySource(plan_sinusoid(path, np.array(START)))
+    source.next(source.plan.approach_s + 1e-4)  # the first timed tick, on line 1
+    seen = [source.program_line]
+    source.next(0.2)  # late: past the rest of line 1 and the whole of line 2
+    seen.append(source.program_line)
+    while not source.finished:
+        source.next(0.005)
+        if source.program_line is not None:
+            seen.append(source.program_line)
+    assert 2 not in seen and seen[:2] == [1, 3]
+    assert source.lines_met == [1, 2, 3, 4]
+    assert path.lines_between(0.0, path.duration_s) == [1, 2, 3, 4]
+
+
+def test_the_stats_list_a_line_met_without_samples_with_no_error():
+    from app.runs.recorder import with_unsampled
+
+    sampled = [{"line": 3, "samples": 4, "rmse_m": 1e-3, "max_m": 2e-3}]
+    out = with_unsampled(sampled, [2, 3])
+    assert out == [{"line": 2, "samples": 0, "rmse_m": None, "max_m": None}, sampled[0]]
+    assert with_unsampled(sampled, []) == sampled

@@ -75,23 +75,28 @@ def test_a_passing_program_runs_with_its_error_per_line(fresh):
     assert run["params"]["gcode"] == PROGRAM and run["params"]["feedforward"] is False
     per_line = run["stats"]["program"]["lines"]
     assert [e["line"] for e in per_line] == sorted(MOTION_LINES)  # every executed line, in order
+    # a line crossed whole by a late tick (a loaded machine) is listed without samples
+    sampled = [e for e in per_line if e["samples"] > 0]
+    assert len(sampled) >= len(per_line) - 1, per_line
     for entry in per_line:
-        assert entry["samples"] > 0
+        if entry["samples"] == 0:
+            assert entry["rmse_m"] is None and entry["max_m"] is None, entry
+            continue
         # RMSE <= max (equal, to rounding, where the error is constant: the dwell)
         assert 0.0 <= entry["rmse_m"] <= entry["max_m"] * (1 + 1e-9) < 0.05, entry
     # the log's line column gives the same figures: the stats are the log's, per line
     rows = list(csv.DictReader(io.StringIO(fresh.get(f"/api/runs/{run_id}/log.csv").text)))
     assert len(rows) == run["samples"]
     timed = [r for r in rows if r["phase"] == "timed"]
-    assert {int(float(r["line"])) for r in timed} == MOTION_LINES
+    assert {int(float(r["line"])) for r in timed} == {e["line"] for e in sampled}
     assert all(r["line"] == "" for r in rows if r["phase"] == "approach")
     error = np.array(
         [[float(r[f"goal_{a}_m"]) - float(r[f"measured_{a}_m"]) for a in "xyz"] for r in timed]
     )
     lines = np.array([int(float(r["line"])) for r in timed], dtype=object)
     again = line_stats(lines, error)
-    assert [e["line"] for e in again] == [e["line"] for e in per_line]
-    for mine, theirs in zip(again, per_line, strict=True):
+    assert [e["line"] for e in again] == [e["line"] for e in sampled]
+    for mine, theirs in zip(again, sampled, strict=True):
         assert mine["samples"] == theirs["samples"]
         assert mine["rmse_m"] == pytest.approx(theirs["rmse_m"], rel=1e-9)
         assert mine["max_m"] == pytest.approx(theirs["max_m"], rel=1e-9)
@@ -201,9 +206,9 @@ def test_a_program_run_aborts_like_any_run_with_the_lines_it_executed(fresh):
     run = _run(fresh, run_id)
     assert run["state"] == "aborted" and run["progress"] is None
     executed = [e["line"] for e in run["stats"]["program"]["lines"]]
-    # the dwell and what came before it, never line 4 (line 2, the rapid, was missing once
-    # in a loaded run of the whole file: cause not found, see docs/gcode.md)
-    assert executed in ([2, 3], [3]), executed
+    # the dwell and what came before it, never line 4; the rapid is listed even when a late
+    # tick crossed it whole (it was missing once in a loaded run, before lines_met)
+    assert executed == [2, 3], executed
 
 
 def test_with_torque_off_a_run_is_refused_as_such_before_any_check(fresh, monkeypatch):
