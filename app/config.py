@@ -22,6 +22,11 @@ Example file::
     servo_id = 1
     zero_offset_ticks = 2048
     direction = 1
+
+    [hardware.sim]                        # the twin built wrong on purpose (calibration)
+    true_joint_offsets_rad = [0.05, -0.03, 0.02]
+    true_lower_link_m = [0.2440, 0.2425, 0.2430]
+    measurement_noise_m = 0.0003
 """
 
 from __future__ import annotations
@@ -32,7 +37,14 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    FiniteFloat,
+    ValidationError,
+    model_validator,
+)
 from pydantic_settings import (
     BaseSettings,
     PydanticBaseSettingsSource,
@@ -40,7 +52,7 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
-from kinematics import DeltaError, LinearDelta, RotaryDelta
+from kinematics import DeltaError, LinearDelta, PerLegRotaryDelta, RotaryDelta
 
 # The file is chosen at run time (``deltadash serve --config FILE``) while the sources are
 # built inside ``Settings()``; a context variable hands the path over without a global.
@@ -94,6 +106,63 @@ def _default_joints() -> list[JointSettings]:
     return [JointSettings(servo_id=i) for i in (1, 2, 3)]
 
 
+Triple = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+
+# per-leg fields of [hardware.sim] and the PerLegRotaryDelta field each one sets
+_TRUE_LEGS = {
+    "true_upper_link_m": "L",
+    "true_lower_link_m": "l",
+    "true_base_radius_m": "R",
+    "true_platform_radius_m": "r",
+}
+
+
+class SimSettings(_Section):
+    """``[hardware.sim]``: the twin built wrong on purpose, and its motion capture.
+
+    The controller keeps ``[robot]`` and ``[[hardware.joints]]``; the twin is built from
+    these (each leg its own values, leg order), so a calibration has something to find
+    (docs/calibration.md). The defaults are the exact twin.
+    """
+
+    true_joint_offsets_rad: Triple = Field(
+        (0.0, 0.0, 0.0),
+        description="added to each joint's reported angle to give the mechanism's [rad]",
+    )
+    true_upper_link_m: Triple | None = Field(None, description="true L per leg [m] (robot.L)")
+    true_lower_link_m: Triple | None = Field(None, description="true l per leg [m] (robot.l)")
+    true_base_radius_m: Triple | None = Field(None, description="true R per leg [m] (robot.R)")
+    true_platform_radius_m: Triple | None = Field(None, description="true r per leg [m] (robot.r)")
+    measurement_frame_position_m: Triple = Field(
+        (0.0, 0.0, 0.0), description="origin of the external measurement's frame, base frame [m]"
+    )
+    measurement_frame_rpy_rad: Triple = Field(
+        (0.0, 0.0, 0.0),
+        description="its axes as roll, pitch, yaw about the base axes, Rz Ry Rx [rad]",
+    )
+    measurement_noise_m: float = Field(
+        0.0, ge=0.0, le=0.1, description="white noise per axis of the measurement [m]"
+    )
+
+    def true_robot(self, robot: RotaryDelta) -> PerLegRotaryDelta | None:
+        """The twin's true geometry around the nominal ``robot``; None for the exact twin.
+
+        Raises:
+            ValueError: naming the ``hardware.sim`` field when the legs are no Delta.
+        """
+        legs = {_TRUE_LEGS[k]: v for k, v in self.model_dump().items() if k in _TRUE_LEGS}
+        legs = {k: v for k, v in legs.items() if v is not None}
+        if not legs and self.true_joint_offsets_rad == (0.0, 0.0, 0.0):
+            return None
+        try:
+            return PerLegRotaryDelta.from_symmetric(
+                robot, joint_offsets_rad=self.true_joint_offsets_rad, **legs
+            )
+        except DeltaError as exc:
+            field = {v: k for k, v in _TRUE_LEGS.items()}.get(str(exc).split("[")[0], "true_*")
+            raise ValueError(f"hardware.sim.{field}: {exc}") from exc
+
+
 class HardwareSettings(_Section):
     """Which servo bus drives the robot."""
 
@@ -111,6 +180,7 @@ class HardwareSettings(_Section):
         "false steps it in a thread of the server",
     )
     joints: list[JointSettings] = Field(default_factory=_default_joints, min_length=3, max_length=3)
+    sim: SimSettings = SimSettings()
 
 
 class LoopSettings(_Section):
@@ -295,6 +365,13 @@ class Settings(BaseSettings):
     world: WorldSettings = WorldSettings()
     programs: ProgramSettings = ProgramSettings()
 
+    @model_validator(mode="after")
+    def _twin_buildable(self) -> Settings:
+        robot = self.robot.build()
+        if isinstance(robot, RotaryDelta):
+            self.hardware.sim.true_robot(robot)  # raises naming the field
+        return self
+
     @classmethod
     def settings_customise_sources(
         cls, settings_cls: type[BaseSettings], init_settings: Any, env_settings: Any, **_: Any
@@ -323,7 +400,12 @@ def load_settings(path: str | Path | None = None, **overrides: Any) -> Settings:
     try:
         return Settings(**overrides)
     except ValidationError as exc:
-        lines = [f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors()]
+        lines = [  # a check across sections has no location: its message names the field
+            f"{'.'.join(map(str, e['loc']))}: {e['msg']}"
+            if e["loc"]
+            else e["msg"].removeprefix("Value error, ")
+            for e in exc.errors()
+        ]
         raise ConfigError("bad config:\n  " + "\n  ".join(lines)) from None
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise ConfigError(f"cannot read config {toml_path}: {exc}") from None

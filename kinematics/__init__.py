@@ -15,6 +15,7 @@ from .errors import (
     UnreachableError,
 )
 from .linear import LinearDelta
+from .per_leg import PerLegRotaryDelta
 from .pose import Pose, base_to_world, unit_quaternion, world_to_base
 from .results import FKResult, IKResult, LegPoints, Projection
 from .rotary import THESIS_DELTA, RotaryDelta
@@ -29,6 +30,7 @@ __all__ = [
     "LegPoints",
     "LinearDelta",
     "NonFiniteError",
+    "PerLegRotaryDelta",
     "Pose",
     "PoseError",
     "Projection",

@@ -32,18 +32,19 @@ _NAN3 = (math.nan, math.nan, math.nan)
 class DeltaKinematics(ABC):
     """Mixin for a 3-leg Delta whose platform keeps its orientation.
 
-    Subclasses are frozen dataclasses with ``l`` (parallelogram length [m]), ``R``
-    (base radius [m]), ``r`` (platform radius [m]) and the per-leg hooks below.
+    Subclasses are frozen dataclasses with the per-leg hooks below (``SymmetricDelta``
+    for three equal legs, ``PerLegRotaryDelta`` for legs that each have their own).
     """
 
-    l: float
-    R: float
-    r: float
+    # ---- the legs' fixed points ----
+    @abstractmethod
+    def _rod_lengths(self) -> float | tuple[float, float, float]:
+        """Parallelogram length [m]: one for all legs, or one per leg."""
 
-    @property
-    def Rbar(self) -> float:
-        """Radial shift R - r [m] that puts all three legs' ends at the platform centre."""
-        return self.R - self.r
+    @abstractmethod
+    def _anchors(self) -> tuple[np.ndarray, np.ndarray]:
+        """(hips, ankle offsets), each (3 legs, 3) [m]: the actuated joints in the base
+        frame and the platform joints relative to the platform centre."""
 
     # ---- per-leg formulas, on NumPy columns or floats (``xp`` is _xp.ARRAYS / FLOATS) ----
     @abstractmethod
@@ -140,7 +141,7 @@ class DeltaKinematics(ABC):
             for a in range(0, len(flat_q), CHUNK):
                 chunk = flat_q[a : a + CHUNK]
                 c1, c2, c3 = [self._leg_centre(leg, chunk[:, leg], ARRAYS) for leg in range(3)]
-                columns = intersect_below(c1, c2, c3, self.l)
+                columns = intersect_below(c1, c2, c3, self._rod_lengths())
                 valid = self._fk_branch_ok(chunk.T, *columns)
                 for axis, column in enumerate(columns):
                     points[a : a + CHUNK, axis] = np.where(valid, column, np.nan)
@@ -152,7 +153,7 @@ class DeltaKinematics(ABC):
             c1, c2, c3 = [self._leg_centre(leg, q[leg], FLOATS) for leg in range(3)]
         except (OverflowError, ValueError):
             return None  # inf joints: let the NumPy path answer it
-        point = intersect_below_point(c1, c2, c3, self.l)
+        point = intersect_below_point(c1, c2, c3, self._rod_lengths())
         if not self._fk_branch_ok(q, *point):
             point = _NAN3
         return _single(point, (*q, *point), FKResult)
@@ -171,8 +172,8 @@ class DeltaKinematics(ABC):
     def leg_points(self, joints: Any) -> LegPoints:
         """Physical joint centres (hips, knees, ankles) of the three legs, for drawing."""
         points = self.fk(joints).points
-        radial = self.r * _UNIT_RADIAL
-        hips = np.broadcast_to(self.R * _UNIT_RADIAL, self.knees(joints).shape)
+        hip_points, radial = self._anchors()
+        hips = np.broadcast_to(hip_points, self.knees(joints).shape)
         knees = self.knees(joints) + radial
         ankles = points[..., None, :] + radial
         return LegPoints(hips, knees, ankles)
@@ -192,6 +193,26 @@ class DeltaKinematics(ABC):
     def project(self, point: Any, margin: float = 0.0, z_max: float | None = None) -> Projection:
         """Nearest reachable point to ``point`` (see :func:`workspace.project`)."""
         return workspace.project(self, point, margin=margin, z_max=z_max)
+
+
+class SymmetricDelta(DeltaKinematics):
+    """Three equal legs at 0, 120, 240 deg: ``l`` (parallelogram length [m]), ``R`` (base
+    radius [m]) and ``r`` (platform radius [m]) shared by all."""
+
+    l: float
+    R: float
+    r: float
+
+    @property
+    def Rbar(self) -> float:
+        """Radial shift R - r [m] that puts all three legs' ends at the platform centre."""
+        return self.R - self.r
+
+    def _rod_lengths(self) -> float:
+        return self.l
+
+    def _anchors(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.R * _UNIT_RADIAL, self.r * _UNIT_RADIAL
 
 
 _UNIT_RADIAL = np.array([[c, s, 0.0] for c, s in zip(LEG_COS, LEG_SIN, strict=True)])

@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 
 from ._xp import LEG_COS, LEG_SIN
-from .delta import DeltaKinematics
+from .delta import SymmetricDelta
 from .errors import InvalidGeometryError
 from .rotary import _check_length
 
 
 @dataclass(frozen=True)
-class LinearDelta(DeltaKinematics):
+class LinearDelta(SymmetricDelta):
     """Delta robot with carriages on straight rails.
 
     Attributes:

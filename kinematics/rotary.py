@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ._xp import LEG_COS, LEG_SIN
-from .delta import DeltaKinematics
+from .delta import SymmetricDelta
 from .errors import InvalidGeometryError
 
 
@@ -30,7 +30,7 @@ def _check_length(name: str, value: float, minimum: float = 0.0, strict: bool = 
 
 
 @dataclass(frozen=True)
-class RotaryDelta(DeltaKinematics):
+class RotaryDelta(SymmetricDelta):
     """Rotary-actuated Delta robot (thesis eq. 3.1-3.88).
 
     Attributes:

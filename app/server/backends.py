@@ -56,9 +56,17 @@ def _twin(settings: Settings) -> ServoBus:
     robot = settings.robot.build()
     if not isinstance(robot, RotaryDelta):
         raise ValueError("robot.type: the simulator models rotary Deltas; use backend 'emulated'")
-    twin = TwinConfig(robot=robot, joints=_calibrations(settings))
+    sim = settings.hardware.sim
+    twin = TwinConfig(robot=robot, joints=_calibrations(settings), true_robot=sim.true_robot(robot))
     bus = ProcessSimBus if settings.hardware.sim_process else SimBus
-    return bus(SimBusConfig(twin=twin))
+    return bus(
+        SimBusConfig(
+            twin=twin,
+            noise_std_m=sim.measurement_noise_m,
+            measurement_frame_position_m=sim.measurement_frame_position_m,
+            measurement_frame_rpy_rad=sim.measurement_frame_rpy_rad,
+        )
+    )
 
 
 @contextlib.contextmanager

@@ -8,6 +8,11 @@ leg's chain is closed by a `connect` equality between the rod's end and the plat
 ball-joint site. The file is written in an assembled pose with joint `ref` values, so
 qpos of the motor hinges is the thesis's theta and qpos of the slides is the platform
 centre in the base frame [m].
+
+A ``PerLegRotaryDelta`` builds each leg from its own L, l, R, r and base angle (a robot
+built wrong on purpose); its joint offsets are no part of the mechanism (they sit between
+the mechanism and the servos, see hardware.sim.twin), so the motor hinges' qpos are the
+mechanism's true angles theta_i.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hardware.sim.masses import THESIS_MASSES, DeltaMasses
-from kinematics import RotaryDelta
+from kinematics import PerLegRotaryDelta, RotaryDelta
 
 MOTOR_JOINTS = ("motor_1", "motor_2", "motor_3")
 PLATFORM_JOINTS = ("platform_x", "platform_y", "platform_z")
@@ -74,16 +79,28 @@ def _lower_frame(rod_dir_upper: np.ndarray) -> np.ndarray:
     return np.column_stack([e1, np.cross(e3, e1), e3])
 
 
+def mechanism(robot: RotaryDelta | PerLegRotaryDelta) -> PerLegRotaryDelta:
+    """The mechanism's per-leg geometry: ``robot`` without joint offsets."""
+    if isinstance(robot, RotaryDelta):
+        return PerLegRotaryDelta.from_symmetric(robot)
+    return robot.with_values(joint_offsets_rad=(0.0, 0.0, 0.0))
+
+
 def _leg_xml(
-    robot: RotaryDelta, masses: DeltaMasses, leg: int, theta: float, home, rod_radius: float
+    robot: PerLegRotaryDelta,
+    masses: DeltaMasses,
+    leg: int,
+    theta: float,
+    home,
+    rod_radius: float,
 ) -> str:
     """One leg: upper link on the motor hinge, lower link on the knee's universal joint."""
-    alpha = 2.0 * math.pi * leg / 3.0
-    L, l, n = robot.L, robot.l, leg + 1
-    hip = robot.R * np.array([math.cos(alpha), math.sin(alpha), 0.0])
+    alpha = robot.angles_rad[leg]
+    L, l, n = robot.L[leg], robot.l[leg], leg + 1
+    hip = robot.R[leg] * np.array([math.cos(alpha), math.sin(alpha), 0.0])
     upper = _upper_frame(alpha, theta)
     knee = hip + upper @ [L, 0.0, 0.0]
-    ankle = np.asarray(home) + robot.r * np.array([math.cos(alpha), math.sin(alpha), 0.0])
+    ankle = np.asarray(home) + robot.r[leg] * np.array([math.cos(alpha), math.sin(alpha), 0.0])
     lower = _lower_frame(upper.T @ (ankle - knee))
     m_up = masses.upper_kg
     # about the link's centre of mass (MuJoCo's convention); the hinge adds m (L/2)^2
@@ -110,17 +127,20 @@ def _leg_xml(
     </body>"""
 
 
-def _platform_xml(robot: RotaryDelta, masses: DeltaMasses, home) -> str:
+def _platform_xml(robot: PerLegRotaryDelta, masses: DeltaMasses, home) -> str:
     """The platform on three slides (qpos = its centre [m]) with its ball-joint sites."""
     x, y, z = home
-    alphas = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)
-    ankle_xy = [robot.r * np.array([math.cos(a), math.sin(a), 0.0]) for a in alphas]
+    ankle_xy = [
+        r * np.array([math.cos(a), math.sin(a), 0.0])
+        for r, a in zip(robot.r, robot.angles_rad, strict=True)
+    ]
     ankles = "".join(
         f'\n        <site name="ankle_{i + 1}" pos="{_fmt(xy)}"/>' for i, xy in enumerate(ankle_xy)
     )
     m_plat = masses.platform_total_kg
     # a disc; its rotation is locked by the slides, so only A + B >= C must hold
-    i_plat = m_plat * robot.r**2 / 2.0
+    radius = max(robot.r)
+    i_plat = m_plat * radius**2 / 2.0
     return f"""
       <body name="platform" pos="{x:.12g} {y:.12g} {z:.12g}">
         <joint name="platform_x" type="slide" axis="1 0 0" ref="{x:.12g}"/>
@@ -128,21 +148,25 @@ def _platform_xml(robot: RotaryDelta, masses: DeltaMasses, home) -> str:
         <joint name="platform_z" type="slide" axis="0 0 1" ref="{z:.12g}"/>
         <inertial pos="0 0 0" mass="{m_plat:.6g}"
                   diaginertia="{i_plat * 0.51:.6g} {i_plat * 0.51:.6g} {i_plat:.6g}"/>
-        <geom type="cylinder" size="{max(robot.r, 0.01):.6g} 0.003" mass="0" rgba=".8 .4 .2 1"/>
+        <geom type="cylinder" size="{max(radius, 0.01):.6g} 0.003" mass="0" rgba=".8 .4 .2 1"/>
         <site name="platform_centre" pos="0 0 0"/>{ankles}
       </body>"""
 
 
 def build_mjcf(
-    robot: RotaryDelta,
+    robot: RotaryDelta | PerLegRotaryDelta,
     masses: DeltaMasses = THESIS_MASSES,
     options: SimOptions | None = None,
 ) -> str:
-    """The MJCF text of `robot` with `masses`, assembled at `options.home_m`."""
+    """The MJCF text of `robot` with `masses`, assembled at `options.home_m`.
+
+    A per-leg robot's joint offsets are left out: the hinges' qpos are true angles."""
     opt = options or SimOptions()
+    described = robot
+    robot = mechanism(robot)
     joints, ok = robot.ik(np.asarray(opt.home_m, dtype=float))
     if not bool(ok):
-        raise ValueError(f"home {opt.home_m} m is outside the workspace of {robot}")
+        raise ValueError(f"home {opt.home_m} m is outside the workspace of {described}")
     legs = "".join(
         _leg_xml(robot, masses, i, float(joints[i]), opt.home_m, opt.rod_radius_m) for i in range(3)
     )
@@ -150,6 +174,7 @@ def build_mjcf(
     motors = "".join(f'\n    <motor name="{j}" joint="{j}" gear="1"/>' for j in MOTOR_JOINTS)
     timeconst = max(opt.eq_timeconst_s, 2.0 * opt.timestep_s)
     platform = _platform_xml(robot, masses, opt.home_m)
+    base_r = max(robot.R)
     return f"""<mujoco model="delta">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{opt.timestep_s:.9g}" integrator="implicitfast" gravity="0 0 -9.81"/>
@@ -160,7 +185,7 @@ def build_mjcf(
   <worldbody>
     <body name="base">
       <inertial pos="0 0 0" mass="{3 * masses.servo_kg + 1e-3:.6g}" diaginertia="1e-3 1e-3 1e-3"/>
-      <geom type="cylinder" size="{robot.R:.6g} 0.004" mass="0" rgba=".7 .7 .7 .5"/>{legs}{platform}
+      <geom type="cylinder" size="{base_r:.6g} 0.004" mass="0" rgba=".7 .7 .7 .5"/>{legs}{platform}
     </body>
   </worldbody>
   <equality>{connects}

@@ -39,7 +39,7 @@ from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
 from hardware.calibration import goal_ticks
 from hardware.dynamixel.control_table import OperatingMode, hardware_error_names
 from hardware.errors import BusError, NotConnectedError
-from hardware.sim.sim_bus import MAX_CATCH_UP_S, SimBus, SimBusConfig
+from hardware.sim.sim_bus import MAX_CATCH_UP_S, SimBus, SimBusConfig, external_measurement
 
 STEP_S = 2e-3  # physics chunk = the most the published state lags (1 ms: 28 % of a core, not 22)
 LOCK_TIMEOUT_S = 0.05
@@ -174,7 +174,7 @@ class ProcessSimBus:
 
     # -- beyond the ServoBus protocol --------------------------------------------------
     def measure_platform(self, at_last_read: bool = False) -> np.ndarray:
-        """The external measurement of the platform in the base frame [m], shape (3,), as
+        """The external measurement of the platform [m], shape (3,), as
         `SimBus.measure_platform`; with ``at_last_read`` at the instant of the last read."""
         if at_last_read and np.isfinite(self._platform_at_read).all():
             true = self._platform_at_read
@@ -182,10 +182,7 @@ class ProcessSimBus:
             frame = self._require_frame("measure platform")
             with self._frame_access("measure platform"):
                 true = frame[_PLATFORM].copy()
-        noise = (
-            self._rng.normal(0.0, self.config.noise_std_m, 3) if self.config.noise_std_m else 0.0
-        )
-        return true + np.asarray(self.config.marker_offset_m) + noise
+        return external_measurement(self.config, true, self._rng)
 
     def set_base_motion(self, motion: BaseMotion) -> None:
         """The drone's attitude, acceleration and turning, acting on the arm from now on."""

@@ -38,6 +38,7 @@ from hardware.dynamixel.control_table import (
 )
 from hardware.errors import BusError, HardwareError, NotConnectedError
 from hardware.sim.twin import DeltaTwin, TwinConfig
+from kinematics.identification import MeasurementFrame
 
 FIRMWARE_VERSION = 46
 MOVING_THRESHOLD_UNITS = Reg.MOVING_THRESHOLD.value.default  # looked up once: enums are slow
@@ -53,7 +54,10 @@ class SimBusConfig:
     marker sits relative to the platform centre, in the base frame [m]; noise_std_m: white
     noise on each axis of the measurement [m]; seed: the noise generator's seed;
     torque_on_at_start: False powers up like the real servos (torque off, the arm hangs);
-    True starts holding the assembled home pose (convenient for demos and tests).
+    True starts holding the assembled home pose (convenient for demos and tests);
+    measurement_frame_position_m, measurement_frame_rpy_rad: the measurement's frame in the
+    base frame (origin [m]; roll, pitch, yaw [rad], Rz Ry Rx): the measurement is
+    Rm^T (P + marker - tm) + noise (kinematics.identification.MeasurementFrame).
     """
 
     twin: TwinConfig = TwinConfig()
@@ -62,6 +66,23 @@ class SimBusConfig:
     noise_std_m: float = 0.0
     seed: int = 0
     torque_on_at_start: bool = False
+    measurement_frame_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    measurement_frame_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def measurement_frame(self) -> MeasurementFrame:
+        """The external measurement's frame in the base frame."""
+        return MeasurementFrame(self.measurement_frame_position_m, self.measurement_frame_rpy_rad)
+
+
+def external_measurement(
+    config: SimBusConfig, platform_m: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
+    """What motion capture reports of the true platform centre `platform_m` (base frame
+    [m]): the marker, in the measurement frame, with the configured noise, shape (3,)."""
+    marker = config.measurement_frame.from_base(platform_m + np.asarray(config.marker_offset_m))
+    noise = rng.normal(0.0, config.noise_std_m, 3) if config.noise_std_m else 0.0
+    return marker + noise
 
 
 # Buses whose physics thread runs. A daemon thread still inside MuJoCo when the interpreter
@@ -200,17 +221,15 @@ class SimBus:
             self.twin.advance(duration_s)
 
     def measure_platform(self, at_last_read: bool = False) -> np.ndarray:
-        """The external measurement of the platform in the base frame [m], shape (3,):
-        the true centre plus the marker offset plus noise (motion capture's view); with
-        ``at_last_read`` at the instant of the last read_state (a synchronized capture)."""
+        """The external measurement of the platform [m], shape (3,): the true centre plus
+        the marker offset, in the measurement frame (the base frame by default), plus noise
+        (motion capture's view, `external_measurement`); with ``at_last_read`` at the
+        instant of the last read_state (a synchronized capture)."""
         with self.lock:
             true = self.twin.platform_m
             if at_last_read and getattr(self, "_platform_at_read", None) is not None:
                 true = self._platform_at_read
-        noise = (
-            self._rng.normal(0.0, self.config.noise_std_m, 3) if self.config.noise_std_m else 0.0
-        )
-        return true + np.asarray(self.config.marker_offset_m) + noise
+        return external_measurement(self.config, true, self._rng)
 
     def set_base_motion(self, motion: BaseMotion) -> None:
         """The drone's attitude, acceleration and turning, acting on the arm from now on."""

@@ -25,9 +25,9 @@ from hardware.dynamixel.control_table import RAD_PER_TICK, OperatingMode
 from hardware.shaft_motion import MotionCommand
 from hardware.sim.base_frame import apply_frame_forces
 from hardware.sim.masses import THESIS_MASSES, DeltaMasses
-from hardware.sim.mjcf import MOTOR_JOINTS, PLATFORM_JOINTS, SimOptions, build_mjcf
+from hardware.sim.mjcf import MOTOR_JOINTS, PLATFORM_JOINTS, SimOptions, build_mjcf, mechanism
 from hardware.sim.xm430 import XM430_W210, ServoOutput, Xm430, Xm430Params
-from kinematics import THESIS_DELTA, RotaryDelta
+from kinematics import THESIS_DELTA, PerLegRotaryDelta, RotaryDelta
 
 DEFAULT_JOINTS = tuple(JointCalibration(servo_id=i) for i in (1, 2, 3))
 SETTLE_STEPS = 200
@@ -39,6 +39,11 @@ class TwinConfig:
 
     The servo's control period is the physics timestep (sim.timestep_s), so one step runs
     the firmware once. joints: one calibration per leg, leg order.
+
+    true_robot: the robot as built, when it is not the design (None: exactly `robot`):
+    each leg its own L, l, R, r and base angle, and joint offsets o_i that turn the
+    mechanism against what its servo reports (theta_i = q_i + o_i, see
+    kinematics.per_leg). The controller keeps `robot`; a calibration finds the difference.
     """
 
     robot: RotaryDelta = THESIS_DELTA
@@ -46,10 +51,23 @@ class TwinConfig:
     sim: SimOptions = field(default_factory=SimOptions)
     servo: Xm430Params = XM430_W210
     joints: tuple[JointCalibration, ...] = DEFAULT_JOINTS
+    true_robot: PerLegRotaryDelta | None = None
 
     def __post_init__(self) -> None:
         if len(self.joints) != 3:
             raise ValueError(f"{len(self.joints)} joint calibrations for a 3-leg Delta")
+
+    @property
+    def built(self) -> RotaryDelta | PerLegRotaryDelta:
+        """The robot as built: `true_robot`, or `robot` when that is None."""
+        return self.robot if self.true_robot is None else self.true_robot
+
+    @property
+    def joint_offsets_rad(self) -> np.ndarray:
+        """The true joint offsets o_i [rad], shape (3,) (zeros for the exact twin)."""
+        if self.true_robot is None:
+            return np.zeros(3)
+        return np.array(self.true_robot.joint_offsets_rad)
 
 
 def hold_command(shaft_rad: float) -> MotionCommand:
@@ -65,7 +83,8 @@ class DeltaTwin:
         servo = cfg.servo
         if abs(servo.control_period_s - cfg.sim.timestep_s) > 1e-12:
             servo = replace(servo, control_period_s=cfg.sim.timestep_s)
-        self.model = mujoco.MjModel.from_xml_string(build_mjcf(cfg.robot, cfg.masses, cfg.sim))
+        self.mechanism = mechanism(cfg.built)  # true geometry, angles theta = qpos
+        self.model = mujoco.MjModel.from_xml_string(build_mjcf(cfg.built, cfg.masses, cfg.sim))
         self.data = mujoco.MjData(self.model)
         m = self.model
         self._motor_q = np.array([m.joint(j).qposadr[0] for j in MOTOR_JOINTS])
@@ -75,7 +94,9 @@ class DeltaTwin:
         base = m.body("base").id
         self._moving_bodies = np.array([b for b in range(m.nbody) if b not in (0, base)])
         self._sign = np.array([c.direction for c in cfg.joints], dtype=float)
-        self._zero = np.array([c.zero_offset_ticks * RAD_PER_TICK for c in cfg.joints])
+        # shaft = zero + sign * q with q = theta - o: a joint offset shifts each shaft's zero
+        zero = np.array([c.zero_offset_ticks * RAD_PER_TICK for c in cfg.joints])
+        self._zero = zero - self._sign * cfg.joint_offsets_rad
         self.servos = [Xm430(servo) for _ in range(3)]
         self.commands: list[MotionCommand] = []
         self.set_base_motion()
@@ -89,7 +110,8 @@ class DeltaTwin:
 
     @property
     def joints_rad(self) -> np.ndarray:
-        """Joint angles theta [rad], shape (3,)."""
+        """The mechanism's true joint angles theta [rad], shape (3,); with joint offsets
+        o_i the servos report theta - o (`joints_of_shafts(shaft_rad)`)."""
         return self.data.qpos[self._motor_q].copy()
 
     @property
@@ -118,11 +140,13 @@ class DeltaTwin:
         return [s.last for s in self.servos]
 
     def shafts_of_joints(self, joints_rad: Sequence[float]) -> np.ndarray:
-        """Shaft angles [rad] of joint angles [rad], through the calibrations (unrounded)."""
+        """Shaft angles [rad] of true joint angles theta [rad], through the calibrations
+        and the joint offsets (unrounded)."""
         return self._zero + self._sign * np.asarray(joints_rad, dtype=float)
 
     def joints_of_shafts(self, shaft_rad: Sequence[float]) -> np.ndarray:
-        """Joint angles [rad] of shaft angles [rad], through the calibrations."""
+        """True joint angles theta [rad] of shaft angles [rad], through the calibrations
+        and the joint offsets."""
         return self._sign * (np.asarray(shaft_rad, dtype=float) - self._zero)
 
     # -- control -----------------------------------------------------------------------
@@ -197,7 +221,7 @@ class DeltaTwin:
 
     def _assemble(self, joints: np.ndarray) -> None:
         """Close the chains at `joints`: pin motors and platform (FK), let the knees settle."""
-        point, ok = self.config.robot.fk(joints)
+        point, ok = self.mechanism.fk(joints)
         if not bool(ok):
             raise ValueError(f"joints {joints.tolist()} rad have no forward kinematics")
         gravity = self.model.opt.gravity.copy()
