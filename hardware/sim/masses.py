@@ -15,7 +15,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from kinematics import RotaryDelta
-from kinematics.dynamics import MassModel
+from kinematics.dynamics import WRIST_XM430, MassModel, WristMasses
+
+__all__ = ["WRIST_XM430", "DeltaMasses", "WristMasses", "gravity_torques"]
 
 GRAVITY_M_S2 = 9.81
 
@@ -113,25 +115,6 @@ class DeltaMasses:
             lower_kg=self.lower_kg,
         )
 
-
-@dataclass(frozen=True)
-class WristMasses:
-    """A wrist's masses: servo_kg, the servo's case (bolted to the platform, moves with
-    it, does not turn); turning_kg and turning_inertia_kgm2, the horn and tool turning
-    with the wrist (inertia about the wrist's axis, at the output, without the rotor's
-    reflected inertia, which the twin adds as the joint's armature like the legs')."""
-
-    servo_kg: float
-    turning_kg: float
-    turning_inertia_kgm2: float
-
-
-# An XM430-W210 as the wrist: 82 g (ROBOTIS e-Manual, XM430-W210 specifications: "Weight
-# 82 g"; the smaller XL430-W250 is 57.2 g). Turning: a 20 g horn and tool, taken as a
-# uniform disc of 20 mm radius, I = m r^2 / 2 = 4.0e-6 kg m^2. The rotor's inertia
-# reflected through the 212.6:1 gearbox (4.5e-3 kg m^2, `DeltaMasses.armature_kgm2`)
-# dominates the wrist's own by a thousand times.
-WRIST_XM430 = WristMasses(servo_kg=0.082, turning_kg=0.020, turning_inertia_kgm2=4.0e-6)
 
 THESIS_MASSES = DeltaMasses()
 
