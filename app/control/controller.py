@@ -356,13 +356,15 @@ class Controller:
             record_fault(state, fault)
 
     def _turn_wrist_alone(self) -> None:
-        """No source: the legs hold their command, the wrist turns on towards its goal."""
+        """No source: the legs hold their command, the wrist turns on towards its goal and
+        is held to it."""
         state = self.state
         if self.wrist is None or state.phi_goal_rad is None or state.commanded_rad is None:
             return
-        if state.phi_commanded_rad == state.phi_goal_rad:
-            return
-        self._write(state.commanded_rad)
+        if state.phi_commanded_rad != state.phi_goal_rad:
+            self._write(state.commanded_rad)
+        # checked while the goal stands (a stop clears it), not only while it turns: a
+        # short turn ends before a stuck wrist's error has lasted following_error_time_s
         self._check_following()
 
     def _setpoint_joints(self, setpoint: Setpoint) -> np.ndarray | None:

@@ -249,3 +249,22 @@ def test_without_a_wrist_the_loop_writes_three_goals_and_refuses_a_phi() -> None
     assert math.isnan(control.snapshot().phi_measured_rad)
     with pytest.raises(GoalRejected, match="no wrist is configured"):
         control.turn_wrist(0.2)
+
+
+def test_a_wrist_that_does_not_follow_trips_the_following_error_as_joint_4() -> None:
+    now = [0.0]
+    fake = FakeBus(errors=((), (), (), ()))
+    fake.position = np.array([*HOME_RAD, 0.0])
+    control = Controller(SETTINGS, fake, "fake", clock=lambda: now[0])  # type: ignore[arg-type]
+    control.step()
+    commands.torque_to(control.state, control.ctx, control.servos, True)
+    fake.stuck = True  # nothing moves: the legs hold still, the wrist is left behind
+    control.state.phi_goal_rad = 1.0
+    while not control.snapshot().faults:
+        assert now[0] < 5.0, phi_seen(control)
+        now[0] += 0.005
+        control.step()
+    (fault,) = control.snapshot().faults
+    assert fault.source == "following" and fault.reason.startswith("joint 4 lags")
+    # 20 deg (the limit) reached at 0.35 rad / (2 rad/s), then held 0.5 s
+    assert now[0] == pytest.approx(0.35 / 2.0 + 0.5, abs=0.02)
