@@ -261,7 +261,7 @@ class Controller:
                 for fault in servo_faults(self.servo_ids, joints.hardware_errors, now):
                     record_fault(self.state, fault)
             if joints is not None and self.wrist is not None and self.wrist.faulted:
-                errors = (self.state.wrist.hardware_errors,) if self.state.wrist else ((),)
+                errors = (self.wrist.hardware_errors,)
                 for fault in servo_faults((self.wrist.servo_id,), errors, self._now()):
                     record_fault(self.state, fault)
             self._advance()
@@ -364,8 +364,10 @@ class Controller:
         if state.phi_commanded_rad != state.phi_goal_rad:
             self._write(state.commanded_rad)
         # checked while the goal stands (a stop clears it), not only while it turns: a
-        # short turn ends before a stuck wrist's error has lasted following_error_time_s
-        self._check_following()
+        # short turn ends before a stuck wrist's error has lasted following_error_time_s.
+        # A stale state says nothing of that, and idle is no time to fault on staleness.
+        if not state.freshness.certain:
+            self._check_following()
 
     def _setpoint_joints(self, setpoint: Setpoint) -> np.ndarray | None:
         try:

@@ -116,6 +116,11 @@ class WristBus:
         """The wrist's servo reported a hardware error at the last read."""
         return self.reading is not None and bool(self.reading.hardware_errors)
 
+    @property
+    def hardware_errors(self) -> tuple[str, ...]:
+        """The names of the wrist servo's latched hardware errors at the last read."""
+        return self.reading.hardware_errors if self.reading is not None else ()
+
 
 def turn_to(state: LoopState, phi_rad: float) -> float:
     """Command the wrist to ``phi_rad`` [rad] (checked by the gate already); the tick turns
