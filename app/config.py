@@ -27,6 +27,9 @@ Example file::
     true_joint_offsets_rad = [0.05, -0.03, 0.02]
     true_lower_link_m = [0.2440, 0.2425, 0.2430]
     measurement_noise_m = 0.0003
+    [wrist]            # optional: a fourth servo turning the tool about the platform's z
+    enabled = true
+    servo_id = 4
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
+from hardware.calibration import JointCalibration
 from kinematics import DeltaError, LinearDelta, PerLegRotaryDelta, RotaryDelta
 
 # The file is chosen at run time (``deltadash serve --config FILE``) while the sources are
@@ -100,6 +104,41 @@ class JointSettings(_Section):
     max_angle_rad: float = Field(
         1.65, description="highest joint angle [rad] (link down; hanging relaxed is ~1.55)"
     )
+
+    def calibration(self) -> JointCalibration:
+        """This joint's calibration as the buses take it (hardware/calibration.py)."""
+        return JointCalibration(
+            self.servo_id,
+            self.zero_offset_ticks,
+            self.direction,
+            self.min_angle_rad,
+            self.max_angle_rad,
+        )
+
+
+class WristSettings(JointSettings):
+    """The optional fourth servo: a wrist turning the tool about the platform's z axis.
+
+    Its angle phi [rad] maps to ticks as a leg's theta does (zero offset, direction); phi
+    = 0 is the tool's heading at assembly. It shares the legs' bus (one sync read and one
+    sync write for all four servos). Without ``enabled`` the bus has the three legs only.
+    """
+
+    enabled: bool = Field(False, description="a wrist servo is fitted (a fourth servo on the bus)")
+    servo_id: int = Field(4, ge=0, le=252, description="Dynamixel id of the wrist servo")
+    min_angle_rad: float = Field(-3.0, description="lowest wrist angle phi [rad]")
+    max_angle_rad: float = Field(3.0, description="highest wrist angle phi [rad]")
+    max_speed_rad_s: float = Field(
+        5.0, gt=0, description="largest commanded wrist speed [rad/s] (XM430-W210: 8.1 no-load)"
+    )
+
+    @model_validator(mode="after")
+    def _ordered(self) -> WristSettings:
+        if not self.min_angle_rad < self.max_angle_rad:
+            raise ValueError("min_angle_rad must be below max_angle_rad")
+        if self.max_angle_rad - self.min_angle_rad >= 2 * math.pi:
+            raise ValueError("the wrist's range must be less than a turn (one encoder turn)")
+        return self
 
 
 def _default_joints() -> list[JointSettings]:
@@ -364,6 +403,21 @@ class Settings(BaseSettings):
     runs: RunSettings = RunSettings()
     world: WorldSettings = WorldSettings()
     programs: ProgramSettings = ProgramSettings()
+    wrist: WristSettings = WristSettings()
+
+    @model_validator(mode="after")
+    def _wrist_id_free(self) -> Settings:
+        legs = [joint.servo_id for joint in self.hardware.joints]
+        if self.wrist.enabled and self.wrist.servo_id in legs:
+            raise ValueError(
+                f"wrist.servo_id {self.wrist.servo_id} is a leg's servo id (legs: {legs})"
+            )
+        return self
+
+    def bus_joints(self) -> list[JointSettings]:
+        """The servos on the bus in bus order: the three legs, then the wrist if enabled."""
+        joints = list(self.hardware.joints)
+        return joints + [self.wrist] if self.wrist.enabled else joints
 
     @model_validator(mode="after")
     def _twin_buildable(self) -> Settings:

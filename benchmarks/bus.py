@@ -1,9 +1,10 @@
 """Round-trip time of one control tick through dynamixel-sdk, a pty and the emulator.
 
-Usage: python benchmarks/bus.py [--ticks 10000] [--emulator process|thread]
+Usage: python benchmarks/bus.py [--ticks 10000] [--emulator process|thread] [--servos 3|4]
 
-One tick = DynamixelBus.write_goal (one Sync Write of Goal Position to 3 servos) plus
-DynamixelBus.read_state (one Sync Read of the 25-byte state block, 3 status packets), the
+One tick = DynamixelBus.write_goal (one Sync Write of Goal Position to 3 servos, or 4 with
+a wrist) plus DynamixelBus.read_state (one Sync Read of the 25-byte state block, one status
+packet per servo), the
 exact per-tick path of the control loop, units converted. By default the emulator runs in
 its own process (``python -m hardware.emulator``) like a separate device on the wire;
 ``--emulator thread`` runs it in this process, where it competes for the GIL with the SDK's
@@ -35,19 +36,19 @@ from hardware.dynamixel.control_table import STATE_BLOCK_SIZE, Reg  # noqa: E402
 from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig  # noqa: E402
 from hardware.emulator import ServoEmulator  # noqa: E402
 
-IDS = (1, 2, 3)
+IDS = (1, 2, 3)  # the legs; --servos 4 adds a wrist (id 4)
 
 
 @contextmanager
-def emulated_port(where: str):
-    """The pty path of 3 emulated servos (Return Delay Time 0), in a process or a thread."""
+def emulated_port(where: str, ids: tuple[int, ...] = IDS):
+    """The pty path of emulated servos `ids` (Return Delay Time 0), in a process or a thread."""
     if where == "thread":
-        with ServoEmulator(IDS) as emulator:
+        with ServoEmulator(ids) as emulator:
             for servo in emulator.servos:
                 servo.table.set(Reg.RETURN_DELAY_TIME, 0)
             yield emulator.port
         return
-    command = [sys.executable, "-m", "hardware.emulator", "--ids", "1,2,3"]
+    command = [sys.executable, "-m", "hardware.emulator", "--ids", ",".join(map(str, ids))]
     process = subprocess.Popen(
         [*command, "--return-delay-us", "0"], stdout=subprocess.PIPE, text=True
     )
@@ -58,9 +59,9 @@ def emulated_port(where: str):
         process.wait(timeout=10)
 
 
-def measure(port: str, ticks: int, warmup: int = 500) -> np.ndarray:
+def measure(port: str, ticks: int, warmup: int = 500, ids: tuple[int, ...] = IDS) -> np.ndarray:
     """Seconds per tick (sync write + sync read), `ticks` samples after `warmup`."""
-    joints = tuple(JointCalibration(i) for i in IDS)
+    joints = tuple(JointCalibration(i) for i in ids)
     bus = DynamixelBus(DynamixelConfig(joints=joints, port=port, baudrate=1_000_000))
     bus.connect()
     try:
@@ -69,7 +70,7 @@ def measure(port: str, ticks: int, warmup: int = 500) -> np.ndarray:
         for k in range(-warmup, ticks):
             goal = 0.3 * math.sin(2 * math.pi * k / 400)  # a 2 s sine at 200 Hz
             start = time.perf_counter()
-            bus.write_goal([goal, -goal, 0.5 * goal])
+            bus.write_goal([goal, -goal, 0.5 * goal, 2 * goal][: len(ids)])
             bus.read_state()
             if k >= 0:
                 samples[k] = time.perf_counter() - start
@@ -93,9 +94,9 @@ def cpu_model() -> str:
     return "unknown CPU"
 
 
-def wire_arithmetic() -> None:
-    """Bytes on a real bus per tick and their time at 1 and 4 Mbps (10 bits per byte)."""
-    n = len(IDS)
+def wire_arithmetic(n: int = len(IDS)) -> None:
+    """Bytes on a real bus per tick with `n` servos and their time at 1 and 4 Mbps (10 bits
+    per byte)."""
     sync_write = 14 + n * (1 + 4)  # header..CRC with (id + 4 data bytes) per servo
     sync_read = 14 + n  # header..CRC with one id per servo
     status = 11 + STATE_BLOCK_SIZE  # one status packet per servo
@@ -116,16 +117,20 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--ticks", type=int, default=10_000)
     parser.add_argument("--emulator", choices=("process", "thread"), default="process")
+    parser.add_argument(
+        "--servos", type=int, choices=(3, 4), default=3, help="3 legs, or 4 with a wrist"
+    )
     args = parser.parse_args(argv)
+    ids = (*IDS, 4) if args.servos == 4 else IDS
     print(f"machine: {cpu_model()}, {os.cpu_count()} cores, Python {platform.python_version()}")
     # Other processes on a 2-core machine show up in the tail: say how busy it was.
     print("load average at start: " + ", ".join(f"{x:.2f}" for x in os.getloadavg()))
-    with emulated_port(args.emulator) as port:
-        samples = measure(port, args.ticks)
+    with emulated_port(args.emulator, ids) as port:
+        samples = measure(port, args.ticks, ids=ids)
     p50, p90, p99 = np.percentile(samples, [50, 90, 99]) * 1e6
     over = int(np.sum(samples > 1e-3))
     print(
-        f"tick (sync write + sync read, 3 servos, emulator in a {args.emulator}), "
+        f"tick (sync write + sync read, {len(ids)} servos, emulator in a {args.emulator}), "
         f"{args.ticks} ticks:"
     )
     print(
@@ -134,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(f"  ticks over 1 ms: {over} of {len(samples)}")
     print(f"  max loop rate at p99: {1e6 / p99:.0f} Hz (target p99 <= 1000 us)")
-    wire_arithmetic()
+    wire_arithmetic(len(ids))
     return 0
 
 

@@ -80,6 +80,13 @@ class MassModel:
             self.platform_kg + payload_kg, self.upper_kg, self.upper_inertia_kgm2, self.lower_kg
         )
 
+    def with_wrist(self, wrist: WristMasses | None = None) -> MassModel:
+        """The same robot with a wrist on the platform (default `WRIST_XM430`): its servo
+        and turning part add to the platform's mass. The translational dynamics do not see
+        the wrist's own inertia (it turns about z on a platform that does not turn)."""
+        w = WRIST_XM430 if wrist is None else wrist
+        return self.with_payload(w.servo_kg + w.turning_kg)
+
 
 # Thesis ch. 4.2 masses. The upper link (29 g nylon) about the motor axis as a uniform
 # rod, m L^2 / 3 = 2.35e-4 kg m^2 at L = 0.1558 m. The rotor dominates: the XM430-W210's
@@ -99,6 +106,26 @@ THESIS_MASS = MassModel(
 )
 """The thesis robot's mass model without payload; ``THESIS_MASS.with_payload(0.2)`` is
 the sizing case (max payload 0.2 kg, ch. 4 design goals)."""
+
+
+@dataclass(frozen=True)
+class WristMasses:
+    """A wrist's masses: servo_kg, the servo's case (bolted to the platform, moves with
+    it, does not turn); turning_kg and turning_inertia_kgm2, the horn and tool turning
+    with the wrist (inertia about the wrist's axis, at the output, without the rotor's
+    reflected inertia, which hardware/sim adds as the joint's armature like the legs')."""
+
+    servo_kg: float
+    turning_kg: float
+    turning_inertia_kgm2: float
+
+
+# An XM430-W210 as the wrist: 82 g (ROBOTIS e-Manual, XM430-W210 specifications: "Weight
+# 82 g"; the smaller XL430-W250 is 57.2 g). Turning: a 20 g horn and tool, taken as a
+# uniform disc of 20 mm radius, I = m r^2 / 2 = 4.0e-6 kg m^2. The rotor's inertia
+# reflected through the 212.6:1 gearbox (4.5e-3 kg m^2, hardware/sim/masses.py)
+# dominates the wrist's own by a thousand times.
+WRIST_XM430 = WristMasses(servo_kg=0.082, turning_kg=0.020, turning_inertia_kgm2=4.0e-6)
 
 
 class JointMotion(NamedTuple):

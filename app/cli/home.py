@@ -39,7 +39,6 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from app.config import ConfigError, load_settings
-    from app.server.backends import _calibrations
     from hardware.dynamixel.driver import DynamixelBus, DynamixelConfig
     from hardware.errors import BusError, CalibrationError
     from hardware.homing import home_bus
@@ -52,7 +51,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     hw = settings.hardware
     try:
-        joints = _calibrations(settings)
+        # the legs only: a wrist's zero is its own (docs/hardware.md, "The wrist")
+        joints = tuple(joint.calibration() for joint in settings.hardware.joints)
     except CalibrationError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

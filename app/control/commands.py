@@ -66,6 +66,7 @@ class CommandContext:
             settings.limits.z_max_m,
             settings.limits.min_dexterity,
             settings.limits.joint_speed_rad_s * period_s,
+            *_wrist_limits(settings, period_s),
         )
         jog = settings.jog
         return cls(
@@ -79,6 +80,14 @@ class CommandContext:
             jog.hold_timeout_s,
             settings.safety.torque_on_limit_slack_rad,
         )
+
+
+def _wrist_limits(settings: Settings, period_s: float) -> tuple[float | None, float | None, float]:
+    """The gate's wrist limits: (min [rad], max [rad], step per tick [rad]); no wrist: None."""
+    wrist = settings.wrist
+    if not wrist.enabled:
+        return None, None, 0.0
+    return wrist.min_angle_rad, wrist.max_angle_rad, wrist.max_speed_rad_s * period_s
 
 
 # ---- safety helpers (the tick uses them too) ----
@@ -124,6 +133,7 @@ def stop_motion(state: LoopState) -> None:
     """
     state.source = None
     state.resync = True
+    state.phi_goal_rad = None  # a wrist stops where it is commanded
     state.hold_deadline_s = state.hold_velocity_m_s = None
     state.goal_m = state.commanded_point_m.copy() if state.torque else np.full(3, np.nan)
 

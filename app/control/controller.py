@@ -31,6 +31,7 @@ from app.control.safety import servo_faults
 from app.control.sources import GoalSource, Setpoint
 from app.control.state import Fault, Snapshot
 from app.control.timing import TickClock, TimingRecorder
+from app.control.wrist import WristBus, next_phi, turn_to
 from hardware.bus import ServoBus, SimulatedBus
 from hardware.errors import BusError
 
@@ -73,6 +74,11 @@ class Controller:
         self.robot, self.gate = self.ctx.robot, self.ctx.gate
         self.servo_ids, self.period_s = self.ctx.servo_ids, self.ctx.period_s
         self.bus, self.backend = bus, backend
+        # with a wrist the loop drives the legs through WristBus, the wrist riding along in
+        # the same sync read and write (app/control/wrist.py); ``bus`` stays the whole bus
+        wrist = settings.wrist
+        self.wrist = WristBus(bus, wrist.servo_id) if wrist.enabled else None
+        self.servos: ServoBus = self.wrist if self.wrist is not None else bus
         self.backend_description = backend_description or backend
         self.timing = TimingRecorder(settings.loop.rate_hz)
         self.state = LoopState.initial(settings.safety, self.period_s)
@@ -118,7 +124,7 @@ class Controller:
         self.halt()
         if self.settings.safety.torque_off_on_exit and self.state.torque:
             try:
-                self.bus.torque(False)
+                self.servos.torque(False)
             except BusError as exc:
                 log.warning("torque off at exit failed: %s", exc)
                 return f"torque off at exit failed: {exc}"
@@ -207,19 +213,36 @@ class Controller:
         return self.submit(lambda: commands.stop_source(self.state, source))
 
     def set_torque(self, enabled: bool) -> Future:
-        return self.submit(lambda: commands.torque_to(self.state, self.ctx, self.bus, enabled))
+        return self.submit(lambda: commands.torque_to(self.state, self.ctx, self.servos, enabled))
 
     def estop(self) -> Future:
         """Stop at once and hold or release per config; nothing moves until reset."""
         if not self.running:  # no loop to queue on: act directly
             future: Future = Future()
-            future.set_result(commands.estop_now(self.state, self.ctx, self.bus))
+            future.set_result(commands.estop_now(self.state, self.ctx, self.servos))
             return future
-        return self.submit(lambda: commands.estop_now(self.state, self.ctx, self.bus))
+        return self.submit(lambda: commands.estop_now(self.state, self.ctx, self.servos))
 
     def reset(self) -> Future:
         """Clear e-stop and faults, rebooting servos that report hardware errors."""
-        return self.submit(lambda: commands.reset_now(self.state, self.ctx, self.bus))
+        return self.submit(self._reset_now)
+
+    def _reset_now(self) -> dict:
+        """Reset (commands.reset_now), and reboot a wrist that reports a hardware error."""
+        wrist_failing = self.wrist is not None and self.wrist.faulted
+        outcome = commands.reset_now(self.state, self.ctx, self.servos)
+        if self.wrist is not None and wrist_failing:
+            self.wrist.reboot([self.wrist.servo_id])
+            self.state.torque = False  # a reboot leaves torque off
+            outcome = {"rebooted": [*outcome["rebooted"], self.wrist.servo_id]}
+        return outcome
+
+    def turn_wrist(self, phi_rad: Any) -> Future:
+        """Turn the wrist to ``phi_rad`` [rad] at its speed limit; GoalRejected (here, in
+        the caller's thread) outside the wrist's limits or without a wrist; MotionRefused
+        (in the Future) when the robot may not move. The hook for goals with a heading."""
+        phi = self.gate.check_phi(phi_rad)
+        return self.submit(lambda: turn_to(self.state, phi))
 
     def _near_measured(self) -> np.ndarray:
         near = self.snapshot().joints_measured_rad
@@ -258,6 +281,10 @@ class Controller:
                 now = self._now()
                 for fault in servo_faults(self.servo_ids, joints.hardware_errors, now):
                     record_fault(self.state, fault)
+            if joints is not None and self.wrist is not None and self.wrist.faulted:
+                errors = (self.wrist.hardware_errors,)
+                for fault in servo_faults((self.wrist.servo_id,), errors, self._now()):
+                    record_fault(self.state, fault)
             self._advance()
             self._publish()
         finally:
@@ -284,7 +311,7 @@ class Controller:
     def _read(self) -> bool:
         state = self.state
         try:
-            joints = self.bus.read_state()
+            joints = self.servos.read_state()
         except BusError as exc:
             if state.misses.miss():
                 reason = f"{state.misses.consecutive} reads failed: {exc}"
@@ -293,6 +320,8 @@ class Controller:
         state.misses.ok()
         state.freshness.update(self._now(), joints, state.commanded_rad)
         state.joints = joints
+        if self.wrist is not None:
+            state.wrist, state.phi_commanded_rad = self.wrist.reading, self.wrist.phi_rad
         state.point_m = self.robot.fk(joints.position_rad).points
         if self._external is not None:  # the simulator's "motion capture" of the platform,
             state.external_m = self._external(at_last_read=True)  # at the read's instant
@@ -300,7 +329,10 @@ class Controller:
 
     def _advance(self) -> None:
         state, source = self.state, self.state.source
-        if source is None or not commands.motion_allowed(state) or state.joints is None:
+        if not commands.motion_allowed(state) or state.joints is None:
+            return
+        if source is None:
+            self._turn_wrist_alone()
             return
         held_jog.tick(state, self.ctx, self._now())  # a held jog whose heartbeat is late stops
         setpoint = source.next(state.dt_s)
@@ -320,16 +352,43 @@ class Controller:
             state.source = None
 
     def _follow(self, setpoint: Setpoint) -> None:
+        if setpoint.phi_rad is not None:
+            try:  # a wrist goal beyond its limits is refused: nothing of this tick is written
+                self.state.phi_goal_rad = self.gate.check_phi(setpoint.phi_rad)
+            except GoalRejected as exc:
+                self.state.warning = f"holding: {exc}"
+                return
         if (joints := self._setpoint_joints(setpoint)) is None:
             return
         self._write(joints)
+        self._check_following()
+
+    def _check_following(self) -> None:
         state, now = self.state, self._now()
         if state.freshness.certain:  # an old state: it says nothing of how the joints follow
             fault = state.freshness.fault(now)
         else:
-            fault = state.following.check(now, state.commanded_rad, state.joints.position_rad)
+            commanded, measured = state.commanded_rad, state.joints.position_rad
+            if state.wrist is not None and state.phi_commanded_rad is not None:
+                commanded = np.append(commanded, state.phi_commanded_rad)  # joint 4: the wrist
+                measured = np.append(measured, state.wrist.position_rad)
+            fault = state.following.check(now, commanded, measured)
         if fault is not None:
             record_fault(state, fault)
+
+    def _turn_wrist_alone(self) -> None:
+        """No source: the legs hold their command, the wrist turns on towards its goal and
+        is held to it."""
+        state = self.state
+        if self.wrist is None or state.phi_goal_rad is None or state.commanded_rad is None:
+            return
+        if state.phi_commanded_rad != state.phi_goal_rad:
+            self._write(state.commanded_rad)
+        # checked while the goal stands (a stop clears it), not only while it turns: a
+        # short turn ends before a stuck wrist's error has lasted following_error_time_s.
+        # A stale state says nothing of that, and idle is no time to fault on staleness.
+        if not state.freshness.certain:
+            self._check_following()
 
     def _setpoint_joints(self, setpoint: Setpoint) -> np.ndarray | None:
         try:
@@ -344,8 +403,10 @@ class Controller:
     def _write(self, joints: np.ndarray) -> None:
         state = self.state
         joints = self.gate.limit_step(joints, state.reference_rad)
+        if self.wrist is not None:  # the wrist's goal goes out in the same sync write
+            self.wrist.phi_rad = next_phi(state, self.wrist, self.gate.wrist_max_step_rad)
         try:
-            self.bus.write_goal(joints)
+            self.servos.write_goal(joints)
         except BusError as exc:
             if state.misses.miss():
                 reason = f"goal writes failing: {exc}"
@@ -353,6 +414,8 @@ class Controller:
                 record_fault(state, fault)
             return
         state.commanded_rad = joints
+        if self.wrist is not None:
+            state.phi_commanded_rad = self.wrist.phi_rad
         state.commanded_point_m = self.robot.fk(joints).points
         state.warning = None
 

@@ -29,6 +29,8 @@ class Gate:
     joint_min_rad / joint_max_rad: per-joint limits, shape (3,); margin_m: distance kept
     from the workspace boundary; z_max_m: ceiling for the platform; min_dexterity: lowest
     1/cond(J) accepted; max_step_rad: largest joint change per tick (speed * period).
+    wrist_min_rad / wrist_max_rad: the wrist's limits [rad] (None: no wrist, phi stays 0);
+    wrist_max_step_rad: largest wrist change per tick [rad] (its speed * period).
     """
 
     robot: RotaryDelta | LinearDelta
@@ -38,6 +40,9 @@ class Gate:
     z_max_m: float
     min_dexterity: float
     max_step_rad: float
+    wrist_min_rad: float | None = None
+    wrist_max_rad: float | None = None
+    wrist_max_step_rad: float = 0.0
 
     def __post_init__(self) -> None:
         # The first projection for a (robot, margin, ceiling) computes the workspace's edges
@@ -135,6 +140,28 @@ class Gate:
                 f"too close to a singularity (1/cond(J) = {dexterity:.3f} < {self.min_dexterity})"
             )
         return joints
+
+    def check_phi(self, phi_rad: Any) -> float:
+        """A wrist goal phi [rad] inside the wrist's limits, or GoalRejected naming the field.
+
+        Without a wrist only phi = 0 passes (the tool cannot turn)."""
+        try:
+            phi = float(phi_rad)
+        except (TypeError, ValueError):
+            raise GoalRejected(f"phi_rad: expected a number, got {phi_rad!r}") from None
+        if not math.isfinite(phi):
+            raise GoalRejected(f"phi_rad: must be finite, got {phi}")
+        low, high = self.wrist_min_rad, self.wrist_max_rad
+        if low is None or high is None:
+            if phi != 0.0:
+                raise GoalRejected("phi_rad: no wrist is configured ([wrist] enabled = false)")
+            return phi
+        if not low <= phi <= high:
+            raise GoalRejected(
+                f"phi_rad: {math.degrees(phi):.1f} deg outside the wrist's limits "
+                f"[{math.degrees(low):.1f}, {math.degrees(high):.1f}] deg"
+            )
+        return phi
 
     def limit_step(self, joints: np.ndarray, previous: np.ndarray) -> np.ndarray:
         """``joints`` or, if any joint would move faster than allowed, a scaled-down step."""

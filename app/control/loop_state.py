@@ -14,7 +14,7 @@ import numpy as np
 from app.config import SafetySettings
 from app.control.safety import FeedbackFreshness, FollowingError, MissCounter
 from app.control.sources import GoalSource
-from app.control.state import Fault, Snapshot
+from app.control.state import Fault, Snapshot, WristReading
 from app.control.timing import TickTiming
 from hardware.bus import JointState
 
@@ -34,6 +34,9 @@ class LoopState:
     external_m: the simulator's own measurement of the platform at the last read.
     resync: the command is stale (torque off, e-stop or a fault since the last motion, or
     none yet): the next motion starts from the measured position and ``notice`` says so.
+    phi_goal_rad: the wrist's goal [rad] (None: it holds where it is commanded);
+    phi_commanded_rad: the wrist goal last written (None: none, or no wrist); wrist: the
+    wrist's servo at the last read (app/control/wrist.py), None without a wrist.
     hold_deadline_s: while an operator holds a jog (app/control/held_jog.py), the loop
     time [s] after which it stops unless a heartbeat renews it; None otherwise.
     """
@@ -63,6 +66,9 @@ class LoopState:
     dt_s: float = 0.0  # scheduled time since the previous tick (sources advance by it)
     lateness_s: float = 0.0
     timing: TickTiming = field(default_factory=TickTiming)  # how this tick started
+    phi_goal_rad: float | None = None
+    phi_commanded_rad: float | None = None
+    wrist: WristReading | None = None
 
     @classmethod
     def initial(cls, safety: SafetySettings, period_s: float) -> LoopState:
@@ -127,7 +133,14 @@ class LoopState:
             sim_time_s=_sim_time(state),
             stale=self.freshness.stale,
             feedback_age_ms=self.freshness.age_s * 1e3,
+            phi_measured_rad=_or_nan(self.wrist.position_rad if self.wrist else None),
+            phi_commanded_rad=_or_nan(self.phi_commanded_rad),
+            phi_goal_rad=_or_nan(self.phi_goal_rad),
         )
+
+
+def _or_nan(value: float | None) -> float:
+    return float("nan") if value is None else value
 
 
 def _sim_time(state: JointState | None) -> float:

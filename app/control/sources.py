@@ -33,6 +33,7 @@ class Setpoint:
     extra: dict | None = None  # mode-specific values for logs (e.g. world-frame positions)
     warning: str | None = None  # shown in status; with no point/joints the robot holds
     fault: str | None = None  # stop and fault with this reason
+    phi_rad: float | None = None  # the wrist's goal [rad] (None: keep it; needs a [wrist])
 
 
 class GoalSource(Protocol):

@@ -55,6 +55,19 @@ class Fault:
 
 
 @dataclass(frozen=True)
+class WristReading:
+    """The wrist's servo at the last read: phi [rad] (calibrated, 0 = the tool's heading
+    at assembly, + as its direction says), its speed [rad/s], current [A], temperature
+    [degC] and the names of its latched hardware errors (empty if none)."""
+
+    position_rad: float
+    velocity_rad_s: float
+    current_a: float
+    temperature_c: float
+    hardware_errors: tuple[str, ...]
+
+
+@dataclass(frozen=True)
 class Snapshot:
     """The loop's state after one tick, in SI units and the base frame.
 
@@ -97,6 +110,11 @@ class Snapshot:
     sim_time_s: float = float("nan")
     stale: bool = False
     feedback_age_ms: float = 0.0
+    # the wrist (app/control/wrist.py), NaN without one: phi [rad] as read, as last
+    # written, and its goal (NaN: holding where it is commanded)
+    phi_measured_rad: float = float("nan")
+    phi_commanded_rad: float = float("nan")
+    phi_goal_rad: float = float("nan")
 
     @property
     def tracking_error_m(self) -> np.ndarray:

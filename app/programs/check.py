@@ -21,7 +21,7 @@ from app.programs.modal import interpret
 from app.programs.planner import PlanLimits, ProgramPath, plan_program
 from app.programs.tokens import tokenize
 from app.programs.verify import Verification, VerifyLimits, Violation, verify_path
-from kinematics.dynamics import THESIS_MASS
+from kinematics.dynamics import THESIS_MASS, MassModel
 from kinematics.sizing import XM430_W210_12V
 
 
@@ -93,9 +93,15 @@ def verify_limits(settings: Settings) -> VerifyLimits:
     return VerifyLimits(
         programs.joint_acceleration_rad_s2,
         XM430_W210_12V if robot_type == "rotary" else None,
-        THESIS_MASS.with_payload(programs.payload_kg) if robot_type == "rotary" else None,
+        _mass(settings) if robot_type == "rotary" else None,
         programs.max_torque_ratio,
     )
+
+
+def _mass(settings: Settings) -> MassModel:
+    """The thesis robot's masses with the configured payload, and a wrist if one is fitted."""
+    mass = THESIS_MASS.with_payload(settings.programs.payload_kg)
+    return mass.with_wrist() if settings.wrist.enabled else mass
 
 
 def _decimated(length: int, count: int) -> np.ndarray:

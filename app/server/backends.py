@@ -28,7 +28,8 @@ class Backend:
 
 
 def _calibrations(settings: Settings) -> tuple[JointCalibration, ...]:
-    return tuple(JointCalibration(**joint.model_dump()) for joint in settings.hardware.joints)
+    """The bus's joints in bus order: the three legs, then the wrist when it is enabled."""
+    return tuple(joint.calibration() for joint in settings.bus_joints())
 
 
 # The emulator is software on the same machine: a loaded one can deschedule it for longer
@@ -119,7 +120,7 @@ def open_backend(settings: Settings, emulator_in_process: bool = False) -> Itera
     inject faults into it; the server runs it as a separate process.
     """
     kind = settings.hardware.backend
-    ids = [joint.servo_id for joint in settings.hardware.joints]
+    ids = [joint.servo_id for joint in settings.bus_joints()]
     with contextlib.ExitStack() as stack:
         emulator: ServoEmulator | None = None
         if kind == "sim":

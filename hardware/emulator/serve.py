@@ -47,7 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "--model",
         choices=["simple", "twin"],
         default="simple",
-        help="motion: a simple position loop per servo, or the MuJoCo twin of the thesis robot",
+        help="motion: a simple position loop per servo, or the MuJoCo twin of the thesis robot "
+        "(three ids; a fourth is a wrist on its platform)",
     )
     return parser
 
@@ -60,8 +61,10 @@ def shaft_motion(name: str, ids: Sequence[int]) -> MotionModel | None:
     from hardware.calibration import JointCalibration
     from hardware.sim import TwinConfig, TwinMotionModel
 
-    if len(ids) != 3:
-        raise SystemExit("--model twin drives a 3-leg Delta: give three --ids")
+    if len(ids) not in (3, 4):
+        raise SystemExit(
+            "--model twin drives a 3-leg Delta: give three --ids (a fourth is its wrist)"
+        )
     return TwinMotionModel(TwinConfig(joints=tuple(JointCalibration(i) for i in ids)))
 
 

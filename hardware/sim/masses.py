@@ -10,12 +10,14 @@ rotor inertia reflected through the gearbox.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from kinematics import RotaryDelta
-from kinematics.dynamics import MassModel
+from kinematics.dynamics import WRIST_XM430, MassModel, WristMasses
+
+__all__ = ["WRIST_XM430", "DeltaMasses", "WristMasses", "gravity_torques"]
 
 GRAVITY_M_S2 = 9.81
 
@@ -31,7 +33,9 @@ class DeltaMasses:
     adds nothing to the arm's dynamics); rotor_inertia_kgm2: the motor's rotor about its own
     axis, reflected to the output as rotor * gear_ratio^2 (ROBOTIS does not publish it;
     1.0e-7 kg m^2 is the estimate kinematics.dynamics.THESIS_MASS uses, 4.5e-3 kg m^2 at
-    the output, uncertain by x3).
+    the output, uncertain by x3); wrist_servo_kg, wrist_kg, wrist_inertia_kgm2: a wrist
+    on the platform (`with_wrist`, `WRIST_XM430`): its servo's case, and its turning part
+    with its inertia about the platform's z axis [kg m^2]; 0 without a wrist.
     """
 
     upper_kg: float = 0.029
@@ -43,12 +47,17 @@ class DeltaMasses:
     servo_kg: float = 0.082
     rotor_inertia_kgm2: float = 1.0e-7
     gear_ratio: float = 212.6
+    wrist_servo_kg: float = 0.0
+    wrist_kg: float = 0.0
+    wrist_inertia_kgm2: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("upper_kg", "rod_kg", "platform_kg", "payload_kg", "servo_kg"):
+        names = ("upper_kg", "rod_kg", "platform_kg", "payload_kg", "servo_kg")
+        wrist = ("wrist_servo_kg", "wrist_kg", "wrist_inertia_kgm2")
+        for name in names + wrist:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} = {value!r} kg: must be finite and >= 0")
+                raise ValueError(f"{name} = {value!r}: must be finite and >= 0")
         if self.platform_kg + self.payload_kg <= 0 or self.rods_per_leg < 1:
             raise ValueError("the platform needs a mass and each leg at least one rod")
 
@@ -58,9 +67,33 @@ class DeltaMasses:
         return self.rod_kg * self.rods_per_leg
 
     @property
+    def has_wrist(self) -> bool:
+        """A wrist servo is on the platform (its mass is part of the model)."""
+        return self.wrist_servo_kg > 0 or self.wrist_kg > 0
+
+    @property
     def platform_total_kg(self) -> float:
-        """Platform plus payload [kg]."""
-        return self.platform_kg + self.payload_kg
+        """Everything the platform carries [kg]: platform, payload, and with a wrist its
+        servo (fixed to the platform) and its turning part (horn and tool)."""
+        return self.platform_kg + self.payload_kg + self.wrist_servo_kg + self.wrist_kg
+
+    def with_wrist(
+        self,
+        servo_kg: float | None = None,
+        turning_kg: float | None = None,
+        turning_inertia_kgm2: float | None = None,
+    ) -> DeltaMasses:
+        """These masses with a wrist on the platform (defaults: `WRIST_XM430`)."""
+        return replace(
+            self,
+            wrist_servo_kg=WRIST_XM430.servo_kg if servo_kg is None else servo_kg,
+            wrist_kg=WRIST_XM430.turning_kg if turning_kg is None else turning_kg,
+            wrist_inertia_kgm2=(
+                WRIST_XM430.turning_inertia_kgm2
+                if turning_inertia_kgm2 is None
+                else turning_inertia_kgm2
+            ),
+        )
 
     def upper_inertia(self, L: float) -> float:
         """Upper link inertia about the motor axis [kg m^2] for link length `L` [m]."""

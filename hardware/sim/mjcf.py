@@ -5,9 +5,10 @@ universal joint at the knee (two hinges: one parallel to the motor axis, one per
 to it and the rod); the platform hangs off the base on three slide joints, which keeps its
 orientation fixed exactly as the parallelograms do, with no extra constraint rows. Each
 leg's chain is closed by a `connect` equality between the rod's end and the platform's
-ball-joint site. The file is written in an assembled pose with joint `ref` values, so
-qpos of the motor hinges is the thesis's theta and qpos of the slides is the platform
-centre in the base frame [m].
+ball-joint site. With a wrist in the mass model (`DeltaMasses.with_wrist`), a wrist body
+turns on the platform about its z axis (hinge `wrist`, a fourth actuator). The file is
+written in an assembled pose with joint `ref` values, so qpos of the motor hinges is the
+thesis's theta and qpos of the slides is the platform centre in the base frame [m].
 
 A ``PerLegRotaryDelta`` builds each leg from its own L, l, R, r and base angle (a robot
 built wrong on purpose); its joint offsets are no part of the mechanism (they sit between
@@ -26,6 +27,7 @@ from hardware.sim.masses import THESIS_MASSES, DeltaMasses
 from kinematics import PerLegRotaryDelta, RotaryDelta
 
 MOTOR_JOINTS = ("motor_1", "motor_2", "motor_3")
+WRIST_JOINT = "wrist"  # the wrist's hinge about the platform's z (qpos = phi [rad])
 PLATFORM_JOINTS = ("platform_x", "platform_y", "platform_z")
 
 
@@ -137,10 +139,12 @@ def _platform_xml(robot: PerLegRotaryDelta, masses: DeltaMasses, home) -> str:
     ankles = "".join(
         f'\n        <site name="ankle_{i + 1}" pos="{_fmt(xy)}"/>' for i, xy in enumerate(ankle_xy)
     )
-    m_plat = masses.platform_total_kg
+    # the wrist's turning part is its own body; the wrist servo's case is the platform's
+    m_plat = masses.platform_total_kg - masses.wrist_kg
     # a disc; its rotation is locked by the slides, so only A + B >= C must hold
     radius = max(robot.r)
     i_plat = m_plat * radius**2 / 2.0
+    wrist = _wrist_xml(masses) if masses.has_wrist else ""
     return f"""
       <body name="platform" pos="{x:.12g} {y:.12g} {z:.12g}">
         <joint name="platform_x" type="slide" axis="1 0 0" ref="{x:.12g}"/>
@@ -149,8 +153,23 @@ def _platform_xml(robot: PerLegRotaryDelta, masses: DeltaMasses, home) -> str:
         <inertial pos="0 0 0" mass="{m_plat:.6g}"
                   diaginertia="{i_plat * 0.51:.6g} {i_plat * 0.51:.6g} {i_plat:.6g}"/>
         <geom type="cylinder" size="{max(radius, 0.01):.6g} 0.003" mass="0" rgba=".8 .4 .2 1"/>
-        <site name="platform_centre" pos="0 0 0"/>{ankles}
+        <site name="platform_centre" pos="0 0 0"/>{ankles}{wrist}
       </body>"""
+
+
+def _wrist_xml(masses: DeltaMasses) -> str:
+    """The wrist: horn and tool turning about the platform's z on a hinge (qpos = phi [rad]),
+    driven like the legs (the servo's rotor as the hinge's armature)."""
+    m = max(masses.wrist_kg, 1e-6)
+    i_z = max(masses.wrist_inertia_kgm2, 1e-9)
+    return f"""
+        <body name="wrist" pos="0 0 0">
+          <joint name="{WRIST_JOINT}" type="hinge" axis="0 0 1"
+                 armature="{masses.armature_kgm2:.6g}"/>
+          <inertial pos="0 0 0" mass="{m:.6g}" diaginertia="{i_z / 2:.6g} {i_z / 2:.6g} {i_z:.6g}"/>
+          <geom type="box" size="0.02 0.003 0.003" pos="0.01 0 -0.006" mass="0" rgba=".9 .8 .1 1"/>
+          <site name="wrist_tool" pos="0 0 0"/>
+        </body>"""
 
 
 def build_mjcf(
@@ -171,7 +190,8 @@ def build_mjcf(
         _leg_xml(robot, masses, i, float(joints[i]), opt.home_m, opt.rod_radius_m) for i in range(3)
     )
     connects = "".join(f'\n    <connect site1="rod_end_{i}" site2="ankle_{i}"/>' for i in (1, 2, 3))
-    motors = "".join(f'\n    <motor name="{j}" joint="{j}" gear="1"/>' for j in MOTOR_JOINTS)
+    driven = MOTOR_JOINTS + ((WRIST_JOINT,) if masses.has_wrist else ())
+    motors = "".join(f'\n    <motor name="{j}" joint="{j}" gear="1"/>' for j in driven)
     timeconst = max(opt.eq_timeconst_s, 2.0 * opt.timestep_s)
     platform = _platform_xml(robot, masses, opt.home_m)
     base_r = max(robot.R)

@@ -50,10 +50,12 @@ REPLY_TIMEOUT_S = 10.0
 # a state whose simulated time did not advance as stale (it is not a bus fault here).
 STALE_S = 2.0
 
-# shared frame: state written by the child, goal written by the parent (float64 slots)
-_POS, _VEL, _CUR, _VOLT, _TEMP, _MOVING, _ERR = (slice(3 * k, 3 * k + 3) for k in range(7))
-_STAMP, _PLATFORM, _GOAL_SEQ, _GOAL, _SIM_TIME = 21, slice(22, 25), 25, slice(26, 29), 29
-_FRAME_SIZE = 30
+# shared frame: state written by the child, goal written by the parent (float64 slots);
+# room for four servos per column (three legs and a wrist), a bus uses its first n
+_W = 4
+_POS, _VEL, _CUR, _VOLT, _TEMP, _MOVING, _ERR = (slice(_W * k, _W * k + _W) for k in range(7))
+_STAMP, _PLATFORM, _GOAL_SEQ, _GOAL, _SIM_TIME = 28, slice(29, 32), 32, slice(33, 37), 37
+_FRAME_SIZE = 38
 
 
 class ProcessSimBus:
@@ -63,6 +65,9 @@ class ProcessSimBus:
         self.config = replace(config or SimBusConfig(), realtime=False)  # the child paces it
         self.joints = self.config.twin.joints
         self.ids = tuple(j.servo_id for j in self.joints)
+        self.n = n = len(self.ids)  # three legs, and a wrist when the twin has one
+        if n > _W:
+            raise ValueError(f"{n} servos: the shared frame holds at most {_W}")
         self._rng = np.random.default_rng(self.config.seed)
         self._stats = BusStats()
         self._process: mp.process.BaseProcess | None = None
@@ -134,7 +139,7 @@ class ProcessSimBus:
         goal_ticks(self.joints, positions_rad)  # refuse bad goals here, with the same errors
         frame = self._require_frame("sync write GOAL_POSITION")
         with self._frame_access("sync write GOAL_POSITION"):
-            frame[_GOAL] = np.asarray(positions_rad, dtype=float)
+            frame[_GOAL][: self.n] = np.asarray(positions_rad, dtype=float)
             frame[_GOAL_SEQ] += 1.0
         self._count()
 
@@ -147,14 +152,15 @@ class ProcessSimBus:
         if time.monotonic() - values[_STAMP] > STALE_S:  # a dead or hung child
             raise BusError(self.ids, instruction, "the simulator process stopped stepping")
         self._platform_at_read = values[_PLATFORM]
+        n = self.n
         return JointState(
-            position_rad=values[_POS],
-            velocity_rad_s=values[_VEL],
-            current_a=values[_CUR],
-            voltage_v=values[_VOLT],
-            temperature_c=values[_TEMP],
-            moving=values[_MOVING] > 0.5,
-            hardware_errors=tuple(hardware_error_names(int(code)) for code in values[_ERR]),
+            position_rad=values[_POS][:n],
+            velocity_rad_s=values[_VEL][:n],
+            current_a=values[_CUR][:n],
+            voltage_v=values[_VOLT][:n],
+            temperature_c=values[_TEMP][:n],
+            moving=values[_MOVING][:n] > 0.5,
+            hardware_errors=tuple(hardware_error_names(int(c)) for c in values[_ERR][:n]),
             stamp_s=float(values[_STAMP]),
             sim_time_s=float(values[_SIM_TIME]),
         )
@@ -276,7 +282,7 @@ def _serve(bus: SimBus, conn: Connection, frame: np.ndarray, lock: Any) -> None:
         if paused:
             continue
         with lock:
-            seq, goal = frame[_GOAL_SEQ], frame[_GOAL].copy()
+            seq, goal = frame[_GOAL_SEQ], frame[_GOAL][: bus.n].copy()
         if seq != goal_seq:
             goal_seq = seq
             bus.write_goal(goal.tolist())
@@ -302,13 +308,14 @@ def _publish(bus: SimBus, frame: np.ndarray, lock: Any) -> None:
     state = bus.read_state()
     codes = [float(servo.hardware_error) for servo in bus.twin.servos]
     platform = bus.twin.platform_m
+    n = bus.n
     with lock:
-        frame[_POS], frame[_VEL], frame[_CUR] = (
+        frame[_POS][:n], frame[_VEL][:n], frame[_CUR][:n] = (
             state.position_rad,
             state.velocity_rad_s,
             state.current_a,
         )
-        frame[_VOLT], frame[_TEMP] = state.voltage_v, state.temperature_c
-        frame[_MOVING], frame[_ERR] = state.moving, codes
+        frame[_VOLT][:n], frame[_TEMP][:n] = state.voltage_v, state.temperature_c
+        frame[_MOVING][:n], frame[_ERR][:n] = state.moving, codes
         frame[_STAMP], frame[_PLATFORM] = state.stamp_s, platform
         frame[_SIM_TIME] = state.sim_time_s

@@ -106,6 +106,7 @@ class SimBus:
         self.twin = DeltaTwin(self.config.twin)
         self.joints = self.config.twin.joints
         self.ids = tuple(j.servo_id for j in self.joints)
+        self.n = len(self.ids)  # three legs, and a wrist when the twin has one
         self.lock = threading.RLock()  # the twin has one owner at a time
         self._rng = np.random.default_rng(self.config.seed)
         self._stats = BusStats()
@@ -114,7 +115,7 @@ class SimBus:
         self._stop = threading.Event()
         self.commands = list(self.twin.commands)
         if not self.config.torque_on_at_start:
-            self._update(torque_enabled=[False] * 3)
+            self._update(torque_enabled=[False] * self.n)
 
     # -- ServoBus ------------------------------------------------------------------------
     def connect(self) -> None:
@@ -154,14 +155,14 @@ class SimBus:
                 # hold where the links are, as the driver does: no jump on enable
                 ticks = np.round(self.twin.shaft_rad / RAD_PER_TICK) * RAD_PER_TICK
                 self._update(goal_position_rad=list(ticks))
-            self._update(torque_enabled=[enabled] * 3)
+            self._update(torque_enabled=[enabled] * self.n)
 
     def set_operating_mode(self, mode: OperatingMode) -> None:
         with self._transaction("write OPERATING_MODE"):
             on = [i for i, c in zip(self.ids, self.commands, strict=True) if c.torque_enabled]
             if on:
                 raise BusError(on, "write OPERATING_MODE", "EEPROM item: turn torque off first")
-            self._update(mode=[OperatingMode(mode)] * 3)
+            self._update(mode=[OperatingMode(mode)] * self.n)
 
     def write_goal(self, positions_rad: Sequence[float]) -> None:
         ticks = goal_ticks(self.joints, positions_rad)
@@ -182,18 +183,18 @@ class SimBus:
         acceleration = acceleration_to_rad_s2(rad_s2_to_acceleration(acceleration_rad_s2))
         with self._transaction("write PROFILE"):
             self._update(
-                profile_velocity_rad_s=[velocity] * 3,
-                profile_acceleration_rad_s2=[acceleration] * 3,
+                profile_velocity_rad_s=[velocity] * self.n,
+                profile_acceleration_rad_s2=[acceleration] * self.n,
             )
 
     def set_gains(self, gains: PositionGains) -> None:
         with self._transaction("write POSITION_GAINS"):
             self._update(
-                position_p=[gains.p] * 3,
-                position_i=[gains.i] * 3,
-                position_d=[gains.d] * 3,
-                feedforward_1st=[gains.feedforward_1st] * 3,
-                feedforward_2nd=[gains.feedforward_2nd] * 3,
+                position_p=[gains.p] * self.n,
+                position_i=[gains.i] * self.n,
+                position_d=[gains.d] * self.n,
+                feedforward_1st=[gains.feedforward_1st] * self.n,
+                feedforward_2nd=[gains.feedforward_2nd] * self.n,
             )
 
     def reboot(self, ids: Sequence[int] | None = None) -> None:
@@ -272,7 +273,7 @@ class SimBus:
             ),
             velocity_rad_s=sign * np.array(velocity),
             current_a=sign * np.array(current),
-            voltage_v=np.full(3, round(twin.config.servo.supply_voltage_v * 10) / 10),
+            voltage_v=np.full(self.n, round(twin.config.servo.supply_voltage_v * 10) / 10),
             temperature_c=np.array([float(round(s.temperature_c)) for s in twin.servos]),
             moving=np.array(moving),
             hardware_errors=tuple(hardware_error_names(s.hardware_error) for s in twin.servos),

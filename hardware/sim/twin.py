@@ -1,4 +1,5 @@
-"""The MuJoCo twin: the Delta's mechanism stepped together with three XM430-W210 models.
+"""The MuJoCo twin: the Delta's mechanism stepped together with XM430-W210 models, three for
+the legs and, with a wrist, a fourth turning the tool about the platform's z.
 
 Every physics step the servos read their shafts (joint angle mapped through the joint
 calibration: shaft = zero offset + direction * theta), run their firmware and motor for one
@@ -25,7 +26,14 @@ from hardware.dynamixel.control_table import RAD_PER_TICK, OperatingMode
 from hardware.shaft_motion import MotionCommand
 from hardware.sim.base_frame import apply_frame_forces
 from hardware.sim.masses import THESIS_MASSES, DeltaMasses
-from hardware.sim.mjcf import MOTOR_JOINTS, PLATFORM_JOINTS, SimOptions, build_mjcf, mechanism
+from hardware.sim.mjcf import (
+    MOTOR_JOINTS,
+    PLATFORM_JOINTS,
+    WRIST_JOINT,
+    SimOptions,
+    build_mjcf,
+    mechanism,
+)
 from hardware.sim.xm430 import XM430_W210, ServoOutput, Xm430, Xm430Params
 from kinematics import THESIS_DELTA, PerLegRotaryDelta, RotaryDelta
 
@@ -38,7 +46,9 @@ class TwinConfig:
     """What to simulate: the design, its masses, solver options, servos and calibrations.
 
     The servo's control period is the physics timestep (sim.timestep_s), so one step runs
-    the firmware once. joints: one calibration per leg, leg order.
+    the firmware once. joints: one calibration per leg, leg order, and a fourth for the
+    wrist (phi [rad] about the platform's z); with four, `masses` without a wrist get
+    `WRIST_XM430`'s (an XM430-W210 on the platform, hardware/sim/masses.py).
 
     true_robot: the robot as built, when it is not the design (None: exactly `robot`):
     each leg its own L, l, R, r and base angle, and joint offsets o_i that turn the
@@ -54,8 +64,19 @@ class TwinConfig:
     true_robot: PerLegRotaryDelta | None = None
 
     def __post_init__(self) -> None:
-        if len(self.joints) != 3:
-            raise ValueError(f"{len(self.joints)} joint calibrations for a 3-leg Delta")
+        if len(self.joints) not in (3, 4):
+            raise ValueError(
+                f"{len(self.joints)} joint calibrations: three legs, and a fourth for a wrist"
+            )
+        if self.has_wrist and not self.masses.has_wrist:
+            object.__setattr__(self, "masses", self.masses.with_wrist())
+        if self.masses.has_wrist and not self.has_wrist:
+            raise ValueError("masses with a wrist need a fourth joint calibration for it")
+
+    @property
+    def has_wrist(self) -> bool:
+        """A fourth servo turns a wrist on the platform."""
+        return len(self.joints) == 4
 
     @property
     def built(self) -> RotaryDelta | PerLegRotaryDelta:
@@ -87,8 +108,10 @@ class DeltaTwin:
         self.model = mujoco.MjModel.from_xml_string(build_mjcf(cfg.built, cfg.masses, cfg.sim))
         self.data = mujoco.MjData(self.model)
         m = self.model
-        self._motor_q = np.array([m.joint(j).qposadr[0] for j in MOTOR_JOINTS])
-        self._motor_v = np.array([m.joint(j).dofadr[0] for j in MOTOR_JOINTS])
+        driven = MOTOR_JOINTS + ((WRIST_JOINT,) if cfg.has_wrist else ())
+        self.n_servos = n = len(driven)
+        self._motor_q = np.array([m.joint(j).qposadr[0] for j in driven])
+        self._motor_v = np.array([m.joint(j).dofadr[0] for j in driven])
         m.dof_frictionloss[self._motor_v] = servo.coulomb_friction_nm  # gearbox, sticks at rest
         self._platform_q = np.array([m.joint(j).qposadr[0] for j in PLATFORM_JOINTS])
         base = m.body("base").id
@@ -96,8 +119,10 @@ class DeltaTwin:
         self._sign = np.array([c.direction for c in cfg.joints], dtype=float)
         # shaft = zero + sign * q with q = theta - o: a joint offset shifts each shaft's zero
         zero = np.array([c.zero_offset_ticks * RAD_PER_TICK for c in cfg.joints])
-        self._zero = zero - self._sign * cfg.joint_offsets_rad
-        self.servos = [Xm430(servo) for _ in range(3)]
+        offsets = np.zeros(n)
+        offsets[:3] = cfg.joint_offsets_rad  # the wrist has none
+        self._zero = zero - self._sign * offsets
+        self.servos = [Xm430(servo) for _ in range(n)]
         self.commands: list[MotionCommand] = []
         self.set_base_motion()
         self.reset()
@@ -110,13 +135,14 @@ class DeltaTwin:
 
     @property
     def joints_rad(self) -> np.ndarray:
-        """The mechanism's true joint angles theta [rad], shape (3,); with joint offsets
-        o_i the servos report theta - o (`joints_of_shafts(shaft_rad)`)."""
+        """The mechanism's true joint angles theta [rad] (and the wrist's phi last), shape
+        (n_servos,); with joint offsets o_i the servos report theta - o
+        (`joints_of_shafts(shaft_rad)`)."""
         return self.data.qpos[self._motor_q].copy()
 
     @property
     def joint_velocity_rad_s(self) -> np.ndarray:
-        """Joint speeds [rad/s], shape (3,)."""
+        """Joint speeds [rad/s], shape (n_servos,)."""
         return self.data.qvel[self._motor_v].copy()
 
     @property
@@ -126,12 +152,12 @@ class DeltaTwin:
 
     @property
     def shaft_rad(self) -> np.ndarray:
-        """Servo shaft angles [rad] (raw ticks * 2 pi / 4096, unquantized), shape (3,)."""
+        """Servo shaft angles [rad] (raw ticks * 2 pi / 4096, unquantized), (n_servos,)."""
         return self._zero + self._sign * self.joints_rad
 
     @property
     def shaft_rad_s(self) -> np.ndarray:
-        """Servo shaft speeds [rad/s], shape (3,)."""
+        """Servo shaft speeds [rad/s], shape (n_servos,)."""
         return self._sign * self.joint_velocity_rad_s
 
     @property
@@ -152,7 +178,8 @@ class DeltaTwin:
     # -- control -----------------------------------------------------------------------
     def reset(self, joints_rad: Sequence[float] | np.ndarray | None = None) -> None:
         """Place the arm at rest at `joints_rad` [rad] (default: the assembled home), every
-        servo holding it with factory settings; temperatures and latched errors are kept."""
+        servo holding it with factory settings; temperatures and latched errors are kept.
+        With a wrist, a fourth value is its phi [rad] (three: phi = 0)."""
         mujoco.mj_resetData(self.model, self.data)
         if joints_rad is not None:
             self._assemble(np.asarray(joints_rad, dtype=float))
@@ -163,9 +190,10 @@ class DeltaTwin:
         self.commands = [hold_command(float(s)) for s in shafts]
 
     def set_commands(self, commands: Sequence[MotionCommand]) -> None:
-        """What each servo's control table asks for (shaft angles [rad]), leg order."""
-        if len(commands) != 3:
-            raise ValueError(f"{len(commands)} commands for 3 servos")
+        """What each servo's control table asks for (shaft angles [rad]), leg order (the
+        wrist last)."""
+        if len(commands) != self.n_servos:
+            raise ValueError(f"{len(commands)} commands for {self.n_servos} servos")
         self.commands = list(commands)
 
     def set_base_motion(self, motion: BaseMotion | None = None) -> None:
@@ -178,7 +206,7 @@ class DeltaTwin:
         """Advance `n` physics steps, running the servos' firmware once per step."""
         model, data = self.model, self.data
         qpos, qvel, ctrl = data.qpos, data.qvel, data.ctrl
-        # plain floats: NumPy's per-call overhead would dominate at three servos
+        # plain floats: NumPy's per-call overhead would dominate at three or four servos
         legs = [
             (
                 self.servos[k],
@@ -187,7 +215,7 @@ class DeltaTwin:
                 float(self._sign[k]),
                 float(self._zero[k]),
             )
-            for k in range(3)
+            for k in range(self.n_servos)
         ]
         commands = self.commands
         rotating = self.base_motion.rotating
@@ -221,12 +249,14 @@ class DeltaTwin:
 
     def _assemble(self, joints: np.ndarray) -> None:
         """Close the chains at `joints`: pin motors and platform (FK), let the knees settle."""
-        point, ok = self.mechanism.fk(joints)
+        legs, phi = joints[:3], float(joints[3]) if joints.size > 3 else 0.0
+        point, ok = self.mechanism.fk(legs)
         if not bool(ok):
             raise ValueError(f"joints {joints.tolist()} rad have no forward kinematics")
         gravity = self.model.opt.gravity.copy()
         self.model.opt.gravity[:] = 0.0
         data = self.data
+        joints = np.append(legs, phi) if self.n_servos == 4 else legs
         for _ in range(SETTLE_STEPS):
             data.qpos[self._motor_q] = joints
             data.qpos[self._platform_q] = point

@@ -16,7 +16,8 @@ from hardware.sim.xm430 import ServoOutput
 
 
 class TwinMotionModel:
-    """MotionModel of three servos on the simulated Delta (emulator order = leg order)."""
+    """MotionModel of the simulated Delta's servos: three legs, and a wrist fourth if the
+    config has one (emulator order = leg order, the wrist last)."""
 
     def __init__(self, config: TwinConfig | None = None) -> None:
         self.twin = DeltaTwin(config)
@@ -37,7 +38,8 @@ class TwinMotionModel:
         shafts, speeds = self.twin.shaft_rad, self.twin.shaft_rad_s
         outs = self.twin.outputs
         return [
-            MotionState(float(shafts[k]), float(speeds[k]), outs[k].current_a) for k in range(3)
+            MotionState(float(shafts[k]), float(speeds[k]), outs[k].current_a)
+            for k in range(self.twin.n_servos)
         ]
 
     def reboot(self, index: int) -> None:

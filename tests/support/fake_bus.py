@@ -56,13 +56,14 @@ class FakeBus:
             return self._last  # a paused simulator: the state it handed out before
         if self.sim_step_s is not None:
             self.sim_time_s += self.sim_step_s
+        n = len(self.position)  # three legs, or four with a wrist (set position and errors)
         self._last = JointState(
             position_rad=self.position.copy(),
-            velocity_rad_s=np.zeros(3),
-            current_a=np.zeros(3),
-            voltage_v=np.full(3, 12.0),
-            temperature_c=np.full(3, 30.0),
-            moving=np.zeros(3, dtype=bool),
+            velocity_rad_s=np.zeros(n),
+            current_a=np.zeros(n),
+            voltage_v=np.full(n, 12.0),
+            temperature_c=np.full(n, 30.0),
+            moving=np.zeros(n, dtype=bool),
             hardware_errors=self.errors,
             stamp_s=time.monotonic(),
             sim_time_s=None if self.sim_step_s is None else self.sim_time_s,

@@ -61,3 +61,15 @@ def test_home_refuses_a_range_across_the_seam_and_saves_nothing(tmp_path, capsys
     assert code == 1 and "servo 2 (joint 2)" in err and "3609 .. 4913 ticks" in err
     assert "391 .. 3182" in err  # where theta = 0 must read after turning the link
     assert config.read_text() == joints
+
+
+def test_home_calibrates_the_legs_and_keeps_the_wrist_s_section(tmp_path, capsys):
+    config = tmp_path / "robot.toml"
+    config.write_text("[wrist]\nenabled = true\nservo_id = 4\nzero_offset_ticks = 1000\n")
+    with fast(ServoEmulator((1, 2, 3, 4))) as emulator:
+        emulator.place({1: 2100, 2: 1990, 3: 2300, 4: 3000})
+        code = main(["home", "--config", str(config), "--port", emulator.port, "--yes"])
+    assert code == 0, capsys.readouterr().err
+    settings = load_settings(config)
+    assert [j.zero_offset_ticks for j in settings.hardware.joints] == [2100, 1990, 2300]
+    assert settings.wrist.enabled and settings.wrist.zero_offset_ticks == 1000  # untouched
