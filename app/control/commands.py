@@ -132,6 +132,7 @@ def stop_motion(state: LoopState) -> None:
     have fallen meanwhile, so the next motion starts from the measured position.
     """
     state.source = None
+    state.settle_rad = None
     state.resync = True
     state.phi_goal_rad = None  # a wrist stops where it is commanded
     state.hold_deadline_s = state.hold_velocity_m_s = None

@@ -332,8 +332,10 @@ class Controller:
         if not commands.motion_allowed(state) or state.joints is None:
             return
         if source is None:
+            self._settle()
             self._turn_wrist_alone()
             return
+        state.settle_rad = None  # a new source starts from the command
         held_jog.tick(state, self.ctx, self._now())  # a held jog whose heartbeat is late stops
         setpoint = source.next(state.dt_s)
         state.phase, state.extra = setpoint.phase, setpoint.extra
@@ -361,6 +363,20 @@ class Controller:
         if (joints := self._setpoint_joints(setpoint)) is None:
             return
         self._write(joints)
+        if setpoint.finished and not np.array_equal(self.state.commanded_rad, joints):
+            self.state.settle_rad = joints  # the speed limit kept the last step short
+        self._check_following()
+
+    def _settle(self) -> None:
+        """Step on to a finished source's last joints (``state.settle_rad``) at the joint
+        speed limit: late ticks let a source end while the limit still held its joints
+        back, and a move would otherwise stop short of its goal."""
+        state = self.state
+        if state.settle_rad is None or state.commanded_rad is None:
+            return
+        self._write(state.settle_rad)
+        if np.array_equal(state.commanded_rad, state.settle_rad):
+            state.settle_rad = None
         self._check_following()
 
     def _check_following(self) -> None:

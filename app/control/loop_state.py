@@ -37,6 +37,9 @@ class LoopState:
     phi_goal_rad: the wrist's goal [rad] (None: it holds where it is commanded);
     phi_commanded_rad: the wrist goal last written (None: none, or no wrist); wrist: the
     wrist's servo at the last read (app/control/wrist.py), None without a wrist.
+    settle_rad: a finished source's last joints [rad] that the speed limit kept the
+        command short of (late ticks: the source advanced further than the limit let the
+        joints follow); the loop steps on to them, then clears it. None otherwise.
     hold_deadline_s: while an operator holds a jog (app/control/held_jog.py), the loop
     time [s] after which it stops unless a heartbeat renews it; None otherwise.
     """
@@ -69,6 +72,7 @@ class LoopState:
     phi_goal_rad: float | None = None
     phi_commanded_rad: float | None = None
     wrist: WristReading | None = None
+    settle_rad: np.ndarray | None = None
 
     @classmethod
     def initial(cls, safety: SafetySettings, period_s: float) -> LoopState:

@@ -502,6 +502,32 @@ def test_a_tick_reads_publishes_and_writes_nothing_when_idle() -> None:
     assert bus.calls == []
 
 
+@pytest.mark.parametrize("late", [1, 20])
+def test_a_move_ends_on_its_goal_even_when_ticks_come_late(late) -> None:
+    """Ticks ``late`` periods apart: the move's source advances by the time elapsed but the
+    joint speed limit lets the joints move one period's worth a tick, so the source ends
+    while they are short of its end; the loop then steps on to it (a move stopped short
+    once, on a loaded machine)."""
+    bus = FakeBus()
+    loop = controller(bus)
+    loop.step()
+    commands.torque_to(loop.state, loop.ctx, bus, True)
+    target = HOME_M + np.array([0.0, 0.0, -0.04])
+    commands.move(loop.state, loop.ctx, target, 0.2, joint_space=False)
+    short = []  # how far the command is from the target once the source has ended
+    for _ in range(400):
+        loop.state.dt_s = late * loop.period_s
+        loop.step()
+        if loop.state.source is None:
+            short.append(float(np.linalg.norm(loop.state.commanded_point_m - target)))
+            if short[-1] < 5e-6:  # the move's source ends within ruckig's tolerance (~1 um)
+                break
+    assert short and short[-1] < 5e-6, short[-3:]
+    assert loop.snapshot().mode == "idle"
+    if late > 1:  # the limit did hold the joints back when the source ended
+        assert short[0] > 1e-3, short[:3]
+
+
 def test_a_jog_is_ticked_towards_its_goal_and_a_servo_error_stops_it() -> None:
     bus = FakeBus()
     loop = controller(bus)
