@@ -17,8 +17,11 @@ through routing and the dependencies. Two paths cut that:
   arrival of each press.
 
 The listener does one thing: any other path is a 404 and any other method but the CORS
-preflight (OPTIONS) a 501; it reads no body, and only the page's own origin (the
-dashboard's port) may read its answer. Stopping needs no token anywhere (whoever sees the
+preflight (OPTIONS) and ``GET /ready`` (204, nothing done: the page keeps its kept-alive
+connection warm with it, since a fresh connection cost the browser tens of ms under load)
+a 501; it reads no body beyond 1 kB (larger: left unread, the connection closed), holds
+at most MAX_CONNECTIONS connections, and only the page's own origin (the dashboard's port)
+may read its answer. Stopping needs no token anywhere (whoever sees the
 robot about to hurt someone may stop it), so this grants nothing that /api/estop did not.
 """
 
@@ -39,9 +42,12 @@ log = logging.getLogger(__name__)
 
 ESTOP_PATH = "/api/estop"
 LISTENER_PATH = "/estop"
+READY_PATH = "/ready"  # GET: 204, nothing else; the page keeps its connection warm with it
 SCOPE_KEY = "deltadash.estop"  # the latched command's Future, for the route
 ANSWER_TIMEOUT_S = 2.0  # the route's COMMAND_TIMEOUT_S
-SOCKET_TIMEOUT_S = 2.0  # a client that sends its request line slower is dropped
+IDLE_TIMEOUT_S = 30.0  # a kept-alive connection idle this long is closed
+MAX_BODY_BYTES = 1024  # a body is never needed; a larger one is not read (connection closed)
+MAX_CONNECTIONS = 32  # beyond, a new connection is closed at once
 _PRESS = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 
@@ -79,16 +85,21 @@ class EstopFirst:
 
 
 class _Handler(BaseHTTPRequestHandler):
+    """HTTP/1.1 with keep-alive: the page's connection stays open between presses (a new
+    one costs the browser a connect under load), IDLE_TIMEOUT_S at most."""
+
     server: _Server
-    timeout = SOCKET_TIMEOUT_S
-    protocol_version = "HTTP/1.0"  # one request per connection: nothing lingers
+    timeout = IDLE_TIMEOUT_S
+    protocol_version = "HTTP/1.1"
 
     def do_POST(self) -> None:  # noqa: N802 (http.server's naming)
         parts = urlsplit(self.path)
         if parts.path != LISTENER_PATH:
+            self._skip_body()
             self._answer(404, {"detail": f"only POST {LISTENER_PATH} here"})
             return
         future = self.server.controller.estop_request("listener", press_id(parts.query))
+        self._skip_body()  # after the stop is latched: nothing waits for a body
         try:
             result = future.result(timeout=ANSWER_TIMEOUT_S)
         except FutureTimeout:
@@ -98,9 +109,33 @@ class _Handler(BaseHTTPRequestHandler):
         else:
             self._answer(200, {"result": result})
 
+    def do_GET(self) -> None:  # noqa: N802
+        """``GET /ready``: 204 and nothing else (the page's warm connection); else 404."""
+        if urlsplit(self.path).path == READY_PATH:
+            self._answer(204, None)
+        else:
+            self._answer(404, {"detail": f"only POST {LISTENER_PATH} here"})
+
     def do_OPTIONS(self) -> None:  # noqa: N802
         """The CORS preflight (a plain POST without a body needs none; answered anyway)."""
+        self._skip_body()
         self._answer(204, None)
+
+    def _skip_body(self) -> None:
+        """Read a small body away (keep-alive needs it); a large or chunked one is left
+        unread and the connection closed after the answer."""
+        if self.headers.get("Transfer-Encoding"):
+            self.close_connection = True
+            return
+        try:
+            length = int(self.headers.get("Content-Length") or 0)
+        except ValueError:
+            length = -1
+        if 0 <= length <= MAX_BODY_BYTES:
+            if length:
+                self.rfile.read(length)
+        else:
+            self.close_connection = True
 
     def _answer(self, status: int, body: dict[str, Any] | None) -> None:
         data = b"" if body is None else json.dumps(body, default=str).encode()
@@ -113,6 +148,8 @@ class _Handler(BaseHTTPRequestHandler):
         if body is not None:
             self.send_header("Content-Type", "application/json")
         self.send_header("Content-Length", str(len(data)))
+        if self.close_connection:
+            self.send_header("Connection", "close")
         self.end_headers()
         if data:
             self.wfile.write(data)
@@ -125,6 +162,25 @@ class _Server(ThreadingHTTPServer):
     daemon_threads = True
     controller: Any
     page_port: int
+    _open = 0
+    _lock = threading.Lock()
+
+    def process_request(self, request: Any, client_address: Any) -> None:
+        with self._lock:
+            full = self._open >= MAX_CONNECTIONS
+            if not full:
+                self._open += 1
+        if full:
+            self.shutdown_request(request)
+            return
+        super().process_request(request, client_address)
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            with self._lock:
+                self._open -= 1
 
     def origin_allowed(self, origin: str) -> bool:
         """The dashboard's pages: any host name, the HTTP server's port."""

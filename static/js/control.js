@@ -362,6 +362,12 @@ export function startControl(info) {
   // the listener speaks plain http: from an https page the browser would block it
   if (info && info.estop_port && location.protocol === "http:") {
     estopListenerUrl = `http://${location.hostname}:${info.estop_port}/estop`;
+    // keep a connection to it open (the server keeps it alive 30 s): a press then needs no
+    // new connection, which cost the browser tens of ms on a loaded machine
+    const ready = `http://${location.hostname}:${info.estop_port}/ready`;
+    const warm = () => fetch(ready, { cache: "no-store" }).catch(() => {});
+    warm();
+    setInterval(warm, 5000);
   }
   bindButtons();
   window.addEventListener("keydown", onKey, { capture: true }); // before any other handler

@@ -5,6 +5,7 @@ docs/dashboard.md (benchmarks/estop_latency.py)."""
 
 from __future__ import annotations
 
+import http.client
 import json
 import urllib.error
 import urllib.request
@@ -59,9 +60,10 @@ def test_the_listener_does_nothing_but_stop(fresh):
         ("/estop", "GET"),
         ("/estop", "PUT"),
         ("/estop", "DELETE"),
+        ("/ready", "GET"),  # the page's warm connection: 204, nothing done
     ]:
         code, _, _ = call(listener_url(fresh, path), method)
-        assert code in (404, 501), (path, method, code)
+        assert code in ((204,) if path == "/ready" else (404, 501)), (path, method, code)
     after = status(fresh)
     assert not after["estopped"]
     assert after["estop_received_unix_s"] == before["estop_received_unix_s"]
@@ -107,3 +109,26 @@ def test_a_bad_press_id_still_stops(fresh, press):
     response = fresh.post("/api/estop", params={"press": press})
     assert response.status_code == 200, response.text
     assert status(fresh)["estopped"]
+
+
+def test_one_kept_alive_connection_serves_presses_and_a_large_body_is_not_read(fresh):
+    port = ok_json(fresh.get("/api/info"))["estop_port"]
+    connection = http.client.HTTPConnection("127.0.0.1", port, timeout=10)
+    try:
+        connection.request("GET", "/ready")
+        ready = connection.getresponse()
+        assert ready.status == 204
+        ready.read()
+        connection.request("POST", "/estop?press=kept-1", body=b"x" * 100)
+        response = connection.getresponse()
+        assert response.status == 200 and "result" in json.loads(response.read())
+        assert status(fresh)["estopped"]
+        cleared(fresh)
+        connection.request("POST", "/estop?press=kept-2", body=b"x" * 100_000)
+        response = connection.getresponse()
+        assert response.status == 200  # it stops whatever the body; the body is not read
+        assert response.getheader("Connection", "").lower() == "close"
+        response.read()
+    finally:
+        connection.close()
+    assert wait_for(lambda: status(fresh)["estopped"], "the e-stop with a large body")
