@@ -13,6 +13,8 @@ per input, in ms, p50 / p99 / worst of:
 - page: from the input event's own time stamp in the page (``performance.timeOrigin +
   event.timeStamp``: when chromium received the input, before any wait for the page's main
   thread) to the server's arrival time (GET /api/status ``estop_received_unix_s``);
+- request sent -> server: from the page's clock just after its fetch calls returned to
+  the arrival (the hop through the browser's network stack, the kernel and the server);
 - driver: from just before Playwright sends the input to the same arrival time (includes
   the driver's own delivery of the input to chromium);
 - per path (``estop_arrivals_unix_s``, servers since the e-stop listener): from the input
@@ -123,6 +125,7 @@ def trial(page: Any, server: Server, how: str) -> tuple[float, float, float, dic
             "the press's arrival by every path",
         )
     by_path = {path: t * 1e3 - event_ms for path, t in arrivals.items()}
+    by_path["sent"] = received * 1e3 - record["sent_unix_ms"]  # the hop: page -> server
     return (
         received * 1e3 - event_ms,
         record["sent_unix_ms"] - event_ms,
@@ -159,6 +162,7 @@ def main() -> None:
             print("  " + report("page event -> server", [r[0] for r in results]))
             print("  " + report("  of which event -> request sent", [r[1] for r in results]))
             print("  " + report("driver -> server", [r[2] for r in results]))
+            print("  " + report("request sent -> server", [r[3]["sent"] for r in results]))
             for path in PATHS:
                 values = [r[3][path] for r in results if path in r[3]]
                 if values:
