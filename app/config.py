@@ -295,6 +295,12 @@ class ServerSettings(_Section):
     max_body_bytes: int = Field(
         1 << 20, ge=1024, description="larger request bodies are refused unread (413) [bytes]"
     )
+    estop_listener: bool = Field(
+        True, description="a POST /estop listener in its own thread, beside the event loop"
+    )
+    estop_port: int = Field(
+        0, ge=0, le=65535, description="its port (0: any free one; /api/info says which)"
+    )
 
 
 class RunSettings(_Section):

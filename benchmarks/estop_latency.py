@@ -13,8 +13,14 @@ per input, in ms, p50 / p99 / worst of:
 - page: from the input event's own time stamp in the page (``performance.timeOrigin +
   event.timeStamp``: when chromium received the input, before any wait for the page's main
   thread) to the server's arrival time (GET /api/status ``estop_received_unix_s``);
+- request sent -> server: from the page's clock just after its fetch calls returned to
+  the arrival (the hop through the browser's network stack, the kernel and the server);
 - driver: from just before Playwright sends the input to the same arrival time (includes
-  the driver's own delivery of the input to chromium).
+  the driver's own delivery of the input to chromium);
+- per path (``estop_arrivals_unix_s``, servers since the e-stop listener): from the input
+  event to the press's arrival at the listener's thread, at the app's outermost middleware
+  (uvicorn has parsed it and the event loop got to it), and at the route's handler (after
+  routing and the dependencies). The gaps show where the time goes.
 
 Both clocks are this machine's wall clock. The machine's load is printed too: the figure is
 only as good as the CPU it got.
@@ -68,9 +74,12 @@ def _canvas(frame: Any) -> bool:
         return False
 
 
-def trial(page: Any, server: Server, how: str) -> tuple[float, float, float]:
+PATHS = ("listener", "middleware", "route")
+
+
+def trial(page: Any, server: Server, how: str) -> tuple[float, float, float, dict[str, float]]:
     """One press: (page event -> server, of which page event -> request sent, driver ->
-    server) [ms]."""
+    server, {path: page event -> arrival by that path}) [ms]."""
     if server.get("/api/status")["estopped"]:
         # as the operator does (the page holds the control lease)
         page.click("#reset", timeout=300_000)
@@ -106,7 +115,23 @@ def trial(page: Any, server: Server, how: str) -> tuple[float, float, float]:
         lambda: page.evaluate(f"window.deltadash.estops[{count}]"), "the page's record of the press"
     )
     event_ms = record["event_unix_ms"]
-    return received * 1e3 - event_ms, record["sent_unix_ms"] - event_ms, (received - pressed) * 1e3
+    arrivals: dict[str, float] = {}
+    if "estop_arrivals_unix_s" in server.get("/api/status"):
+        expected = set(PATHS) if record.get("paths", 1) > 1 else {"middleware", "route"}
+        arrivals = until(
+            lambda: (
+                (a := server.get("/api/status")["estop_arrivals_unix_s"]).keys() >= expected and a
+            ),
+            "the press's arrival by every path",
+        )
+    by_path = {path: t * 1e3 - event_ms for path, t in arrivals.items()}
+    by_path["sent"] = received * 1e3 - record["sent_unix_ms"]  # the hop: page -> server
+    return (
+        received * 1e3 - event_ms,
+        record["sent_unix_ms"] - event_ms,
+        (received - pressed) * 1e3,
+        by_path,
+    )
 
 
 def report(name: str, values: list[float]) -> str:
@@ -137,6 +162,11 @@ def main() -> None:
             print("  " + report("page event -> server", [r[0] for r in results]))
             print("  " + report("  of which event -> request sent", [r[1] for r in results]))
             print("  " + report("driver -> server", [r[2] for r in results]))
+            print("  " + report("request sent -> server", [r[3]["sent"] for r in results]))
+            for path in PATHS:
+                values = [r[3][path] for r in results if path in r[3]]
+                if values:
+                    print("  " + report(f"page event -> {path}", values))
         print(f"load after {os.getloadavg()}")
 
 

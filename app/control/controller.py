@@ -94,9 +94,13 @@ class Controller:
         self._t0 = clock()
         self._snapshot = Snapshot()
         self.pose_status: Callable[[], dict] | None = None  # set by the world service
-        # wall-clock time [s since the epoch] the last e-stop request reached the server (set
-        # by POST /api/estop, before it is queued); None: none since start
+        # wall-clock time [s since the epoch] the last e-stop press reached the server (its
+        # first request, by whichever path: see estop_request); None: none since start
         self.estop_received_unix_s: float | None = None
+        # per path, when the last press's requests arrived (the instrumentation of the paths)
+        self.estop_arrivals_unix_s: dict[str, float] = {}
+        self._estop_press: str | None = None
+        self._estop_lock = threading.Lock()
 
     # ---- lifecycle ----
     def start(self) -> None:
@@ -222,6 +226,25 @@ class Controller:
             future.set_result(commands.estop_now(self.state, self.ctx, self.servos))
             return future
         return self.submit(lambda: commands.estop_now(self.state, self.ctx, self.servos))
+
+    def estop_request(self, via: str, press: str | None = None) -> Future:
+        """An e-stop request arrived by path ``via`` (e.g. "listener", "middleware",
+        "route"): record when, then :meth:`estop` (idempotent: every request stops).
+
+        One press may come by several paths (the page sends two requests with the same
+        ``press`` id): ``estop_received_unix_s`` is its first arrival, and
+        ``estop_arrivals_unix_s`` when it came by each path (first per path). A request
+        without a press id is a press of its own. Safe from any thread.
+        """
+        now = time.time()
+        with self._estop_lock:
+            if press is None or press != self._estop_press:
+                self._estop_press = press
+                self.estop_received_unix_s = now
+                self.estop_arrivals_unix_s = {via: now}
+            else:
+                self.estop_arrivals_unix_s.setdefault(via, now)
+        return self.estop()
 
     def reset(self) -> Future:
         """Clear e-stop and faults, rebooting servos that report hardware errors."""

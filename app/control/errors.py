@@ -11,14 +11,23 @@ import numpy as np
 
 
 class GoalRejected(ValueError):
-    """A goal failed the gate; ``nearest`` is the closest acceptable point when known."""
+    """A goal failed the gate; ``nearest`` is the closest acceptable point when known.
 
-    def __init__(self, reason: str, nearest: np.ndarray | None = None) -> None:
+    ``goal`` (3,) [m] is the refused point when a point the gate takes near it can be
+    offered (the server computes one that passes every check: app/server/sections.py
+    ``nearest``); ``reason`` is the message without the nearest point.
+    """
+
+    def __init__(
+        self, reason: str, nearest: np.ndarray | None = None, goal: np.ndarray | None = None
+    ) -> None:
+        self.reason = reason
         if nearest is not None:
             mm = ", ".join(f"{v:.4f}" for v in nearest)
             reason = f"{reason}; nearest reachable point [{mm}] m"
         super().__init__(reason)
         self.nearest = nearest
+        self.goal = goal
 
 
 class MotionRefused(RuntimeError):

@@ -72,7 +72,7 @@ class Gate:
         if not np.isfinite(goal).all():
             raise GoalRejected(f"position_m: must be finite, got {goal.tolist()}")
         if not self.inside(goal):
-            raise GoalRejected("position_m: outside the workspace", self.nearest(goal))
+            raise GoalRejected("position_m: outside the workspace", self.nearest(goal), goal=goal)
         return goal
 
     def clamp_point(self, point: np.ndarray) -> np.ndarray:
@@ -109,17 +109,22 @@ class Gate:
 
         The branch nearest the current joints first; if that breaks a limit (the arm may
         start from outside them, e.g. hanging with torque off), the working knee-out branch.
+        A refusal carries ``point`` as its ``goal`` (the server offers an accepted point
+        near it).
         """
         joints, ok = self.robot.ik(point, near=near)
         if not ok:
-            raise GoalRejected("position_m: no joint solution", self.nearest(point))
+            raise GoalRejected("position_m: no joint solution", self.nearest(point), goal=point)
         try:
             return self.check_joints(joints)
-        except GoalRejected:
+        except GoalRejected as exc:
             knee_out = self.robot.ik(point).joints
             if np.array_equal(knee_out, joints):
-                raise
+                raise GoalRejected(exc.reason, goal=point) from None
+        try:
             return self.check_joints(knee_out)
+        except GoalRejected as exc:
+            raise GoalRejected(exc.reason, goal=point) from None
 
     def check_joints(self, joints: np.ndarray) -> np.ndarray:
         """Joint limits and the singularity margin; returns ``joints`` or raises."""

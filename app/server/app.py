@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
+import logging
 import sys
 from collections.abc import AsyncIterator, Callable
 
@@ -26,12 +27,27 @@ from app.server.api import compare, dashboard, mav, programs, robot, runs, telem
 from app.server.api.deps import require_read_token
 from app.server.backends import open_backend
 from app.server.errors import install_error_handlers
+from app.server.estop import EstopFirst, EstopListener
 from app.server.limits import RequestLimits
 from app.static_files import static_dir
 from app.world.service import WorldService
 
+log = logging.getLogger(__name__)
 GIL_SWITCH_S = 2.5e-4
 STATIC_DIR = static_dir()
+
+
+def _start_estop_listener(settings: Settings, controller: Controller) -> EstopListener | None:
+    """The e-stop's own listener (app/server/estop.py); None (logged) when it cannot bind
+    or the config turns it off: POST /api/estop still stops."""
+    server = settings.server
+    if not server.estop_listener:
+        return None
+    try:
+        return EstopListener(controller, server.host, server.estop_port, server.http_port)
+    except OSError as exc:
+        log.warning("e-stop listener not started on port %s: %s", server.estop_port, exc)
+        return None
 
 
 def create_app(settings: Settings, backend_opener: Callable = open_backend) -> FastAPI:
@@ -51,6 +67,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
             controller = Controller(settings, backend.bus, backend.kind, backend.description)
             controller.start()
             app.state.controller = controller
+            app.state.estop_listener = _start_estop_listener(settings, controller)
             app.state.backend = backend
             app.state.runs = RunManager(controller, settings.runs.folder_path)
             app.state.world = WorldService(controller)
@@ -66,6 +83,8 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
                     await asyncio.to_thread(app.state.scene.stop)
                 await asyncio.to_thread(app.state.runs.close)
                 app.state.world.close()
+                if app.state.estop_listener is not None:
+                    await asyncio.to_thread(app.state.estop_listener.close)
                 await asyncio.to_thread(controller.stop)
 
     app = FastAPIOffline(  # /docs and /redoc from local assets: they work with no internet
@@ -77,7 +96,8 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
     # one authority for motion: the HTTP routes and the 3D scene check the same lease
     app.state.authority = Authority(settings.server.token, settings.server.lease_timeout_s)
     install_error_handlers(app)
-    app.add_middleware(RequestLimits, settings=settings)  # outermost: before any body is read
+    app.add_middleware(RequestLimits, settings=settings)  # before any body is read
+    app.add_middleware(EstopFirst)  # outermost: an e-stop is latched before anything else
     reads = [Depends(require_read_token)]  # the token on reads too, beyond loopback
     app.include_router(robot.router, prefix="/api", dependencies=reads)
     app.include_router(telemetry.router, prefix="/api", dependencies=reads)

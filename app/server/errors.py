@@ -8,6 +8,7 @@ dressed as something the operator did.
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from typing import Any
 
@@ -18,6 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.control.errors import GoalRejected, MotionRefused
+from app.server import sections
 from hardware.errors import BusError
 from kinematics import PoseError
 
@@ -31,7 +33,9 @@ class ErrorBody(BaseModel):
     model_config = ConfigDict(extra="forbid")
     detail: str
     nearest_m: list[float | None] | None = Field(
-        None, description="422 for a goal outside the workspace: the nearest reachable point [m]"
+        None,
+        description="422 for a goal the gate refuses (outside the workspace, beyond a joint "
+        "limit, near a singularity): a point near it that the gate accepts [m]",
     )
 
 
@@ -66,6 +70,19 @@ def _field_errors(exc: RequestValidationError) -> str:
     return "; ".join(parts)
 
 
+async def _offer(request: Request, exc: GoalRejected) -> tuple[str, dict[str, Any]]:
+    """The 422's words and ``nearest_m``: for a refused goal (``exc.goal``) a point the gate
+    accepts (sections.nearest, workspace, joint limits and margins; computed in a worker
+    thread, it takes tens of ms), else the exception's own ``nearest`` if any."""
+    controller = getattr(request.app.state, "controller", None)
+    if exc.goal is None or controller is None:
+        nearest = None if exc.nearest is None else [float(v) for v in exc.nearest]
+        return str(exc), {"nearest_m": nearest}
+    point = await asyncio.to_thread(sections.nearest, controller.gate, exc.goal)
+    mm = ", ".join(f"{v:.4f}" for v in point)
+    return f"{exc.reason}; nearest reachable point [{mm}] m", {"nearest_m": point.tolist()}
+
+
 def install_error_handlers(app: FastAPI) -> None:
     """Map the project's exceptions to 401/409/422/503; anything else is a logged 500."""
 
@@ -74,9 +91,9 @@ def install_error_handlers(app: FastAPI) -> None:
         return _error(422, _field_errors(exc))
 
     @app.exception_handler(GoalRejected)
-    async def goal_rejected(_: Request, exc: GoalRejected) -> JSONResponse:
-        nearest = None if exc.nearest is None else [float(v) for v in exc.nearest]
-        return _error(422, str(exc), nearest_m=nearest)
+    async def goal_rejected(request: Request, exc: GoalRejected) -> JSONResponse:
+        detail, extra = await _offer(request, exc)
+        return _error(422, detail, **extra)
 
     @app.exception_handler(PoseError)
     async def pose_error(_: Request, exc: PoseError) -> JSONResponse:

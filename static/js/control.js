@@ -42,24 +42,45 @@ export async function command(path, body) {
 // The e-stop never waits: the request leaves first, synchronously from the key or pointer
 // event, on its own keepalive fetch at high priority (not behind the page's other requests,
 // not after the lease or the token prompt: POST /api/estop needs neither); the page's
-// reaction comes after. Each press is recorded (window.deltadash.estops, Unix ms) so a test
-// can compare it with the server's arrival time (GET /api/status's estop_received_unix_s).
+// reaction comes after. A second request goes in parallel to the server's e-stop listener
+// (its own port and thread, /api/info's estop_port: it does not wait behind the server's
+// event loop); both carry the same press id, so the server counts the press once, at its
+// first arrival. Each press is recorded (window.deltadash.estops, Unix ms) so a test can
+// compare it with the server's arrival time (GET /api/status's estop_received_unix_s).
 const estops = [];
 window.deltadash = Object.assign(window.deltadash || {}, { estops });
+let estopListenerUrl = null; // "http://<this host>:<estop_port>/estop", null: none known
+
+function newPressId() {
+  return `${Date.now().toString(36)}-${Math.random().toString(36).slice(2, 10)}`;
+}
 
 export function estop(event = null) {
+  const press = newPressId();
   const headers = token() ? { Authorization: `Bearer ${token()}` } : {};
-  const sent = fetch("/api/estop", { method: "POST", headers, keepalive: true, priority: "high" });
+  const options = { method: "POST", keepalive: true, priority: "high" };
+  const requests = [fetch(`/api/estop?press=${press}`, { ...options, headers })];
+  if (estopListenerUrl) { // no headers: a plain cross-origin POST, no preflight round trip
+    requests.push(fetch(`${estopListenerUrl}?press=${press}`, { ...options, mode: "cors" }));
+  }
   const sentMs = Date.now();
   // event.timeStamp is when the input arrived, before any wait for the main thread
   const eventMs = event ? performance.timeOrigin + event.timeStamp : sentMs;
-  estops.push({ source: event ? event.type : "call", event_unix_ms: eventMs, sent_unix_ms: sentMs });
-  sent
-    .then((response) => {
-      if (!response.ok) throw new Error(`E-stop refused by the server (HTTP ${response.status})`);
+  estops.push({
+    source: event ? event.type : "call", event_unix_ms: eventMs, sent_unix_ms: sentMs,
+    press, paths: requests.length,
+  });
+  const confirmed = (request) => request.then((response) => {
+    if (!response.ok) throw new Error(`E-stop refused by the server (HTTP ${response.status})`);
+  });
+  Promise.any(requests.map(confirmed))
+    .then(() => {
       showMessage("E-stop: nothing moves until Reset", "error", { clearsWhen: (s) => !s.estopped });
     })
-    .catch((err) => showError(new Error(`E-stop not confirmed: ${err.message}`)));
+    .catch((err) => {
+      const first = (err.errors && err.errors[0]) || err;
+      showError(new Error(`E-stop not confirmed: ${first.message}`));
+    });
   answerConfirm(false); // a pending move is not wanted after an e-stop
 }
 
@@ -338,6 +359,16 @@ export function startControl(info) {
   if (info && info.jog_max_velocity_m_s) maxSpeed = info.jog_max_velocity_m_s;
   if (info && info.confirm_move_m) confirmMoveM = info.confirm_move_m;
   if (info && Array.isArray(info.home_m)) homeM = info.home_m;
+  // the listener speaks plain http: from an https page the browser would block it
+  if (info && info.estop_port && location.protocol === "http:") {
+    estopListenerUrl = `http://${location.hostname}:${info.estop_port}/estop`;
+    // keep a connection to it open (the server keeps it alive 30 s): a press then needs no
+    // new connection, which cost the browser tens of ms on a loaded machine
+    const ready = `http://${location.hostname}:${info.estop_port}/ready`;
+    const warm = () => fetch(ready, { cache: "no-store" }).catch(() => {});
+    warm();
+    setInterval(warm, 5000);
+  }
   bindButtons();
   window.addEventListener("keydown", onKey, { capture: true }); // before any other handler
   document.addEventListener("keyup", onKeyUp);

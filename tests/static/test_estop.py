@@ -69,6 +69,18 @@ def press_estop(page: Any, server: Server, how: str) -> float:
     )
     assert page.evaluate("window.deltadash.estops.length") == count + 1  # one press, one stop
     assert record["source"] == ("keydown" if how == "key" else "pointerdown")
+    # the press went both ways, /api/estop and the e-stop listener's own thread, counted
+    # once (the same press id): the listener's arrival is kept beside the middleware's
+    assert record["paths"] == 2
+    arrivals = wait_for(
+        lambda: (
+            (a := server.get("/api/status")["estop_arrivals_unix_s"]).keys()
+            >= {"listener", "middleware"}
+            and a
+        ),
+        f"the press by {how} through both paths",
+    )
+    assert server.get("/api/status")["estop_received_unix_s"] == min(arrivals.values()) == received
     return received * 1e3 - record["event_unix_ms"]
 
 
@@ -97,6 +109,7 @@ def test_estop_answers_with_the_scene_embedded_and_plots_running(page: Any, serv
         latencies.setdefault(how, []).append(press_estop(page, server, how))
         wait_for(lambda: "estop" in page.locator("#mode").inner_text(), "the header's e-stop")
         reset(page, server)
+    assert isinstance(server.get("/api/info")["estop_port"], int)  # the page's second path
     print(
         "e-stop latency, input event in the page -> server [ms]: "
         + ", ".join(f"{how} {', '.join(f'{v:.0f}' for v in vs)}" for how, vs in latencies.items())

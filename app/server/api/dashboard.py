@@ -28,7 +28,14 @@ from app.control.errors import GoalRejected, MotionRefused
 from app.runs.manager import RunManager
 from app.runs.trajectories import SinusoidParams, sinusoid_points
 from app.scene import Scene
-from app.server.api.deps import ControllerDep, RunsDep, SceneDep, SettingsDep, TokenChecked
+from app.server.api.deps import (
+    ControllerDep,
+    EstopPortDep,
+    RunsDep,
+    SceneDep,
+    SettingsDep,
+    TokenChecked,
+)
 from app.server.api.responses import InfoOut
 from app.server.api.runs import SinusoidRequest
 from app.server.errors import INVALID, UNAUTHORISED, UNAVAILABLE
@@ -57,10 +64,12 @@ def _viser_port(scene: Scene | None) -> int | None:
 
 
 @router.get("/api/info", response_model=InfoOut)
-def get_info(settings: SettingsDep, scene: SceneDep) -> dict[str, Any]:
-    """Viser port, token requirement and the limits the page shows beside its controls."""
+def get_info(settings: SettingsDep, scene: SceneDep, estop_port: EstopPortDep) -> dict[str, Any]:
+    """Viser and e-stop ports, token requirement and the limits the page shows beside its
+    controls."""
     return {
         "viser_port": _viser_port(scene),
+        "estop_port": estop_port,
         "token_required": settings.server.token is not None,
         "telemetry_hz": settings.server.telemetry_hz,
         "jog_max_velocity_m_s": settings.jog.max_velocity_m_s,

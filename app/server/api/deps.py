@@ -45,6 +45,12 @@ def get_scene(connection: HTTPConnection) -> Scene | None:
     return getattr(connection.app.state, "scene", None)
 
 
+def get_estop_port(connection: HTTPConnection) -> int | None:
+    """The e-stop listener's bound port (app/server/estop.py), None when it is not running."""
+    listener = getattr(connection.app.state, "estop_listener", None)
+    return None if listener is None else listener.port
+
+
 def get_authority(connection: HTTPConnection) -> Authority:
     return connection.app.state.authority
 
@@ -115,5 +121,6 @@ RunsDep = Annotated[RunManager, Depends(get_runs)]
 WorldDep = Annotated[WorldService, Depends(get_world)]
 SceneDep = Annotated[Scene | None, Depends(get_scene)]
 AuthorityDep = Annotated[Authority, Depends(get_authority)]
+EstopPortDep = Annotated[int | None, Depends(get_estop_port)]
 ControlClient = Annotated[str, Depends(require_control)]
 TokenChecked = Annotated[None, Depends(require_token)]

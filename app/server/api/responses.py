@@ -142,8 +142,14 @@ class StatusOut(_Out):
     torque: bool
     estopped: bool
     estop_received_unix_s: float | None = Field(
-        description="wall-clock time [s since the Unix epoch] the last POST /api/estop reached "
-        "the server, before it was queued to the loop; null: none since the server started"
+        description="wall-clock time [s since the Unix epoch] the last e-stop press reached "
+        "the server (its first request: POST /api/estop or the e-stop listener), before it "
+        "was queued to the loop; null: none since the server started"
+    )
+    estop_arrivals_unix_s: dict[str, float] = Field(
+        description="when the last press's requests reached each path [s since the Unix "
+        "epoch]: 'listener' (its own thread), 'middleware' (first in the app), 'route' (the "
+        "handler, after routing and dependencies); the gaps show where the time goes"
     )
     faults: list[FaultOut]
     faults_dropped: int = Field(description="older causes dropped from the bounded list")
@@ -369,6 +375,10 @@ class InfoOut(_Out):
     """Facts the dashboard cannot read from status."""
 
     viser_port: int | None
+    estop_port: int | None = Field(
+        description="the e-stop listener's port (POST /estop there stops, as /api/estop "
+        "does; same host); null: not running"
+    )
     token_required: bool
     telemetry_hz: float
     jog_max_velocity_m_s: float

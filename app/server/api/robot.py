@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import asyncio
-import time
 from concurrent.futures import Future
 from dataclasses import asdict
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Header, HTTPException
+from fastapi import APIRouter, Header, HTTPException, Request
 
 from app.control.authority import LeaseHeld
+from app.server import estop
 from app.server.api import serialize
 from app.server.api.deps import AuthorityDep, ControlClient, ControllerDep, TokenChecked
 from app.server.api.models import (
@@ -75,13 +75,18 @@ async def post_torque(body: TorqueRequest, controller: ControllerDep, _: Control
 
 
 @router.post("/estop", response_model=Accepted, responses=UNAVAILABLE)
-async def post_estop(controller: ControllerDep):
+async def post_estop(request: Request, controller: ControllerDep):
     """Stop at once; holds or releases torque per config. Open to anyone (no token, no
-    lease): whoever sees the robot about to hurt someone may stop it. Its wall-clock time of
-    arrival is in GET /api/status (``estop_received_unix_s``): the page's latency is measured
-    from it."""
-    controller.estop_received_unix_s = time.time()
-    return await _outcome(controller.estop())
+    lease): whoever sees the robot about to hurt someone may stop it. Latched before
+    routing by the outermost middleware (app/server/estop.py); also served by the e-stop
+    listener on its own port (``/api/info``'s ``estop_port``). An optional ``?press=`` id
+    (1-64 of A-Z a-z 0-9 _ -; anything else is ignored, never refused) makes the requests of
+    one press by several paths count once. Its wall-clock time of arrival (the first of
+    the press) is in GET /api/status (``estop_received_unix_s``): the page's latency is
+    measured from it."""
+    latched = request.scope.get(estop.SCOPE_KEY)
+    route = controller.estop_request("route", estop.valid_press(request.query_params.get("press")))
+    return await _outcome(latched if latched is not None else route)
 
 
 @router.post("/reset", response_model=Accepted, responses=CONTROL)

@@ -28,6 +28,7 @@ def status(controller: Controller) -> dict[str, Any]:
         "torque": snap.torque,
         "estopped": snap.estopped,
         "estop_received_unix_s": controller.estop_received_unix_s,
+        "estop_arrivals_unix_s": dict(controller.estop_arrivals_unix_s),
         "faults": [f.as_dict() for f in snap.faults],
         "faults_dropped": snap.faults_dropped,
         "warning": snap.warning,

@@ -86,14 +86,15 @@ def test_nearest_is_the_point_itself_when_the_gate_takes_it(client):
     assert answer["inside"] and answer["nearest_m"] == [0, 0, -0.24] and answer["distance_m"] == 0
 
 
-def test_nearest_is_the_goals_422_point_when_the_gate_takes_that(client):
+def test_nearest_is_the_goals_422_point_and_the_gate_takes_it(client):
     gate = client.app.state.controller.gate
     goal = [0.0, 0.01, -0.5]  # below the workspace: its nearest point is on the bottom
     answer = nearest(client, goal)
     refused = client.post("/api/goal", json={"position_m": goal})
     assert refused.status_code == 422 and not answer["inside"]
-    # the 422's point, moved 0.02 mm inwards (so 0.01 mm rounding keeps it inside)
-    np.testing.assert_allclose(answer["nearest_m"], refused.json()["nearest_m"], atol=2.1e-5)
+    assert answer["nearest_m"] == refused.json()["nearest_m"]  # one rule for both
+    # the workspace's nearest point, moved 0.02 mm inwards (0.01 mm rounding stays inside)
+    np.testing.assert_allclose(answer["nearest_m"], gate.nearest(np.array(goal)), atol=2.1e-5)
     rounded = np.round(np.array(answer["nearest_m"]), 5)
     assert gate_accepts(gate, rounded)
     point = np.array(answer["nearest_m"])
@@ -104,13 +105,14 @@ def test_nearest_is_the_goals_422_point_when_the_gate_takes_that(client):
 
 
 @pytest.mark.parametrize("goal", [[0.3, 0.02, -0.24], [0.3, 0.05, -0.24], [0, 0, 0.1]])
-def test_nearest_is_a_point_the_gate_takes_where_the_422_point_breaks_a_joint_limit(client, goal):
+def test_nearest_is_a_point_the_gate_takes_where_the_workspaces_breaks_a_joint_limit(client, goal):
     """At z = -240 mm the workspace's nearest point to (300, 20) mm needs joint 2 past its
-    limit: the 422's nearest_m would be refused in turn; /nearest answers one it takes."""
+    limit: the gate would refuse it in turn; /nearest and the 422 offer one it takes."""
     gate = client.app.state.controller.gate
+    assert not gate_accepts(gate, gate.nearest(np.array(goal)))
     refused = client.post("/api/goal", json={"position_m": goal})
     assert refused.status_code == 422
-    assert not gate_accepts(gate, np.array(refused.json()["nearest_m"]))
+    assert gate_accepts(gate, np.array(refused.json()["nearest_m"]))
     answer = nearest(client, goal)
     assert not answer["inside"] and gate_accepts(gate, np.array(answer["nearest_m"]))
 

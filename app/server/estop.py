@@ -1,0 +1,218 @@
+"""The e-stop's two early paths into the server: neither waits behind the routes' work.
+
+Measured on the loaded 2-core machine (docs/dashboard.md, "The e-stop"), a press reached
+``POST /api/estop``'s handler a few hundred ms after the input: the request waited in the
+asyncio event loop behind the telemetry WebSocket, status polls and program checks, then
+through routing and the dependencies. Two paths cut that:
+
+- :class:`EstopFirst`, the outermost ASGI middleware: a ``POST /api/estop`` latches the
+  controller's e-stop as soon as uvicorn hands the request to the app, before the token
+  and body checks, routing and dependencies; the route then answers with that same
+  command's outcome (it stays the documented API, with its response model).
+- :class:`EstopListener`, a plain HTTP server in its own thread on its own port
+  (``server.estop_port``; 0: any free one, in ``/api/info``): ``POST /estop`` e-stops and
+  answers; it shares nothing with the event loop but the GIL, which the interpreter hands
+  over within its switch interval (0.25 ms here). The page posts to it in parallel with
+  ``/api/estop``, with the same press id (``?press=``), so the server keeps the first
+  arrival of each press.
+
+The listener does one thing: any other path is a 404 and any other method but the CORS
+preflight (OPTIONS) and ``GET /ready`` (204, nothing done: the page keeps its kept-alive
+connection warm with it, since a fresh connection cost the browser tens of ms under load)
+a 501; it reads no body beyond 1 kB (larger: left unread, the connection closed), holds
+at most MAX_CONNECTIONS connections, and only the page's own origin (the dashboard's port)
+may read its answer. Stopping needs no token anywhere (whoever sees the
+robot about to hurt someone may stop it), so this grants nothing that /api/estop did not.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+import threading
+from concurrent.futures import TimeoutError as FutureTimeout
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
+from urllib.parse import parse_qs, urlsplit
+
+from starlette.types import ASGIApp, Receive, Scope, Send
+
+log = logging.getLogger(__name__)
+
+ESTOP_PATH = "/api/estop"
+LISTENER_PATH = "/estop"
+READY_PATH = "/ready"  # GET: 204, nothing else; the page keeps its connection warm with it
+SCOPE_KEY = "deltadash.estop"  # the latched command's Future, for the route
+ANSWER_TIMEOUT_S = 2.0  # the route's COMMAND_TIMEOUT_S
+IDLE_TIMEOUT_S = 30.0  # a kept-alive connection idle this long is closed
+MAX_BODY_BYTES = 1024  # a body is never needed; a larger one is not read (connection closed)
+MAX_CONNECTIONS = 32  # beyond, a new connection is closed at once
+_PRESS = re.compile(r"[A-Za-z0-9_-]{1,64}")
+
+
+def valid_press(value: str | None) -> str | None:
+    """``value`` when it is 1-64 of [A-Za-z0-9_-], else None (a bad press id never refuses
+    an e-stop: the request is then a press of its own)."""
+    return value if value is not None and _PRESS.fullmatch(value) else None
+
+
+def press_id(query: str | bytes) -> str | None:
+    """The valid ``press`` parameter of a query string, else None."""
+    if isinstance(query, bytes):
+        query = query.decode("latin-1")
+    values = parse_qs(query).get("press", [])
+    return valid_press(values[0]) if values else None
+
+
+class EstopFirst:
+    """ASGI middleware, outermost of the project's: a ``POST /api/estop`` calls the
+    controller's ``estop_request("middleware", press)`` before anything else runs for it,
+    and leaves the command's Future in the scope (``SCOPE_KEY``) for the route to answer
+    with. Everything else passes untouched."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http" and scope["method"] == "POST" and scope["path"] == ESTOP_PATH:
+            app = scope.get("app")  # Starlette puts itself there before its middleware
+            controller = getattr(app.state, "controller", None) if app is not None else None
+            if controller is not None and controller.running:
+                press = press_id(scope.get("query_string", b""))
+                scope[SCOPE_KEY] = controller.estop_request("middleware", press)
+        await self.app(scope, receive, send)
+
+
+class _Handler(BaseHTTPRequestHandler):
+    """HTTP/1.1 with keep-alive: the page's connection stays open between presses (a new
+    one costs the browser a connect under load), IDLE_TIMEOUT_S at most."""
+
+    server: _Server
+    timeout = IDLE_TIMEOUT_S
+    protocol_version = "HTTP/1.1"
+
+    def do_POST(self) -> None:  # noqa: N802 (http.server's naming)
+        parts = urlsplit(self.path)
+        if parts.path != LISTENER_PATH:
+            self._skip_body()
+            self._answer(404, {"detail": f"only POST {LISTENER_PATH} here"})
+            return
+        future = self.server.controller.estop_request("listener", press_id(parts.query))
+        self._skip_body()  # after the stop is latched: nothing waits for a body
+        try:
+            result = future.result(timeout=ANSWER_TIMEOUT_S)
+        except FutureTimeout:
+            self._answer(503, {"detail": "the control loop did not answer in time"})
+        except Exception as exc:  # the loop is not running, a bus error: say so, as a 503
+            self._answer(503, {"detail": f"e-stop: {exc}"})
+        else:
+            self._answer(200, {"result": result})
+
+    def do_GET(self) -> None:  # noqa: N802
+        """``GET /ready``: 204 and nothing else (the page's warm connection); else 404."""
+        if urlsplit(self.path).path == READY_PATH:
+            self._answer(204, None)
+        else:
+            self._answer(404, {"detail": f"only POST {LISTENER_PATH} here"})
+
+    def do_OPTIONS(self) -> None:  # noqa: N802
+        """The CORS preflight (a plain POST without a body needs none; answered anyway)."""
+        self._skip_body()
+        self._answer(204, None)
+
+    def _skip_body(self) -> None:
+        """Read a small body away (keep-alive needs it); a large or chunked one is left
+        unread and the connection closed after the answer."""
+        if self.headers.get("Transfer-Encoding"):
+            self.close_connection = True
+            return
+        try:
+            length = int(self.headers.get("Content-Length") or 0)
+        except ValueError:
+            length = -1
+        if 0 <= length <= MAX_BODY_BYTES:
+            if length:
+                self.rfile.read(length)
+        else:
+            self.close_connection = True
+
+    def _answer(self, status: int, body: dict[str, Any] | None) -> None:
+        data = b"" if body is None else json.dumps(body, default=str).encode()
+        self.send_response(status)
+        origin = self.headers.get("Origin")
+        if origin is not None and self.server.origin_allowed(origin):
+            self.send_header("Access-Control-Allow-Origin", origin)
+            self.send_header("Access-Control-Allow-Methods", "POST")
+            self.send_header("Vary", "Origin")
+        if body is not None:
+            self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(data)))
+        if self.close_connection:
+            self.send_header("Connection", "close")
+        self.end_headers()
+        if data:
+            self.wfile.write(data)
+
+    def log_message(self, format: str, *args: Any) -> None:  # noqa: A002
+        log.debug("e-stop listener: " + format, *args)
+
+
+class _Server(ThreadingHTTPServer):
+    daemon_threads = True
+    controller: Any
+    page_port: int
+    _open = 0
+    _lock = threading.Lock()
+
+    def process_request(self, request: Any, client_address: Any) -> None:
+        with self._lock:
+            full = self._open >= MAX_CONNECTIONS
+            if not full:
+                self._open += 1
+        if full:
+            self.shutdown_request(request)
+            return
+        super().process_request(request, client_address)
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            with self._lock:
+                self._open -= 1
+
+    def origin_allowed(self, origin: str) -> bool:
+        """The dashboard's pages: any host name, the HTTP server's port."""
+        try:
+            parts = urlsplit(origin)
+            return parts.scheme in ("http", "https") and parts.port == self.page_port
+        except ValueError:
+            return False
+
+
+class EstopListener:
+    """``POST /estop`` on ``host:port`` in a thread of its own (see the module doc).
+
+    controller: whose ``estop_request`` it calls; page_port: the dashboard's HTTP port (the
+    origin allowed to read the answers). ``port`` is the bound one (0 in the config picks
+    a free one). Raises OSError when the port cannot be bound.
+    """
+
+    def __init__(self, controller: Any, host: str, port: int, page_port: int) -> None:
+        self._server = _Server((host, port), _Handler)
+        self._server.controller = controller
+        self._server.page_port = page_port
+        self.port: int = self._server.server_address[1]
+        self._thread = threading.Thread(
+            target=self._server.serve_forever,
+            kwargs={"poll_interval": 0.5},
+            name="deltadash-estop",
+            daemon=True,
+        )
+        self._thread.start()
+
+    def close(self) -> None:
+        self._server.shutdown()
+        self._server.server_close()
+        self._thread.join(timeout=2.0)
