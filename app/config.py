@@ -270,7 +270,7 @@ class ProgramSettings(_Section):
         "about a millisecond of CPU per loop tick)",
     )
     check_timeout_s: float = Field(
-        180.0,
+        300.0,
         gt=0,
         le=3600,
         description="longest a check or dry run may take in its worker process, the "

@@ -132,7 +132,7 @@ class ProgramWorkers:
     itself raises. Safe from any thread. :meth:`close` kills the workers.
     """
 
-    def __init__(self, settings: Settings, slots: int = 2, timeout_s: float = 180.0) -> None:
+    def __init__(self, settings: Settings, slots: int = 2, timeout_s: float = 300.0) -> None:
         self.settings, self.slots, self.timeout_s = settings, slots, timeout_s
         self._lock = threading.Lock()
         self._free = list(range(slots))
