@@ -104,7 +104,7 @@ def workers(settings) -> Iterator[ProgramWorkers]:
 def test_a_check_runs_in_another_process_and_answers_as_in_this_one(workers, settings):
     pid, nice, checked = workers.call(pid_and_check, CheckJob(GOOD, settings))
     assert pid != os.getpid()
-    assert nice >= os.nice(0) + 1  # the worker yields the CPU to the loop's process
+    assert nice > os.nice(0) or nice == 19  # the worker yields the CPU to the loop's process
     here = check_program(GOOD, settings)
     assert checked.report == here.report
     assert checked.path.duration_s == here.path.duration_s
