@@ -391,6 +391,13 @@ class ProgramSettings(_Section):
         description="longest program the dry run plays on the twin [s] (its physics costs "
         "about a millisecond of CPU per loop tick)",
     )
+    check_timeout_s: float = Field(
+        300.0,
+        gt=0,
+        le=3600,
+        description="longest a check or dry run may take in its worker process, the "
+        "worker's start included; beyond, the worker is stopped and the request is a 503 [s]",
+    )
 
 
 class Settings(BaseSettings):

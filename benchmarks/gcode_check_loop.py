@@ -1,12 +1,14 @@
 """What a long G-code check does to the control loop running beside it.
 
-The server checks a program (POST /api/programs/check, /run, /dry-run) in its thread pool,
-in the control loop's process. This runs a headless controller on the simulator at its
-rate, holding torque, and prints the loop's timing over a window with nothing else to do
-and over a window while a thread checks a long program again and again (the raster of
-benchmarks/gcode_check.py): rate, lateness p50 / p99 / worst, overruns, longest gap.
+The server checks a program (POST /api/programs/check, /run, /dry-run) in a worker
+process (app/programs/workers.py); it used to check in its thread pool, in the control
+loop's process. This runs a headless controller on the simulator at its rate, holding
+torque, and prints the loop's timing over a window with nothing else to do, over a window
+while a thread of this process checks a long program again and again (the raster of
+benchmarks/gcode_check.py; as before), and over one while a worker process does (as now):
+rate, lateness p50 / p99 / worst, overruns, longest gap.
 
-Usage: python benchmarks/gcode_check_loop.py [--lines 4000] [--window 10]
+Usage: python benchmarks/gcode_check_loop.py [--lines 4000] [--window 10] [--rounds 2]
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from app.config import load_settings  # noqa: E402
 from app.control.controller import Controller  # noqa: E402
 from app.control.errors import MotionRefused  # noqa: E402
 from app.programs.check import check_program  # noqa: E402
+from app.programs.workers import CheckJob, ProgramWorkers  # noqa: E402
 from app.server.backends import open_backend  # noqa: E402
 
 
@@ -46,14 +49,42 @@ def window(controller: Controller, seconds: float, what: str, busy: threading.Ev
         f"{what:<28} {ticks / seconds:7.1f} Hz  lateness p50 {last.jitter_p50_ms:5.2f} "
         f"p99 {last.jitter_p99_ms:6.2f} worst {last.worst_ms:6.1f} ms  overruns {overruns} "
         f"({100 * overruns / max(ticks, 1):.1f} %)  longest gap {last.longest_gap_ms:.1f} ms"
+        + f"  load {os.getloadavg()[0]:.1f}"
         + ("  [checking]" if busy.is_set() else "")
     )
+
+
+def _mean(values: list[float]) -> float:
+    return sum(values) / max(len(values), 1)
+
+
+def checking(
+    controller: Controller, seconds: float, what: str, busy: threading.Event, check
+) -> list[float]:
+    """One window while a thread calls ``check()`` again and again; each call's time [s]."""
+    stop, times = threading.Event(), []
+
+    def again() -> None:
+        busy.set()
+        while not stop.is_set():
+            begin = time.perf_counter()
+            check()
+            times.append(time.perf_counter() - begin)
+        busy.clear()
+
+    worker = threading.Thread(target=again, daemon=True)
+    worker.start()
+    window(controller, seconds, what, busy)
+    stop.set()
+    worker.join()
+    return times
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lines", type=int, default=4000)
     parser.add_argument("--window", type=float, default=10.0)
+    parser.add_argument("--rounds", type=int, default=2, help="thread / worker window pairs")
     args = parser.parse_args()
     sys.setswitchinterval(2.5e-4)  # as the server's lifespan (app/server/app.py) runs its loop
     gc.collect()
@@ -74,25 +105,30 @@ def main() -> None:
                     time.sleep(0.5)
             check_program(text, settings, gate=controller.gate)  # warm-up (workspace cache)
             print(f"backend: {opened.description}; program: {args.lines} lines")
-            busy, stop = threading.Event(), threading.Event()
+            busy = threading.Event()
+            workers = ProgramWorkers(settings, slots=1, timeout_s=600.0)
+            job = CheckJob(text, settings, gate=controller.gate)
+            workers.check(job)  # the worker started and warm, as after a server's first check
             window(controller, args.window, "idle (torque on, holding)", busy)
-            checks: list[float] = []
-
-            def check_again() -> None:
-                busy.set()
-                while not stop.is_set():
-                    begin = time.perf_counter()
-                    check_program(text, settings, gate=controller.gate)
-                    checks.append(time.perf_counter() - begin)
-                busy.clear()
-
-            worker = threading.Thread(target=check_again, daemon=True)
-            worker.start()
-            window(controller, args.window, "checking in a thread", busy)
-            stop.set()
-            worker.join()
-            print(f"  {len(checks)} checks, {sum(checks) / max(len(checks), 1):.2f} s each")
-            window(controller, args.window, "idle again", busy)
+            for _ in range(args.rounds):  # interleaved: the machine's load drifts
+                in_thread = checking(
+                    controller,
+                    args.window,
+                    "checking in a thread",
+                    busy,
+                    lambda: check_program(text, settings, gate=controller.gate),
+                )
+                print(f"  {len(in_thread)} checks, {_mean(in_thread):.2f} s each")
+                in_worker = checking(
+                    controller,
+                    args.window,
+                    "checking in a worker process",
+                    busy,
+                    lambda: workers.check(job),
+                )
+                print(f"  {len(in_worker)} checks, {_mean(in_worker):.2f} s each")
+            workers.close()
+            window(controller, args.window, "idle at the end", busy)
         finally:
             controller.stop()
     print("load after: " + " ".join(f"{v:.2f}" for v in os.getloadavg()))

@@ -12,6 +12,7 @@ viser, pydantic): each handler imports what it needs, so ``deltadash --help``, `
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from app.cli import design, emulate, gcode, home, kinematics, run, runs, serve
@@ -56,10 +57,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+SIGPIPE_EXIT = 141  # 128 + SIGPIPE: what a Unix tool whose reader left exits with
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return args.handler(args)
+        code = args.handler(args)
+        sys.stdout.flush()  # here, not at exit: a reader gone (`| head`) is caught below
+        return code
     except DeltaError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `deltadash gcode check FILE | head`: the reader left; no more
+        # output and no traceback (the interpreter's flush at exit would raise it again)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return SIGPIPE_EXIT

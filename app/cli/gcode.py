@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -60,15 +61,17 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         "--start",
         nargs=3,
         type=float,
-        metavar=("X", "Y", "Z"),
-        help="where the tool starts [mm, base frame] (default programs.start_m)",
+        metavar=("X_MM", "Y_MM", "Z_MM"),
+        help="where the tool starts, in millimetres in the base frame (z < 0 below the "
+        "base), e.g. --start 0 0 -240 (default programs.start_m, which is in metres)",
     )
     check.add_argument(
         "--work-offset",
         nargs=3,
         type=float,
-        metavar=("X", "Y", "Z"),
-        help="G54: the program origin in the base frame [mm] (default programs.work_offset_m)",
+        metavar=("X_MM", "Y_MM", "Z_MM"),
+        help="G54: the program origin in the base frame, in millimetres "
+        "(default programs.work_offset_m)",
     )
     check.add_argument(
         "--dry-run",
@@ -175,8 +178,29 @@ def format_line_errors(per_line: list[dict[str, Any]], text: str, title: str) ->
     return "\n".join(out)
 
 
+def _start_refusal(gate: Any, start_mm: list[float]) -> str | None:
+    """Why ``--start`` (mm) cannot be where the tool is (None: it can): outside the
+    workspace, with the same point read as metres suggested when that is inside."""
+    import numpy as np
+
+    point = np.asarray(start_mm) * 1e-3
+    if gate.inside(point):
+        return None
+    given = " ".join(f"{v:g}" for v in start_mm)
+    why = (
+        f"--start {given}: ({', '.join(f'{v:.3f}' for v in start_mm)}) mm is outside the "
+        f"workspace (kept {gate.margin_m * 1e3:.1f} mm from its edge, below the ceiling "
+        f"z = {gate.z_max_m * 1e3:.1f} mm); --start is in millimetres"
+    )
+    as_metres = np.asarray(start_mm, dtype=np.float64)
+    if np.isfinite(as_metres).all() and gate.inside(as_metres):
+        why += f": for {given} m give --start " + " ".join(f"{v * 1e3:g}" for v in start_mm)
+    return why
+
+
 def _check(args: argparse.Namespace) -> int:
     from app.config import ConfigError, load_settings
+    from app.control.commands import CommandContext
     from app.programs.check import check_program
     from app.programs.dry_run import DryRunRefused, dry_run
     from app.programs.errors import ProgramError
@@ -187,10 +211,18 @@ def _check(args: argparse.Namespace) -> int:
     except (ConfigError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    for flag, given in (("--start", args.start), ("--work-offset", args.work_offset)):
+        if given is not None and not all(math.isfinite(v) for v in given):
+            print(f"error: {flag}: expected 3 finite numbers in mm, got {given}", file=sys.stderr)
+            return 2
+    gate = CommandContext.from_settings(settings).gate
     start = None if args.start is None else [v * 1e-3 for v in args.start]
+    if start is not None and (refusal := _start_refusal(gate, args.start)):
+        print(f"error: {refusal}", file=sys.stderr)
+        return 2
     offset = None if args.work_offset is None else [v * 1e-3 for v in args.work_offset]
     try:
-        checked = check_program(text, settings, start_m=start, work_offset_m=offset)
+        checked = check_program(text, settings, gate=gate, start_m=start, work_offset_m=offset)
     except ProgramError as exc:
         if args.json:
             print(json.dumps({"detail": str(exc), "line": exc.line or None, "word": exc.word}))

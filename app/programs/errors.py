@@ -14,3 +14,7 @@ class ProgramError(ValueError):
         self.line, self.word, self.reason = line, word, reason
         where = f"line {line}: {word}: " if word else f"line {line}: "
         super().__init__(where + reason)
+
+    def __reduce__(self) -> tuple[type[ProgramError], tuple[int, str, str]]:
+        """Pickled as its three fields (a check in a worker process raises it there)."""
+        return (type(self), (self.line, self.word, self.reason))

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from app.programs.errors import ProgramError
 
-_WORD = re.compile(r"([A-Z])([+-]?(?:\d+\.?\d*|\.\d+))")
+_WORD = re.compile(r"([A-Z])([+-]?(?:\d+\.?\d*|\.\d+))(E[+-]?\d+)?")
 _NEWLINE = re.compile(r"\r\n|\n|\r")  # what an editor counts as a line break; not \f, U+2028
 MAX_MAGNITUDE = 1e6  # no coordinate, radius, feed or dwell of the subset is larger
 
@@ -76,6 +76,12 @@ def tokenize_line(text: str, number: int) -> Line:
             rest = code[at : at + 12]
             raise ProgramError(
                 number, rest, "not a word (a letter and a number, e.g. G1 or X-10.5)"
+            )
+        if match[3]:  # X1E308: not two words X1 and E308 (E is no word of the subset)
+            raise ProgramError(
+                number,
+                match[0][:24],
+                "exponent notation is not G-code: write the number in full (e.g. X0.001)",
             )
         value = float(match[2])
         if not abs(value) <= MAX_MAGNITUDE:  # 400 digits are inf, 160 overflow later

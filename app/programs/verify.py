@@ -236,6 +236,9 @@ def verify_path(
             lambda v, _i: (
                 f"torque up to {v:.2f} of what the {servo_name} gives at that "
                 f"speed (limit {cap:.2f})"
+                if math.isfinite(v)
+                else f"torque needed at a joint speed where the {servo_name} gives none "
+                f"(at or past its no-load speed; limit {cap:.2f} of what it gives)"
             ),
         )
         worst_ratio = float(ratio[good].max()) if good.size else math.nan  # inf: no torque left

@@ -1,8 +1,9 @@
 """The FastAPI application: its lifespan owns the bus and the control loop.
 
 Startup opens the configured backend (simulator, emulator or real servos) and starts the
-controller's thread; shutdown stops motion, relaxes the servos per config and closes the
-bus. Errors map to HTTP codes in one place, app/server/errors.py.
+controller's thread (and makes the pool of program-check worker processes, which start on
+the first check); shutdown kills those workers, stops motion, relaxes the servos per
+config and closes the bus. Errors map to HTTP codes in one place, app/server/errors.py.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from fastapi_offline import FastAPIOffline
 from app.config import Settings
 from app.control.authority import Authority
 from app.control.controller import Controller
+from app.programs.workers import ProgramWorkers
 from app.runs.manager import RunManager
 from app.scene import start_scene
 from app.server.api import compare, dashboard, mav, programs, robot, runs, telemetry, workspace
@@ -71,6 +73,10 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
             app.state.backend = backend
             app.state.runs = RunManager(controller, settings.runs.folder_path)
             app.state.world = WorldService(controller)
+            # program checks and dry runs in worker processes (started on the first one)
+            app.state.program_workers = ProgramWorkers(
+                settings, programs.CONCURRENT_CHECKS, settings.programs.check_timeout_s
+            )
             controller.pose_status = app.state.world.tracker.status
             runs = lambda: app.state.runs  # noqa: E731
             app.state.scene = await asyncio.to_thread(
@@ -81,6 +87,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
             finally:
                 if app.state.scene is not None:
                     await asyncio.to_thread(app.state.scene.stop)
+                await asyncio.to_thread(app.state.program_workers.close)
                 await asyncio.to_thread(app.state.runs.close)
                 app.state.world.close()
                 if app.state.estop_listener is not None:

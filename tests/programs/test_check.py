@@ -139,3 +139,17 @@ def test_a_linear_delta_is_checked_without_a_torque_model():
     report = check_program("G1 F600 Z-300", linear, start_m=(0.0, 0.0, -0.3)).report
     assert report.worst_torque_ratio is None
     assert all(v.kind != "torque" for v in report.violations)
+
+
+def test_a_torque_no_servo_can_give_is_said_in_words_not_inf(settings):
+    """Past the servo's no-load speed it gives no torque: the ratio is infinite, and the
+    message says why instead of printing inf."""
+    # from a start given in metres where mm were meant (a user's trial): out of reach, and
+    # the branch followed back in whips a joint past the servo's no-load speed
+    report = check_program(
+        "G21 G90\nG1 F1200 X0 Y0 Z-220\nM2", settings, start_m=(0.0, 0.0, -0.00024)
+    ).report
+    torque = [v for v in report.violations if v.kind == "torque"]
+    assert torque, report.violations
+    assert all("inf" not in v.message for v in report.violations)
+    assert any("gives none" in v.message for v in torque)

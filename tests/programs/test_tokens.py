@@ -69,3 +69,14 @@ def test_lines_are_counted_as_an_editor_counts_them():
     assert [texts(line) for line in lines] == [["G0", "X0", "Y0"], ["G1", "X1"], ["G92"]]
     # a byte-order mark (Windows editors write one) is not part of the first word
     assert [w.text for w in tokenize("\ufeffG0 X1")[0].words] == ["G0", "X1"]
+
+
+@pytest.mark.parametrize(
+    ("text", "word"), [("G1 X1e308", "X1E308"), ("G1 F1200 Y-2.5E-3", "Y-2.5E-3")]
+)
+def test_exponent_notation_is_refused_naming_the_word_it_is_in(text, word):
+    """X1e308 was read as X1 and E308 and refused naming E308; the word is X1E308."""
+    with pytest.raises(ProgramError) as info:
+        tokenize(f"G21\n{text}")
+    assert info.value.line == 2 and info.value.word == word
+    assert "exponent notation" in str(info.value)

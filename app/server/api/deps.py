@@ -1,6 +1,6 @@
 """Typed dependencies: what routes read from ``app.state`` (controller, runs, world, scene,
-settings, authority), the token check and the control lease (app/control/authority.py).
-Only this module reads ``app.state``; routes declare what they need as
+settings, authority, program workers), the token check and the control lease
+(app/control/authority.py). Only this module reads ``app.state``; routes declare what they need as
 ``Annotated[..., Depends(...)]`` aliases."""
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from starlette.requests import HTTPConnection
 from app.config import Settings
 from app.control.authority import Authority, ControlRefused, TokenRequired, is_loopback
 from app.control.controller import Controller
+from app.programs.workers import ProgramWorkers
 from app.runs.manager import RunManager
 from app.scene import Scene
 from app.world.service import WorldService
@@ -34,6 +35,11 @@ def get_settings(connection: HTTPConnection) -> Settings:
 
 def get_runs(connection: HTTPConnection) -> RunManager:
     return connection.app.state.runs
+
+
+def get_program_workers(connection: HTTPConnection) -> ProgramWorkers:
+    """The worker processes that check programs (created by the lifespan)."""
+    return connection.app.state.program_workers
 
 
 def get_world(connection: HTTPConnection) -> WorldService:
@@ -118,6 +124,7 @@ def require_control(
 ControllerDep = Annotated[Controller, Depends(get_controller)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 RunsDep = Annotated[RunManager, Depends(get_runs)]
+ProgramWorkersDep = Annotated[ProgramWorkers, Depends(get_program_workers)]
 WorldDep = Annotated[WorldService, Depends(get_world)]
 SceneDep = Annotated[Scene | None, Depends(get_scene)]
 AuthorityDep = Annotated[Authority, Depends(get_authority)]

@@ -1,6 +1,11 @@
 """Programs resource: check a G-code program on the virtual robot before anything moves,
 predict its tracking error on a headless twin, run it.
 
+Checks and dry runs run in worker processes (app/programs/workers.py), not in the
+server's: the control loop keeps its ticks. At most CONCURRENT_CHECKS at a time (503
+beyond, with Retry-After); a worker that dies or takes longer than
+``programs.check_timeout_s`` is a 503 saying so, and the next check gets a new worker.
+
 ``POST /api/programs/check`` plans the program from where the robot is (or ``start_m``)
 and runs every loop sample through the gate's checks, the joint acceleration and the
 servo torque (app/programs/). Nothing moves: the answer is the report. A program that
@@ -18,7 +23,6 @@ program line); a failing check is a 422 with the violations and nothing moves.
 from __future__ import annotations
 
 import asyncio
-import threading
 from dataclasses import replace
 from typing import Any
 
@@ -29,12 +33,14 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from app.control.commands import require_motion
 from app.control.errors import MotionRefused
-from app.programs.check import CheckedProgram, check_program
-from app.programs.dry_run import DryRunRefused, dry_run
+from app.programs.check import CheckedProgram
+from app.programs.dry_run import DryRunRefused
 from app.programs.errors import ProgramError
+from app.programs.workers import CheckJob, ChecksBusy, ProgramWorkers, WorkerCrashed, WorkerError
 from app.server.api.deps import (
     ControlClient,
     ControllerDep,
+    ProgramWorkersDep,
     RunsDep,
     SceneDep,
     SettingsDep,
@@ -43,14 +49,14 @@ from app.server.api.deps import (
 from app.server.api.models import ReachVector3
 from app.server.api.responses import RunStarted
 from app.server.api.runs import start_run
-from app.server.errors import CONTROL, UNAUTHORISED, UNAVAILABLE
+from app.server.errors import CONTROL, UNAUTHORISED, ErrorBody
 
 router = APIRouter(prefix="/programs", tags=["programs"])
 # A long program's check takes seconds of CPU and up to ~1 GB (programs.max_samples loop
-# samples of several arrays), in the server's thread pool beside the control loop: at most
-# this many at a time; another is answered 503 at once (nothing is queued).
+# samples of several arrays): it runs in a worker process (app/programs/workers.py), never
+# beside the control loop in the server's; at most this many at a time, another is
+# answered 503 at once (nothing is queued).
 CONCURRENT_CHECKS = 2
-_checks = threading.BoundedSemaphore(CONCURRENT_CHECKS)
 START_TOLERANCE_M = 0.002  # as the run manager's start check
 
 
@@ -139,6 +145,14 @@ class DryRunOut(BaseModel):
 NOT_READABLE: dict[int, dict[str, Any]] = {
     422: {"model": ProgramErrorOut, "description": "the program cannot be read or planned"}
 }
+CHECK_UNAVAILABLE: dict[int, dict[str, Any]] = {
+    503: {
+        "model": ErrorBody,
+        "description": "the check did not come back: CONCURRENT_CHECKS (2) are running "
+        "(Retry-After), its worker process died (Retry-After) or ran longer than "
+        "programs.check_timeout_s; or the control loop is not running",
+    }
+}
 REFUSED: dict[int, dict[str, Any]] = {
     422: {
         "model": ProgramRefusedOut,
@@ -164,19 +178,20 @@ def _start(controller) -> tuple[np.ndarray | None, np.ndarray | None]:
 @router.post(
     "/check",
     response_model=ProgramReportOut,
-    responses={**NOT_READABLE, **UNAUTHORISED, **UNAVAILABLE},
+    responses={**NOT_READABLE, **UNAUTHORISED, **CHECK_UNAVAILABLE},
 )
 def check(
     body: ProgramRequest,
     controller: ControllerDep,
     settings: SettingsDep,
+    workers: ProgramWorkersDep,
     _: TokenChecked,
     scene: SceneDep,
 ) -> Any:
     """Plan the program and check every loop sample (workspace with margin and ceiling,
     IK on the followed branch, joint limits, speed and acceleration, singularity margin,
-    servo torque); all violations by line. Moves nothing."""
-    outcome = _check(body, controller, settings)
+    servo torque); all violations by line. Runs in a worker process; moves nothing."""
+    outcome = _check(body, controller, settings, workers)
     if isinstance(outcome, JSONResponse):
         return outcome
     checked, notes = outcome
@@ -193,29 +208,18 @@ def _unreadable(exc: ProgramError) -> JSONResponse:
     )
 
 
-def _check(
-    body: ProgramRequest, controller, settings, from_robot: bool = False
-) -> tuple[CheckedProgram, list[str]] | JSONResponse:
-    """The check from ``start_m`` or where the robot is (always there with
-    ``from_robot``: a run starts where the robot is); the 422 of an unreadable program."""
-    if not _checks.acquire(blocking=False):
-        return JSONResponse(
-            {
-                "detail": f"busy: {CONCURRENT_CHECKS} program checks are running; "
-                "try again when one has ended"
-            },
-            status_code=503,
-            headers={"Retry-After": "5"},
-        )
-    try:
-        return _check_now(body, controller, settings, from_robot)
-    finally:
-        _checks.release()
+def _unavailable(exc: WorkerError) -> JSONResponse:
+    """503 for a check that did not come back: all slots busy, its worker died or ran
+    too long (the message says which); Retry-After when trying again soon may work."""
+    retry = {"Retry-After": "5"} if isinstance(exc, ChecksBusy | WorkerCrashed) else {}
+    return JSONResponse({"detail": str(exc)}, status_code=503, headers=retry)
 
 
-def _check_now(
+def _job(
     body: ProgramRequest, controller, settings, from_robot: bool
-) -> tuple[CheckedProgram, list[str]] | JSONResponse:
+) -> tuple[CheckJob, list[str]]:
+    """The check's inputs from ``start_m`` or where the robot is (always there with
+    ``from_robot``: a run starts where the robot is), and the notes to add."""
     given = body.start_m is not None and not from_robot
     start, near = (np.asarray(body.start_m), None) if given else _start(controller)
     notes = []
@@ -223,20 +227,35 @@ def _check_now(
         if from_robot:
             raise MotionRefused("the robot's position is unknown: check the bus")
         notes.append("the robot's position is unknown: checked from programs.start_m")
+    job = CheckJob(
+        body.gcode,
+        settings,
+        gate=controller.gate,
+        start_m=start,
+        work_offset_m=body.work_offset_m,
+        near=near,
+        # a run's log holds at most runs.max_samples: say so before the costly checks
+        max_samples=(settings.runs.max_samples, "runs.max_samples") if from_robot else None,
+    )
+    return job, notes
+
+
+def _check(
+    body: ProgramRequest,
+    controller,
+    settings,
+    workers: ProgramWorkers,
+    from_robot: bool = False,
+) -> tuple[CheckedProgram, list[str]] | JSONResponse:
+    """The check in a worker process (blocks this thread until it answers); the 422 of
+    an unreadable program, the 503 of a check that did not come back."""
+    job, notes = _job(body, controller, settings, from_robot)
     try:
-        checked = check_program(
-            body.gcode,
-            settings,
-            gate=controller.gate,
-            start_m=start,
-            work_offset_m=body.work_offset_m,
-            near=near,
-            # a run's log holds at most runs.max_samples: say so before the costly checks
-            max_samples=(settings.runs.max_samples, "runs.max_samples") if from_robot else None,
-        )
+        return workers.check(job), notes
     except ProgramError as exc:
         return _unreadable(exc)
-    return checked, notes
+    except WorkerError as exc:
+        return _unavailable(exc)
 
 
 def _require_motion(controller) -> None:
@@ -258,28 +277,40 @@ def _refused(checked: CheckedProgram) -> JSONResponse:
 @router.post(
     "/dry-run",
     response_model=DryRunOut,
-    responses={**NOT_READABLE, **UNAUTHORISED, **UNAVAILABLE},
+    responses={**NOT_READABLE, **UNAUTHORISED, **CHECK_UNAVAILABLE},
 )
 def dry_run_program(
-    body: RunProgramRequest, controller: ControllerDep, settings: SettingsDep, _: TokenChecked
+    body: RunProgramRequest,
+    controller: ControllerDep,
+    settings: SettingsDep,
+    workers: ProgramWorkersDep,
+    _: TokenChecked,
 ) -> Any:
     """Check the program, then play its timed path on a headless twin of the robot (a
     simulated bus of its own, stepped offline; never the live robot): the predicted
     tracking error (goal - FK) per program line. Programs longer than
-    programs.dry_run_max_s are refused (422). Moves nothing."""
-    checked = _check(body, controller, settings)
-    if isinstance(checked, JSONResponse):
-        return checked
+    programs.dry_run_max_s are refused (422). Both in a worker process; moves nothing."""
+    job, _notes = _job(body, controller, settings, from_robot=False)
     try:
-        result = dry_run(checked[0], settings, feedforward=body.feedforward)
+        _checked, result = workers.dry_run(job, body.feedforward)
+    except ProgramError as exc:
+        return _unreadable(exc)
     except DryRunRefused as exc:
         return JSONResponse({"detail": str(exc)}, status_code=422)
+    except WorkerError as exc:
+        return _unavailable(exc)
     return result.to_dict()
 
 
-@router.post("/run", response_model=RunStarted, responses={**CONTROL, **REFUSED})
+@router.post(
+    "/run", response_model=RunStarted, responses={**CONTROL, **REFUSED, **CHECK_UNAVAILABLE}
+)
 async def run_program(
-    request: Request, body: RunProgramRequest, runs: RunsDep, _: ControlClient
+    request: Request,
+    body: RunProgramRequest,
+    runs: RunsDep,
+    workers: ProgramWorkersDep,
+    _: ControlClient,
 ) -> Any:
     """Check the program from where the robot is (a run starts there: a start_m more than
     2 mm away is a 422) and, only if it passes, run it as a run of kind "program";
@@ -287,7 +318,7 @@ async def run_program(
     Its progress carries program_line; its stats program.lines, the error per line."""
     controller = runs.controller
     _require_motion(controller)  # torque off, e-stop, fault: said as such, before the check
-    checked = await asyncio.to_thread(_check, body, controller, controller.settings, True)
+    checked = await asyncio.to_thread(_check, body, controller, controller.settings, workers, True)
     if isinstance(checked, JSONResponse):
         return checked
     program = checked[0]

@@ -71,3 +71,41 @@ def test_a_file_that_is_not_utf8_exits_2_naming_the_file_and_line(tmp_path, caps
     err = capsys.readouterr().err
     assert f"{program}: line 2: byte 0xdf is not UTF-8 text" in err
     assert "Traceback" not in err
+
+
+def test_the_start_says_its_unit_in_the_help_and_in_its_errors(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["gcode", "check", "--help"])
+    assert "millimetres" in capsys.readouterr().out
+    program = tmp_path / "still.ngc"
+    program.write_text("(nothing)\n")
+    # metres where mm are meant: refused, saying the unit and what it would be in mm
+    assert main(["gcode", "check", str(program), "--start", "0", "0", "-0.24"]) == 2
+    err = capsys.readouterr().err
+    assert "--start is in millimetres" in err and "give --start 0 0 -240" in err
+    assert main(["gcode", "check", str(program), "--start", "0", "0", "nan"]) == 2
+    assert "--start: expected 3 finite numbers in mm" in capsys.readouterr().err
+
+
+@pytest.mark.slow  # a deltadash process
+def test_a_reader_that_leaves_ends_the_check_quietly():
+    """`deltadash gcode check FILE | head`: no BrokenPipeError traceback, exit 141."""
+    import os
+    import subprocess
+    import sys
+
+    root = EXAMPLES.parent
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    command = [sys.executable, "-m", "app.cli", "gcode", "check", "--json"]
+    with subprocess.Popen(
+        [*command, str(EXAMPLES / "fails.ngc")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=root,
+        env=env,
+    ) as child:
+        child.stdout.close()  # the reader leaves before the report is written
+        err = child.stderr.read().decode()
+        code = child.wait(timeout=300)
+    assert "Traceback" not in err and "BrokenPipe" not in err, err
+    assert code == 141, err

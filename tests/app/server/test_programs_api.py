@@ -1,11 +1,18 @@
-"""POST /api/programs/check: the report of a program, 422 for one that cannot be read."""
+"""POST /api/programs/check: the report of a program, 422 for one that cannot be read;
+in a worker process, 503 when none answers."""
 
 from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.support.wait import ok_json
+from tests.support.wait import ok_json, wait_for
 
 START = [0.0, 0.0, -0.22]
 GOOD = "G21 G90\nG1 F1200 X10 Y0 Z-220\nG3 X-10 Y0 R10\nG4 P0.1\nM2"
@@ -66,19 +73,57 @@ def test_without_a_start_the_check_starts_where_the_robot_is(client):
 
 
 def test_checks_beyond_the_concurrent_limit_are_a_503_not_a_queue(client, monkeypatch):
-    """Each long check costs seconds of CPU and memory beside the control loop: when the
+    """Each long check costs seconds of CPU and up to ~1 GB in a worker process: when the
     allowed number are running, another is refused at once, saying why."""
-    import threading
-
-    from app.server.api import programs
-
-    monkeypatch.setattr(programs, "_checks", threading.BoundedSemaphore(1))
-    programs._checks.acquire()  # one check running, of a limit of one
-    try:
-        response = client.post("/api/programs/check", json={"gcode": "G4 P0.1"})
-        assert response.status_code == 503, response.text
-        assert "program checks are running" in response.json()["detail"]
-        assert response.headers["retry-after"] == "5"
-    finally:
-        programs._checks.release()
+    workers = client.app.state.program_workers
+    assert workers.slots == 2
+    monkeypatch.setattr(workers, "_free", [])  # every slot running a check
+    response = client.post("/api/programs/check", json={"gcode": "G4 P0.1"})
+    assert response.status_code == 503, response.text
+    assert "2 program checks are running" in response.json()["detail"]
+    assert response.headers["retry-after"] == "5"
+    monkeypatch.setattr(workers, "_free", [0, 1])
     assert ok_json(check(client, "G4 P0.1", start_m=START))["ok"]  # free again: answered
+
+
+def test_the_check_runs_outside_the_server_process(client, monkeypatch):
+    """The control loop's process never checks: here the check would fail, in the worker
+    it answers."""
+    from app.programs import workers
+
+    def not_here(*_args, **_kwargs):
+        raise AssertionError("the program was checked in the server's process")
+
+    monkeypatch.setattr(workers, "check_program", not_here)
+    assert ok_json(check(client, GOOD, start_m=START))["ok"] is True
+
+
+def say_pid_then_wait(job) -> None:
+    """In the worker, instead of the check: the pid to the file the program text names."""
+    Path(job.text).write_text(str(os.getpid()))
+    while True:
+        time.sleep(1.0)
+
+
+@pytest.mark.slow  # a new worker process starts
+def test_a_killed_check_worker_is_a_503_saying_so_and_the_next_check_works(
+    client, monkeypatch, tmp_path
+):
+    from app.programs import workers
+
+    pid_file = tmp_path / "pid"
+    monkeypatch.setattr(workers, "run_check", say_pid_then_wait)
+    answer: list = []
+    request = threading.Thread(
+        target=lambda: answer.append(check(client, str(pid_file), start_m=START)), daemon=True
+    )
+    request.start()
+    wait_for(pid_file.exists, "the check's worker to say its pid", 180.0)
+    os.kill(int(pid_file.read_text()), signal.SIGKILL)
+    request.join(180.0)
+    assert answer, "the request never came back"
+    response = answer[0]
+    assert response.status_code == 503, response.text
+    assert "ended before answering" in response.json()["detail"]
+    monkeypatch.undo()
+    assert ok_json(check(client, GOOD, start_m=START))["ok"] is True

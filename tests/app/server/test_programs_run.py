@@ -212,12 +212,12 @@ def test_a_program_run_aborts_like_any_run_with_the_lines_it_executed(fresh):
 
 
 def test_with_torque_off_a_run_is_refused_as_such_before_any_check(fresh, monkeypatch):
-    from app.server.api import programs
+    from app.programs.workers import ProgramWorkers
 
     def no_check(*_args, **_kwargs):
         raise AssertionError("the program was checked although the robot may not move")
 
-    monkeypatch.setattr(programs, "check_program", no_check)
+    monkeypatch.setattr(ProgramWorkers, "check", no_check)
     response = fresh.post("/api/programs/run", json={"gcode": PROGRAM})  # torque is off
     assert response.status_code == 409, response.text
     assert response.json()["detail"].startswith("torque is off")

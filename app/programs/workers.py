@@ -1,0 +1,212 @@
+"""Program checks and dry runs in worker processes, away from the control loop.
+
+A check is seconds of CPU, much of it Python that holds the GIL: in the server's own
+process it held the 200 Hz loop up to 77.5 ms (benchmarks/gcode_check_loop.py,
+docs/performance.md). So the server hands each check and dry run to a worker process:
+only picklable things cross (the program's text, the settings, the gate in force, the
+start point and the G54 offset in; a :class:`CheckedProgram`, a :class:`DryRun` or the
+:class:`ProgramError` / :class:`DryRunRefused` raised there out).
+
+:class:`ProgramWorkers` has ``slots`` slots (2 by default), each a
+``ProcessPoolExecutor`` of one worker process, started with ``spawn`` (the server has
+threads: a forked copy could inherit a lock another thread held) on the slot's first job
+and kept for the next ones. A worker runs at a lower priority (nice +10: on a loaded
+machine the loop gets the CPU first), ignores SIGINT (the server stops it) and pays the
+gate's workspace projection once, when it starts. When every slot is busy another job is
+refused at once (:class:`ChecksBusy`, nothing is queued). A job that takes longer than
+``timeout_s`` has its worker killed (:class:`WorkerTimeout`); a worker that dies (killed,
+out of memory) ends its job with :class:`WorkerCrashed`; either way the slot starts a new
+worker for its next job.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import os
+import signal
+import threading
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import numpy as np
+
+from app.config import Settings
+from app.control.commands import CommandContext
+from app.control.gate import Gate
+from app.programs.check import CheckedProgram, check_program
+from app.programs.dry_run import DryRun, dry_run
+
+WORKER_NICE = 10  # added to a worker's niceness: the control loop's process comes first
+SPAWN = multiprocessing.get_context("spawn")  # never fork a process that has threads
+T = TypeVar("T")
+
+
+class WorkerError(RuntimeError):
+    """A job that did not come back from its worker; the message says why (an HTTP 503)."""
+
+
+class ChecksBusy(WorkerError):
+    """Every slot is running a job: refused at once, nothing is queued."""
+
+
+class WorkerCrashed(WorkerError):
+    """The worker process ended before answering (killed, out of memory)."""
+
+
+class WorkerTimeout(WorkerError):
+    """The job took longer than the bound: its worker was killed."""
+
+
+@dataclass(frozen=True)
+class CheckJob:
+    """What a check needs, all picklable: the arguments of :func:`check_program`.
+
+    text: the program; settings: the robot and limits; gate: the limits in force (the
+    controller's); start_m, work_offset_m (3,) [m] and near (3,) [rad] or None (the
+    settings' defaults); max_samples: a lower cap and its setting's name, or None.
+    """
+
+    text: str
+    settings: Settings
+    gate: Gate | None = None
+    start_m: np.ndarray | None = None
+    work_offset_m: tuple[float, float, float] | None = None
+    near: np.ndarray | None = None
+    max_samples: tuple[int, str] | None = None
+
+
+def run_check(job: CheckJob) -> CheckedProgram:
+    """The check, in the worker (raises ProgramError as :func:`check_program` does)."""
+    return check_program(
+        job.text,
+        job.settings,
+        gate=job.gate,
+        start_m=job.start_m,
+        work_offset_m=job.work_offset_m,
+        near=job.near,
+        max_samples=job.max_samples,
+    )
+
+
+def run_dry_run(job: CheckJob, feedforward: bool) -> tuple[CheckedProgram, DryRun]:
+    """The check, then the dry run on the worker's own headless twin (raises
+    ProgramError or DryRunRefused)."""
+    checked = run_check(job)
+    return checked, dry_run(checked, job.settings, feedforward=feedforward)
+
+
+def _start_worker(settings: Settings) -> None:
+    """A new worker: lower priority, SIGINT left to the server, the gate's first workspace
+    projection paid now (cached per process by kinematics.projection)."""
+    with contextlib.suppress(OSError):
+        os.nice(WORKER_NICE)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    CommandContext.from_settings(settings)
+
+
+def _kill(executor: ProcessPoolExecutor) -> None:
+    """Stop ``executor`` and kill its worker (busy or not); returns without waiting."""
+    # killed first: a shutdown alone would let an idle worker exit on its own, and a busy
+    # one finish its job (ProcessPoolExecutor has no public kill before Python 3.14)
+    for process in list((getattr(executor, "_processes", None) or {}).values()):
+        with contextlib.suppress(OSError, ValueError):
+            process.kill()
+    executor.shutdown(wait=False, cancel_futures=True)
+
+
+class ProgramWorkers:
+    """Checks and dry runs in worker processes, at most ``slots`` at a time.
+
+    Args:
+        settings: passed to each worker when it starts (to warm the gate's projection).
+        slots: jobs running at once (each a worker process of up to ~1 GB in a long check).
+        timeout_s: the longest a job may take, its worker's start included [s].
+
+    The methods block the calling thread (a request's) until the answer, and raise
+    ChecksBusy, WorkerCrashed or WorkerTimeout (each a WorkerError) besides what the job
+    itself raises. Safe from any thread. :meth:`close` kills the workers.
+    """
+
+    def __init__(self, settings: Settings, slots: int = 2, timeout_s: float = 300.0) -> None:
+        self.settings, self.slots, self.timeout_s = settings, slots, timeout_s
+        self._lock = threading.Lock()
+        self._free = list(range(slots))
+        self._executors: list[ProcessPoolExecutor | None] = [None] * slots
+        self._closed = False
+
+    def check(self, job: CheckJob) -> CheckedProgram:
+        """:func:`run_check` in a worker."""
+        return self.call(run_check, job)
+
+    def dry_run(self, job: CheckJob, feedforward: bool) -> tuple[CheckedProgram, DryRun]:
+        """:func:`run_dry_run` in a worker."""
+        return self.call(run_dry_run, job, feedforward)
+
+    def call(self, function: Callable[..., T], *args: Any) -> T:
+        """``function(*args)`` in a free slot's worker: a module-level function and
+        picklable arguments and result (what ``check`` and ``dry_run`` use; tests give
+        their own)."""
+        slot = self._take()
+        try:
+            executor = self._executor(slot)
+            try:
+                future = executor.submit(function, *args)
+                return future.result(timeout=self.timeout_s)
+            except FutureTimeout:
+                self._discard(slot)
+                raise WorkerTimeout(
+                    f"the program's check took longer than {self.timeout_s:g} s "
+                    "(programs.check_timeout_s): its worker was stopped; a shorter program "
+                    "checks faster"
+                ) from None
+            except BrokenProcessPool:
+                self._discard(slot)
+                raise WorkerCrashed(
+                    "the worker process checking the program ended before answering "
+                    "(killed, or out of memory); the next check starts a new one"
+                ) from None
+        finally:
+            with self._lock:
+                self._free.append(slot)
+
+    def close(self) -> None:
+        """Kill every worker (a check running is abandoned); later jobs are ChecksBusy."""
+        with self._lock:
+            self._closed = True
+            executors, self._executors = self._executors, [None] * self.slots
+        for executor in executors:
+            if executor is not None:
+                _kill(executor)
+
+    def _take(self) -> int:
+        with self._lock:
+            if self._closed:
+                raise ChecksBusy("the server is stopping: no program checks now")
+            if not self._free:
+                raise ChecksBusy(
+                    f"busy: {self.slots} program checks are running; try again when one has ended"
+                )
+            return self._free.pop()
+
+    def _executor(self, slot: int) -> ProcessPoolExecutor:
+        with self._lock:
+            if self._closed:
+                raise ChecksBusy("the server is stopping: no program checks now")
+            executor = self._executors[slot]
+            if executor is None:  # no process yet: it starts on the first submit
+                executor = ProcessPoolExecutor(
+                    1, mp_context=SPAWN, initializer=_start_worker, initargs=(self.settings,)
+                )
+                self._executors[slot] = executor
+            return executor
+
+    def _discard(self, slot: int) -> None:
+        with self._lock:
+            executor, self._executors[slot] = self._executors[slot], None
+        if executor is not None:
+            _kill(executor)
