@@ -63,6 +63,7 @@ class CommandContext:
             settings.limits.z_max_m,
             settings.limits.min_dexterity,
             settings.limits.joint_speed_rad_s * period_s,
+            settings.tool.build(),  # the [wrist] section will give it its 4th axis
         )
         jog = settings.jog
         return cls(
@@ -151,19 +152,26 @@ def begin_motion(state: LoopState, source: GoalSource) -> None:
 
 # ---- motion ----
 def check_move(
-    gate: Gate, point: Any, joints: Any, joint_space: bool, near_rad: np.ndarray
+    gate: Gate,
+    point: Any,
+    joints: Any,
+    joint_space: bool,
+    near_rad: np.ndarray,
+    phi_rad: float = 0.0,
 ) -> tuple[np.ndarray, bool]:
     """A move's target and whether it is in joint space, checked in the caller's thread.
 
-    Exactly one of ``point`` [m] or ``joints`` [rad]; a point must be reachable from
-    ``near_rad``, and a joint-space move to a point goes to its joints.
+    Exactly one of ``point`` (the tool tip [m] at wrist angle ``phi_rad``) or ``joints``
+    [rad]; a point must be reachable from ``near_rad``, and a joint-space move to a point
+    goes to its joints.
     """
     if (point is None) == (joints is None):
         raise GoalRejected("give exactly one of position_m or joints_rad")
+    phi_rad = gate.check_phi(phi_rad)
     if joints is not None:
         return gate.check_joints(np.asarray(joints, dtype=np.float64)), True
-    goal = gate.check_point(point)
-    target = gate.solve(goal, near_rad)  # refuses a point with no usable joint solution
+    goal = gate.check_point(point, phi_rad)
+    target = gate.solve(goal, near_rad, phi_rad)  # refuses a point with no usable joints
     return (target, True) if joint_space else (goal, False)
 
 
@@ -184,11 +192,18 @@ def jog_source(state: LoopState, ctx: CommandContext, renewal: bool = False) -> 
 
 
 def jog_to(
-    state: LoopState, ctx: CommandContext, goal: np.ndarray, speed_m_s: float | None = None
+    state: LoopState,
+    ctx: CommandContext,
+    goal: np.ndarray,
+    speed_m_s: float | None = None,
+    phi_rad: float = 0.0,
 ) -> list[float]:
-    """Jog towards ``goal`` [m] (already gated), starting a jog source if none is active;
-    ``speed_m_s`` caps its speed per axis (None: the configured jog limit)."""
-    return _retarget(state, jog_source(state, ctx), goal, speed_m_s)
+    """Jog the tip towards ``goal`` [m] at wrist angle ``phi_rad`` [rad] (both already
+    gated), starting a jog source if none is active; ``speed_m_s`` caps its speed per axis
+    (None: the configured jog limit)."""
+    source = jog_source(state, ctx)
+    state.phi_rad = phi_rad  # 0 until a wrist is configured (the gate refuses others)
+    return _retarget(state, source, goal, speed_m_s)
 
 
 def _retarget(
@@ -212,7 +227,7 @@ def jog_by(
     """
     source = jog_source(state, ctx)
     base = source.aim_m
-    goal = ctx.gate.clamp_towards(base, base + delta, state.reference_rad)
+    goal = ctx.gate.clamp_towards(base, base + delta, state.reference_rad, state.phi_rad)
     return _retarget(state, source, goal, speed_m_s)
 
 
@@ -222,14 +237,17 @@ def move(
     target: np.ndarray,
     duration_s: float | None,
     joint_space: bool,
+    phi_rad: float = 0.0,
 ) -> dict:
-    """Smooth move to ``target``: joint angles [rad] if ``joint_space``, else a point [m]."""
+    """Smooth move to ``target``: joint angles [rad] if ``joint_space``, else a tip [m] at
+    wrist angle ``phi_rad`` [rad] (already gated)."""
     require_motion(state)
+    state.phi_rad = phi_rad  # 0 until a wrist is configured (the gate refuses others)
     if joint_space:
         speed = ctx.joint_speed_rad_s
         limits = Limits(0.5 * speed, 4.0 * speed, 40.0 * speed)
         start = start_joints(state)
-        goal = ctx.robot.fk(target).points
+        goal = ctx.gate.tip(ctx.robot.fk(target).points, state.phi_rad)
     else:
         limits, start, goal = ctx.jog_limits, start_point(state), target
     source = MoveSource(start, target, limits, duration_s, joint_space=joint_space)

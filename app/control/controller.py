@@ -1,9 +1,10 @@
 """The controller: the only owner of the servo bus, ticking in its own thread.
 
 Each tick: run queued operator commands, read the joint state, FK to the measured platform
-position, take a setpoint from the active goal source, pass it through the gate, IK on the
-branch nearest the current joints, limit joint speed, write the goal, check safety, then
-publish an immutable Snapshot. Operator commands (HTTP handlers, the 3D scene's callbacks)
+position and its tool tip, take a (tip) setpoint from the active goal source, pass it
+through the gate (which checks the platform point the tip implies), IK on the branch
+nearest the current joints, limit joint speed, write the goal, check safety, then publish
+an immutable Snapshot. Operator commands (HTTP handlers, the 3D scene's callbacks)
 never touch the bus: they are queued and run at the start of the next tick, in this thread.
 """
 
@@ -129,11 +130,13 @@ class Controller:
             self._commands.put((command, future))
         return future
 
-    def set_goal(self, point: Any) -> Future:
-        """Jog target, checked strictly: outside the workspace is refused with the nearest."""
-        goal = self.gate.check_point(point)
-        self.gate.solve(goal, self._near_measured())
-        return self.submit(lambda: commands.jog_to(self.state, self.ctx, goal))
+    def set_goal(self, point: Any, phi_rad: float = 0.0) -> Future:
+        """Jog target: the tool tip [m] at wrist angle ``phi_rad`` [rad], checked strictly
+        (a tip whose platform point is outside the workspace is refused with the nearest)."""
+        phi = self.gate.check_phi(phi_rad)
+        goal = self.gate.check_point(point, phi)
+        self.gate.solve(goal, self._near_measured(), phi)
+        return self.submit(lambda: commands.jog_to(self.state, self.ctx, goal, phi_rad=phi))
 
     def jog(self, delta_m: Any, speed_m_s: float | None = None) -> Future:
         """Relative jog step [m] from what the loop commands when the step runs (not from a
@@ -161,13 +164,16 @@ class Controller:
         joints: Any = None,
         duration_s: float | None = None,
         joint_space: bool = False,
+        phi_rad: float = 0.0,
     ) -> Future:
-        """Smooth move-to a point (Cartesian or joint-space path) or to joint angles."""
+        """Smooth move-to a tip [m] at ``phi_rad`` (Cartesian or joint-space path) or to
+        joint angles."""
         target, joint_space = commands.check_move(
-            self.gate, point, joints, joint_space, self._near_measured()
+            self.gate, point, joints, joint_space, self._near_measured(), phi_rad
         )
+        phi = float(phi_rad)  # checked by check_move
         return self.submit(
-            lambda: commands.move(self.state, self.ctx, target, duration_s, joint_space)
+            lambda: commands.move(self.state, self.ctx, target, duration_s, joint_space, phi)
         )
 
     def run_source(
@@ -272,9 +278,12 @@ class Controller:
         state.misses.ok()
         state.freshness.update(self._now(), joints, state.commanded_rad)
         state.joints = joints
-        state.point_m = self.robot.fk(joints.position_rad).points
+        state.platform_m = self.robot.fk(joints.position_rad).points
+        # the tip at the held wrist angle (a measured one once a wrist servo reports it)
+        state.point_m = self.gate.tip(state.platform_m, state.phi_rad)
         if self._external is not None:  # the simulator's "motion capture" of the platform,
-            state.external_m = self._external(at_last_read=True)  # at the read's instant
+            external = self._external(at_last_read=True)  # at the read's instant
+            state.external_m = self.gate.tip(external, state.phi_rad)
         return True
 
     def _advance(self) -> None:
@@ -314,8 +323,9 @@ class Controller:
         try:
             if setpoint.joints_rad is not None:
                 return self.gate.check_joints(setpoint.joints_rad)
-            point = self.gate.clamp_point(setpoint.point_m)
-            return self.gate.solve(point, self.state.reference_rad)
+            phi = self.state.phi_rad if setpoint.phi_rad is None else setpoint.phi_rad
+            point = self.gate.clamp_point(setpoint.point_m, phi)
+            return self.gate.solve(point, self.state.reference_rad, phi)
         except GoalRejected as exc:
             self.state.warning = f"holding: {exc}"  # the path crossed a limit: stay put
             return None
@@ -332,7 +342,7 @@ class Controller:
                 record_fault(state, fault)
             return
         state.commanded_rad = joints
-        state.commanded_point_m = self.robot.fk(joints).points
+        state.commanded_point_m = self.gate.tip(self.robot.fk(joints).points, state.phi_rad)
         state.warning = None
 
     def _now(self) -> float:
@@ -346,7 +356,7 @@ class Controller:
     # ---- read from the control thread (e.g. in a listener) ----
     @property
     def measured_point(self) -> np.ndarray:
-        """This tick's measured platform position (call from the control thread)."""
+        """This tick's measured tool tip (call from the control thread)."""
         return self.state.point_m
 
     @property
