@@ -69,6 +69,8 @@ def test_the_wrist_turns_only_the_horizontal_part_of_the_offset(offset, phi, tur
     np.testing.assert_allclose(once, _rz(turn) @ (tool.tip(platform, phi) - platform), atol=1e-12)
     assert once[2] == pytest.approx(offset[2])
     np.testing.assert_array_equal(Tool(wrist=True).tip(platform, phi), platform)
+    # a Python float (the control tick's fast path) and an array agree
+    np.testing.assert_allclose(tool.tip(platform, phi), tool.tip(platform, np.array(phi)))
 
 
 def test_without_a_wrist_phi_zero_is_the_plain_offset_in_any_batch():
