@@ -191,7 +191,8 @@ class JogSettings(_Section):
         0.05, gt=0, description="the dashboard asks before a typed move longer than this [m]"
     )
     home_m: tuple[float, float, float] = Field(
-        (0.0, 0.0, -0.24), description="the point the dashboard's Go home button goes to [m]"
+        (0.0, 0.0, -0.24),
+        description="the tool tip point the dashboard's Go home button goes to [m]",
     )
 
 
@@ -294,7 +295,7 @@ class ProgramSettings(_Section):
     )
     payload_kg: float = Field(0.0, ge=0, description="load on the platform for the torque check")
     start_m: tuple[float, float, float] = Field(
-        (0.0, 0.0, -0.24), description="where an offline check assumes the tool starts [m]"
+        (0.0, 0.0, -0.24), description="where an offline check assumes the tool tip starts [m]"
     )
     work_offset_m: tuple[float, float, float] = Field(
         (0.0, 0.0, 0.0), description="G54: the program origin in the base frame [m]"
