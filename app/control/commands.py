@@ -242,16 +242,16 @@ def move(
     """Smooth move to ``target``: joint angles [rad] if ``joint_space``, else a tip [m] at
     wrist angle ``phi_rad`` [rad] (already gated)."""
     require_motion(state)
-    state.phi_rad = phi_rad  # 0 until a wrist is configured (the gate refuses others)
     if joint_space:
         speed = ctx.joint_speed_rad_s
         limits = Limits(0.5 * speed, 4.0 * speed, 40.0 * speed)
         start = start_joints(state)
-        goal = ctx.gate.tip(ctx.robot.fk(target).points, state.phi_rad)
+        goal = ctx.gate.tip(ctx.robot.fk(target).points, phi_rad)
     else:
         limits, start, goal = ctx.jog_limits, start_point(state), target
     source = MoveSource(start, target, limits, duration_s, joint_space=joint_space)
     begin_motion(state, source)
+    state.phi_rad = phi_rad  # 0 until a wrist is configured (the gate refuses others)
     state.goal_m = goal
     return {"duration_s": source.duration_s}
 
