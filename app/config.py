@@ -13,6 +13,9 @@ Example file::
     R = 0.0844
     r = 0.038
 
+    [tool]
+    offset_m = [0.0, 0.0, -0.05]
+
     [hardware]
     backend = "dynamixel"
     port = "/dev/ttyUSB0"
@@ -46,6 +49,7 @@ from pydantic import (
     Field,
     FiniteFloat,
     ValidationError,
+    field_validator,
     model_validator,
 )
 from pydantic_settings import (
@@ -56,7 +60,7 @@ from pydantic_settings import (
 )
 
 from hardware.calibration import JointCalibration
-from kinematics import DeltaError, LinearDelta, PerLegRotaryDelta, RotaryDelta
+from kinematics import DeltaError, LinearDelta, PerLegRotaryDelta, RotaryDelta, Tool
 
 # The file is chosen at run time (``deltadash serve --config FILE``) while the sources are
 # built inside ``Settings()``; a context variable hands the path over without a global.
@@ -202,6 +206,40 @@ class SimSettings(_Section):
             raise ValueError(f"hardware.sim.{field}: {exc}") from exc
 
 
+MAX_TOOL_OFFSET_M = 0.5  # a longer tool is a typo (mm for m), not a Delta's tool
+
+
+class ToolSettings(_Section):
+    """The tool on the platform (kinematics/tool.py ``Tool``): operators command its tip.
+
+    Without this section the offset is zero and the tip is the platform centre (the
+    behaviour before tools). Frames: docs/kinematics.md, "The tool tip".
+    """
+
+    offset_m: tuple[float, float, float] = Field(
+        (0.0, 0.0, 0.0),
+        description="tool tip in the platform frame at wrist angle phi = 0 [m], e.g. "
+        "[0, 0, -0.05] for a 5 cm tool pointing down",
+    )
+
+    @field_validator("offset_m")
+    @classmethod
+    def _sensible(cls, offset: tuple[float, float, float]) -> tuple[float, float, float]:
+        if not all(math.isfinite(v) for v in offset):
+            raise ValueError(f"must be three finite numbers [m], got {list(offset)}")
+        length = math.hypot(*offset)
+        if length > MAX_TOOL_OFFSET_M:
+            raise ValueError(
+                f"the tip is {length:.3f} m from the platform centre, over "
+                f"{MAX_TOOL_OFFSET_M} m (metres, not millimetres?)"
+            )
+        return offset
+
+    def build(self, wrist: bool = False) -> Tool:
+        """The kinematics tool; ``wrist``: a 4th axis turns it about z (the [wrist] section)."""
+        return Tool(offset_m=self.offset_m, wrist=wrist)
+
+
 class HardwareSettings(_Section):
     """Which servo bus drives the robot."""
 
@@ -256,7 +294,8 @@ class JogSettings(_Section):
         0.05, gt=0, description="the dashboard asks before a typed move longer than this [m]"
     )
     home_m: tuple[float, float, float] = Field(
-        (0.0, 0.0, -0.24), description="the point the dashboard's Go home button goes to [m]"
+        (0.0, 0.0, -0.24),
+        description="the tool tip point the dashboard's Go home button goes to [m]",
     )
 
 
@@ -372,7 +411,7 @@ class ProgramSettings(_Section):
     )
     payload_kg: float = Field(0.0, ge=0, description="load on the platform for the torque check")
     start_m: tuple[float, float, float] = Field(
-        (0.0, 0.0, -0.24), description="where an offline check assumes the tool starts [m]"
+        (0.0, 0.0, -0.24), description="where an offline check assumes the tool tip starts [m]"
     )
     work_offset_m: tuple[float, float, float] = Field(
         (0.0, 0.0, 0.0), description="G54: the program origin in the base frame [m]"
@@ -407,6 +446,7 @@ class Settings(BaseSettings):
         env_prefix="DELTADASH_", env_nested_delimiter="__", extra="forbid", frozen=True
     )
     robot: RobotSettings = RobotSettings()
+    tool: ToolSettings = ToolSettings()
     hardware: HardwareSettings = HardwareSettings()
     loop: LoopSettings = LoopSettings()
     limits: LimitSettings = LimitSettings()

@@ -40,6 +40,8 @@ class Tool:
         object.__setattr__(self, "_offset", offset)
 
     def _rotated_offset(self, phi: Any) -> np.ndarray:
+        if isinstance(phi, (int, float)):  # the control tick's case: no NumPy per call
+            return self._rotated_offset_scalar(float(phi))
         if not self.wrist:
             if np.any(np.asarray(phi) != 0.0):
                 raise DeltaError("phi: this tool has no wrist axis (Tool(wrist=True) to add one)")
@@ -48,6 +50,15 @@ class Tool:
         c, s = np.cos(angle), np.sin(angle)
         ox, oy, oz = self._offset
         return np.stack([c * ox - s * oy, s * ox + c * oy, np.broadcast_to(oz, c.shape)], -1)
+
+    def _rotated_offset_scalar(self, phi: float) -> np.ndarray:
+        if not self.wrist:
+            if phi != 0.0:
+                raise DeltaError("phi: this tool has no wrist axis (Tool(wrist=True) to add one)")
+            return self._offset
+        c, s = math.cos(phi), math.sin(phi)
+        ox, oy, oz = self.offset_m
+        return np.array([c * ox - s * oy, s * ox + c * oy, oz])
 
     def tip(self, platform_points: Any, phi: Any = 0.0) -> np.ndarray:
         """Tool tip [m] for platform centres (*, 3) and wrist angles phi (*) [rad]."""

@@ -67,6 +67,7 @@ class CommandContext:
             settings.limits.min_dexterity,
             settings.limits.joint_speed_rad_s * period_s,
             *_wrist_limits(settings, period_s),
+            settings.tool.build(wrist=settings.wrist.enabled),
         )
         jog = settings.jog
         return cls(
@@ -166,19 +167,26 @@ def begin_motion(state: LoopState, source: GoalSource) -> None:
 
 # ---- motion ----
 def check_move(
-    gate: Gate, point: Any, joints: Any, joint_space: bool, near_rad: np.ndarray
+    gate: Gate,
+    point: Any,
+    joints: Any,
+    joint_space: bool,
+    near_rad: np.ndarray,
+    phi_rad: float = 0.0,
 ) -> tuple[np.ndarray, bool]:
     """A move's target and whether it is in joint space, checked in the caller's thread.
 
-    Exactly one of ``point`` [m] or ``joints`` [rad]; a point must be reachable from
-    ``near_rad``, and a joint-space move to a point goes to its joints.
+    Exactly one of ``point`` (the tool tip [m] at wrist angle ``phi_rad``) or ``joints``
+    [rad]; a point must be reachable from ``near_rad``, and a joint-space move to a point
+    goes to its joints.
     """
     if (point is None) == (joints is None):
         raise GoalRejected("give exactly one of position_m or joints_rad")
+    phi_rad = gate.check_phi(phi_rad)
     if joints is not None:
         return gate.check_joints(np.asarray(joints, dtype=np.float64)), True
-    goal = gate.check_point(point)
-    target = gate.solve(goal, near_rad)  # refuses a point with no usable joint solution
+    goal = gate.check_point(point, phi_rad)
+    target = gate.solve(goal, near_rad, phi_rad)  # refuses a point with no usable joints
     return (target, True) if joint_space else (goal, False)
 
 
@@ -199,11 +207,26 @@ def jog_source(state: LoopState, ctx: CommandContext, renewal: bool = False) -> 
 
 
 def jog_to(
-    state: LoopState, ctx: CommandContext, goal: np.ndarray, speed_m_s: float | None = None
+    state: LoopState,
+    ctx: CommandContext,
+    goal: np.ndarray,
+    speed_m_s: float | None = None,
+    phi_rad: float = 0.0,
 ) -> list[float]:
-    """Jog towards ``goal`` [m] (already gated), starting a jog source if none is active;
-    ``speed_m_s`` caps its speed per axis (None: the configured jog limit)."""
-    return _retarget(state, jog_source(state, ctx), goal, speed_m_s)
+    """Jog the tip towards ``goal`` [m] at wrist angle ``phi_rad`` [rad] (both already
+    gated), starting a jog source if none is active; ``speed_m_s`` caps its speed per axis
+    (None: the configured jog limit)."""
+    source = jog_source(state, ctx)
+    _hold_tool_at(state, ctx, phi_rad)
+    return _retarget(state, source, goal, speed_m_s)
+
+
+def _hold_tool_at(state: LoopState, ctx: CommandContext, phi_rad: float) -> None:
+    """The tip's goals are at wrist angle ``phi_rad`` [rad] (already gated: 0 without a
+    wrist); a wrist servo turns there (app/control/wrist.py)."""
+    state.phi_rad = phi_rad
+    if ctx.gate.wrist_min_rad is not None:
+        state.phi_goal_rad = phi_rad
 
 
 def _retarget(
@@ -227,7 +250,7 @@ def jog_by(
     """
     source = jog_source(state, ctx)
     base = source.aim_m
-    goal = ctx.gate.clamp_towards(base, base + delta, state.reference_rad)
+    goal = ctx.gate.clamp_towards(base, base + delta, state.reference_rad, state.phi_rad)
     return _retarget(state, source, goal, speed_m_s)
 
 
@@ -237,18 +260,21 @@ def move(
     target: np.ndarray,
     duration_s: float | None,
     joint_space: bool,
+    phi_rad: float = 0.0,
 ) -> dict:
-    """Smooth move to ``target``: joint angles [rad] if ``joint_space``, else a point [m]."""
+    """Smooth move to ``target``: joint angles [rad] if ``joint_space``, else a tip [m] at
+    wrist angle ``phi_rad`` [rad] (already gated)."""
     require_motion(state)
     if joint_space:
         speed = ctx.joint_speed_rad_s
         limits = Limits(0.5 * speed, 4.0 * speed, 40.0 * speed)
         start = start_joints(state)
-        goal = ctx.robot.fk(target).points
+        goal = ctx.gate.tip(ctx.robot.fk(target).points, phi_rad)
     else:
         limits, start, goal = ctx.jog_limits, start_point(state), target
     source = MoveSource(start, target, limits, duration_s, joint_space=joint_space)
     begin_motion(state, source)
+    _hold_tool_at(state, ctx, phi_rad)
     state.goal_m = goal
     return {"duration_s": source.duration_s}
 

@@ -1,9 +1,10 @@
 """The controller: the only owner of the servo bus, ticking in its own thread.
 
 Each tick: run queued operator commands, read the joint state, FK to the measured platform
-position, take a setpoint from the active goal source, pass it through the gate, IK on the
-branch nearest the current joints, limit joint speed, write the goal, check safety, then
-publish an immutable Snapshot. Operator commands (HTTP handlers, the 3D scene's callbacks)
+position and its tool tip, take a (tip) setpoint from the active goal source, pass it
+through the gate (which checks the platform point the tip implies), IK on the branch
+nearest the current joints, limit joint speed, write the goal, check safety, then publish
+an immutable Snapshot. Operator commands (HTTP handlers, the 3D scene's callbacks)
 never touch the bus: they are queued and run at the start of the next tick, in this thread.
 """
 
@@ -160,11 +161,13 @@ class Controller:
             self._commands.put((command, future))
         return future
 
-    def set_goal(self, point: Any) -> Future:
-        """Jog target, checked strictly: outside the workspace is refused with the nearest."""
-        goal = self.gate.check_point(point)
-        self.gate.solve(goal, self._near_measured())
-        return self.submit(lambda: commands.jog_to(self.state, self.ctx, goal))
+    def set_goal(self, point: Any, phi_rad: float = 0.0) -> Future:
+        """Jog target: the tool tip [m] at wrist angle ``phi_rad`` [rad], checked strictly
+        (a tip whose platform point is outside the workspace is refused with the nearest)."""
+        phi = self.gate.check_phi(phi_rad)
+        goal = self.gate.check_point(point, phi)
+        self.gate.solve(goal, self._near_measured(), phi)
+        return self.submit(lambda: commands.jog_to(self.state, self.ctx, goal, phi_rad=phi))
 
     def jog(self, delta_m: Any, speed_m_s: float | None = None) -> Future:
         """Relative jog step [m] from what the loop commands when the step runs (not from a
@@ -192,13 +195,16 @@ class Controller:
         joints: Any = None,
         duration_s: float | None = None,
         joint_space: bool = False,
+        phi_rad: float = 0.0,
     ) -> Future:
-        """Smooth move-to a point (Cartesian or joint-space path) or to joint angles."""
+        """Smooth move-to a tip [m] at ``phi_rad`` (Cartesian or joint-space path) or to
+        joint angles."""
         target, joint_space = commands.check_move(
-            self.gate, point, joints, joint_space, self._near_measured()
+            self.gate, point, joints, joint_space, self._near_measured(), phi_rad
         )
+        phi = float(phi_rad)  # checked by check_move
         return self.submit(
-            lambda: commands.move(self.state, self.ctx, target, duration_s, joint_space)
+            lambda: commands.move(self.state, self.ctx, target, duration_s, joint_space, phi)
         )
 
     def run_source(
@@ -345,10 +351,21 @@ class Controller:
         state.joints = joints
         if self.wrist is not None:
             state.wrist, state.phi_commanded_rad = self.wrist.reading, self.wrist.phi_rad
-        state.point_m = self.robot.fk(joints.position_rad).points
+        state.platform_m = self.robot.fk(joints.position_rad).points
+        # the tip at the measured wrist angle (the held one without a wrist servo)
+        state.point_m = self.gate.tip(state.platform_m, self._phi_measured())
         if self._external is not None:  # the simulator's "motion capture" of the platform,
-            state.external_m = self._external(at_last_read=True)  # at the read's instant
+            external = self._external(at_last_read=True)  # at the read's instant
+            state.external_m = self.gate.tip(external, self._phi_measured())
         return True
+
+    def _phi_measured(self) -> float:
+        """The wrist angle the tool is at [rad]: the wrist servo's reading, else (no wrist,
+        or none read) the angle the loop holds the tool at."""
+        wrist = self.state.wrist
+        if wrist is not None and math.isfinite(wrist.position_rad):
+            return float(wrist.position_rad)
+        return self.state.phi_rad
 
     def _advance(self) -> None:
         state, source = self.state, self.state.source
@@ -433,8 +450,9 @@ class Controller:
         try:
             if setpoint.joints_rad is not None:
                 return self.gate.check_joints(setpoint.joints_rad)
-            point = self.gate.clamp_point(setpoint.point_m)
-            return self.gate.solve(point, self.state.reference_rad)
+            phi = self.state.phi_rad if setpoint.phi_rad is None else setpoint.phi_rad
+            point = self.gate.clamp_point(setpoint.point_m, phi)
+            return self.gate.solve(point, self.state.reference_rad, phi)
         except GoalRejected as exc:
             self.state.warning = f"holding: {exc}"  # the path crossed a limit: stay put
             return None
@@ -455,7 +473,8 @@ class Controller:
         state.commanded_rad = joints
         if self.wrist is not None:
             state.phi_commanded_rad = self.wrist.phi_rad
-        state.commanded_point_m = self.robot.fk(joints).points
+        phi = state.phi_rad if state.phi_commanded_rad is None else state.phi_commanded_rad
+        state.commanded_point_m = self.gate.tip(self.robot.fk(joints).points, phi)
         state.warning = None
 
     def _now(self) -> float:
@@ -469,7 +488,7 @@ class Controller:
     # ---- read from the control thread (e.g. in a listener) ----
     @property
     def measured_point(self) -> np.ndarray:
-        """This tick's measured platform position (call from the control thread)."""
+        """This tick's measured tool tip (call from the control thread)."""
         return self.state.point_m
 
     @property

@@ -1,6 +1,12 @@
 """The one gate every goal passes before it can reach a servo (like Klipper's check_move).
 
-Order of checks: finite -> inside the workspace with margin and below the ceiling ->
+Goals are tool tips (base frame) at a wrist angle phi [rad]; the gate checks the platform
+centre each tip implies, ``tool.platform(tip, phi)`` (kinematics/tool.py), and gives its
+answers (the nearest point, clamped points) back as tips. With no tool (a zero offset) the
+tip is the platform centre.
+
+Order of checks: finite -> wrist angle (none without a wrist) -> the implied platform
+point inside the workspace with margin and below the ceiling ->
 IK on the branch nearest the current joints -> joint limits -> distance from singularity.
 REST goals that fail are refused with the reason (and the nearest reachable point when
 the workspace is the problem); jog goals are clamped onto the workspace instead. Joint
@@ -11,13 +17,13 @@ from __future__ import annotations
 
 import contextlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from app.control.errors import GoalRejected
-from kinematics import DeltaError, LinearDelta, RotaryDelta
+from kinematics import DeltaError, LinearDelta, RotaryDelta, Tool
 
 FAR_M = 10.0  # goals beyond this are scaled back before projecting (still refused)
 
@@ -31,6 +37,10 @@ class Gate:
     1/cond(J) accepted; max_step_rad: largest joint change per tick (speed * period).
     wrist_min_rad / wrist_max_rad: the wrist's limits [rad] (None: no wrist, phi stays 0);
     wrist_max_step_rad: largest wrist change per tick [rad] (its speed * period).
+    tool: the tool whose tip the goals are (the platform centre by default).
+
+    Points in and out are tool tips (3,) [m] in the base frame, at wrist angle ``phi``
+    [rad] (0 without a wrist); the workspace, ceiling and IK apply to the platform centre.
     """
 
     robot: RotaryDelta | LinearDelta
@@ -43,6 +53,15 @@ class Gate:
     wrist_min_rad: float | None = None
     wrist_max_rad: float | None = None
     wrist_max_step_rad: float = 0.0
+    tool: Tool = field(default_factory=Tool)
+
+    def platform(self, tip: Any, phi: Any = 0.0) -> np.ndarray:
+        """The platform centre (*, 3) [m] that puts the tool tip at ``tip`` (*, 3) [m]."""
+        return self.tool.platform(tip, phi)
+
+    def tip(self, platform: Any, phi: Any = 0.0) -> np.ndarray:
+        """The tool tip (*, 3) [m] of the platform centre ``platform`` (*, 3) [m]."""
+        return self.tool.tip(platform, phi)
 
     def __post_init__(self) -> None:
         # The first projection for a (robot, margin, ceiling) computes the workspace's edges
@@ -50,75 +69,95 @@ class Gate:
         with contextlib.suppress(DeltaError):
             self.robot.project((0.0, 0.0, FAR_M), margin=self.margin_m, z_max=self.z_max_m)
 
-    def inside(self, point: np.ndarray) -> bool:
-        """Within the workspace margin and below the ceiling."""
-        if not point[2] <= self.z_max_m:
+    def inside(self, point: np.ndarray, phi: float = 0.0) -> bool:
+        """The platform point the tip ``point`` implies is within the workspace margin and
+        below the ceiling."""
+        platform = self.platform(point, phi)
+        if not platform[2] <= self.z_max_m:
             return False
-        return bool(self.robot.reachable(point, margin=self.margin_m))
+        return bool(self.robot.reachable(platform, margin=self.margin_m))
 
-    def nearest(self, point: np.ndarray) -> np.ndarray:
-        """The closest point that passes :meth:`inside` (``point`` itself if it does)."""
-        largest = float(np.abs(point).max())
+    def nearest(self, point: np.ndarray, phi: float = 0.0) -> np.ndarray:
+        """The closest tip that passes :meth:`inside` (``point`` itself if it does).
+
+        The tool offset is a translation at a given phi, so the closest tip is the tip of
+        the platform point closest to the one ``point`` implies."""
+        platform = self.platform(point, phi)
+        largest = float(np.abs(platform).max())
         if largest > FAR_M:  # same direction, without squaring 1e300
-            direction = point / largest
-            point = direction * (FAR_M / float(np.linalg.norm(direction)))
-        return self.robot.project(point, margin=self.margin_m, z_max=self.z_max_m).point
+            direction = platform / largest
+            platform = direction * (FAR_M / float(np.linalg.norm(direction)))
+        found = self.robot.project(platform, margin=self.margin_m, z_max=self.z_max_m).point
+        return self.tip(found, phi)
 
-    def check_point(self, point: Any) -> np.ndarray:
-        """A finite (3,) goal inside the workspace, or GoalRejected naming the problem."""
+    def check_point(self, point: Any, phi: float = 0.0) -> np.ndarray:
+        """A finite (3,) tip goal whose platform point is inside the workspace, or
+        GoalRejected naming the problem (with the nearest tip that passes)."""
         goal = np.asarray(point, dtype=np.float64)
         if goal.shape != (3,):
             raise GoalRejected(f"position_m: expected 3 numbers, got shape {goal.shape}")
         if not np.isfinite(goal).all():
             raise GoalRejected(f"position_m: must be finite, got {goal.tolist()}")
-        if not self.inside(goal):
-            raise GoalRejected("position_m: outside the workspace", self.nearest(goal), goal=goal)
+        phi = self.check_phi(phi)
+        if not self.inside(goal, phi):
+            reason = "position_m: outside the workspace"
+            if self.tool.length_m > 0.0:
+                platform = ", ".join(f"{v * 1e3:.1f}" for v in self.platform(goal, phi))
+                reason += f" (the platform centre would be at [{platform}] mm)"
+            raise GoalRejected(reason, self.nearest(goal, phi), goal=goal)
         return goal
 
-    def clamp_point(self, point: np.ndarray) -> np.ndarray:
-        """Jog semantics: a goal outside the workspace moves to the nearest inside point."""
-        return point if self.inside(point) else self.nearest(point)
+    def clamp_point(self, point: np.ndarray, phi: float = 0.0) -> np.ndarray:
+        """Jog semantics: a tip whose platform point is outside the workspace moves to the
+        nearest tip inside."""
+        return point if self.inside(point, phi) else self.nearest(point, phi)
 
-    def clamp_towards(self, start: np.ndarray, target: np.ndarray, near: np.ndarray) -> np.ndarray:
+    def clamp_towards(
+        self, start: np.ndarray, target: np.ndarray, near: np.ndarray, phi: float = 0.0
+    ) -> np.ndarray:
         """Jog semantics: the point nearest ``target`` that passes every check.
 
         The workspace projection first; if that point breaks a joint limit or comes too
         close to a singularity, the furthest passing point on the way from ``start`` (which
         passes) towards it. Raises GoalRejected only if ``start`` itself fails.
         """
-        clamped = self.clamp_point(target)
-        if self._passes(clamped, near):
+        clamped = self.clamp_point(target, phi)
+        if self._passes(clamped, near, phi):
             return clamped
-        if not self._passes(start, near):
+        if not self._passes(start, near, phi):
             raise GoalRejected("the current position fails the gate; move it back first")
         good, bad = start, clamped
         for _ in range(40):  # ~1e-12 of the jog length
             middle = 0.5 * (good + bad)
-            good, bad = (middle, bad) if self._passes(middle, near) else (good, middle)
+            good, bad = (middle, bad) if self._passes(middle, near, phi) else (good, middle)
         return good
 
-    def _passes(self, point: np.ndarray, near: np.ndarray) -> bool:
+    def _passes(self, point: np.ndarray, near: np.ndarray, phi: float) -> bool:
         try:
-            self.solve(point, near)
+            self.solve(point, near, phi)
         except GoalRejected:
             return False
-        return self.inside(point)
+        return self.inside(point, phi)
 
-    def solve(self, point: np.ndarray, near: np.ndarray) -> np.ndarray:
-        """Joints for a point that passed :meth:`check_point`; GoalRejected if unusable.
+    def solve(self, point: np.ndarray, near: np.ndarray, phi: float = 0.0) -> np.ndarray:
+        """Joints (3,) [rad] for a tip (3,) [m] that passed :meth:`check_point` (IK of the
+        platform point it implies); GoalRejected if unusable.
 
         The branch nearest the current joints first; if that breaks a limit (the arm may
         start from outside them, e.g. hanging with torque off), the working knee-out branch.
         A refusal carries ``point`` as its ``goal`` (the server offers an accepted point
         near it).
         """
-        joints, ok = self.robot.ik(point, near=near)
+        platform = self.platform(point, phi)
+        joints, ok = self.robot.ik(platform, near=near)
         if not ok:
-            raise GoalRejected("position_m: no joint solution", self.nearest(point), goal=point)
+            raise GoalRejected(
+                "position_m: no joint solution", self.nearest(point, phi), goal=point
+            )
         try:
             return self.check_joints(joints)
         except GoalRejected as exc:
-            knee_out = self.robot.ik(point).joints
+            knee_out = self.robot.ik(platform).joints
             if np.array_equal(knee_out, joints):
                 raise GoalRejected(exc.reason, goal=point) from None
         try:
@@ -159,7 +198,10 @@ class Gate:
         low, high = self.wrist_min_rad, self.wrist_max_rad
         if low is None or high is None:
             if phi != 0.0:
-                raise GoalRejected("phi_rad: no wrist is configured ([wrist] enabled = false)")
+                raise GoalRejected(
+                    "phi_rad: no wrist axis is configured ([wrist] enabled = false), so the "
+                    "tool cannot turn"
+                )
             return phi
         if not low <= phi <= high:
             raise GoalRejected(

@@ -90,6 +90,6 @@ def _aim(state: LoopState, ctx: CommandContext, source: JogSource) -> None:
         braking_s = 2.0 * float(np.sqrt(speed / limits.jerk))
     ahead_m = velocity * (braking_s + LOOKAHEAD_TICKS * ctx.period_s)
     here = source.commanded_m
-    target = ctx.gate.clamp_towards(here, here + ahead_m, state.reference_rad)
+    target = ctx.gate.clamp_towards(here, here + ahead_m, state.reference_rad, state.phi_rad)
     source.set_target(target)
     state.goal_m = target

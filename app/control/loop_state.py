@@ -27,11 +27,16 @@ def _nan3() -> np.ndarray:
 class LoopState:
     """Everything the loop remembers between ticks; arrays are (3,), NaN where unknown.
 
-    joints: the last successful read; point_m: FK of it (the measured platform position);
-    commanded_rad / commanded_point_m: the last goal written to the servos (None / NaN before
-    any); goal_m: the setpoint the loop is using (a jog target, a move's end, a run's
-    nominal point, the held point after a stop; NaN with torque off);
-    external_m: the simulator's own measurement of the platform at the last read.
+    Points are the tool tip (base frame, app/control/gate.py), the platform centre plus the
+    tool offset turned by ``phi_rad``; with no tool they are the platform centre.
+    joints: the last successful read; platform_m: FK of it (the measured platform centre);
+    point_m: the tool tip there; commanded_rad / commanded_point_m: the last goal written
+    to the servos and its tip (None / NaN before any); goal_m: the tip setpoint the loop is
+    using (a jog target, a move's end, a run's nominal point, the held point after a stop;
+    NaN with torque off); phi_rad: the wrist angle the loop holds the tool at [rad] (0
+    without a wrist: the one place a goal's phi goes, and each tick converts its tip
+    setpoint to the platform with it); external_m: the simulator's own measurement at the
+    last read, as a tip.
     resync: the command is stale (torque off, e-stop or a fault since the last motion, or
     none yet): the next motion starts from the measured position and ``notice`` says so.
     phi_goal_rad: the wrist's goal [rad] (None: it holds where it is commanded);
@@ -59,6 +64,8 @@ class LoopState:
     hold_velocity_m_s: np.ndarray | None = None  # the held jog's velocity [m/s]
     joints: JointState | None = None
     point_m: np.ndarray = field(default_factory=_nan3)
+    platform_m: np.ndarray = field(default_factory=_nan3)
+    phi_rad: float = 0.0
     commanded_rad: np.ndarray | None = None
     commanded_point_m: np.ndarray = field(default_factory=_nan3)
     goal_m: np.ndarray = field(default_factory=_nan3)
@@ -118,6 +125,8 @@ class LoopState:
             notice=self.notice,
             joints_measured_rad=state.position_rad if state else nan3,
             point_measured_m=self.point_m,
+            platform_measured_m=self.platform_m,
+            phi_rad=self.phi_rad,
             joints_commanded_rad=commanded,
             point_commanded_m=self.commanded_point_m,
             goal_m=self.goal_m,

@@ -19,7 +19,9 @@ from app.control.errors import GoalRejected
 
 @dataclass(frozen=True)
 class Setpoint:
-    """One tick's request: exactly one of ``point_m`` (3,) or ``joints_rad`` (3,).
+    """One tick's request: exactly one of ``point_m`` (3,), the tool tip [m], or
+    ``joints_rad`` (3,); ``phi_rad``: the wrist angle [rad] for the tip (None: the one the
+    loop holds, ``LoopState.phi_rad``).
 
     goal_m: the nominal goal this tick (a test run's trajectory point, when feed-forward
     commands a point ahead of it); phase: the run's phase for logs (approach, timed, stop).
@@ -27,6 +29,7 @@ class Setpoint:
 
     point_m: np.ndarray | None = None
     joints_rad: np.ndarray | None = None
+    phi_rad: float | None = None
     finished: bool = False
     goal_m: np.ndarray | None = None
     phase: str = ""

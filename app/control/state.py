@@ -71,7 +71,9 @@ class WristReading:
 class Snapshot:
     """The loop's state after one tick, in SI units and the base frame.
 
-    Arrays are shape (3,); NaN where unknown (no successful read yet, FK failed).
+    Arrays are shape (3,); NaN where unknown (no successful read yet, FK failed). Points
+    (``point_*_m``, ``goal_m``, ``external_m``) are the tool tip; ``platform_measured_m``
+    is the platform centre (the same without a tool) and ``phi_rad`` the wrist angle [rad].
 
     How the tick started (app/control/timing.py ``TickTiming``): lateness_ms after its
     deadline, gap_ms since the previous tick started, overrun (it missed its deadline).
@@ -91,6 +93,8 @@ class Snapshot:
     notice: str | None = None  # about the last motion command, e.g. where it started from
     joints_measured_rad: np.ndarray = field(default_factory=lambda: _NAN3)
     point_measured_m: np.ndarray = field(default_factory=lambda: _NAN3)
+    platform_measured_m: np.ndarray = field(default_factory=lambda: _NAN3)
+    phi_rad: float = 0.0
     joints_commanded_rad: np.ndarray = field(default_factory=lambda: _NAN3)
     point_commanded_m: np.ndarray = field(default_factory=lambda: _NAN3)
     goal_m: np.ndarray = field(default_factory=lambda: _NAN3)
@@ -118,7 +122,7 @@ class Snapshot:
 
     @property
     def tracking_error_m(self) -> np.ndarray:
-        """Commanded minus measured platform position [m]."""
+        """Commanded minus measured tip position [m]."""
         return self.point_commanded_m - self.point_measured_m
 
     @property

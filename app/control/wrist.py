@@ -127,7 +127,7 @@ def turn_to(state: LoopState, phi_rad: float) -> float:
     it there at the wrist's speed limit. Raises MotionRefused when the robot may not move
     (e-stop, fault, torque off)."""
     require_motion(state)
-    state.phi_goal_rad = float(phi_rad)
+    state.phi_goal_rad = state.phi_rad = float(phi_rad)  # the tip's goals follow the turn
     return state.phi_goal_rad
 
 

@@ -130,7 +130,7 @@ def dry_run(checked: CheckedProgram, settings: Settings, *, feedforward: bool = 
     commanded = path.evaluate(ahead, (0,))[0] if lead else goals
     lines = path.line_at(times)
     start = path.evaluate(np.zeros(1), (0,))[0][0]
-    reference = robot.ik(start).joints
+    reference = robot.ik(gate.platform(start)).joints  # the path is the tool tip's
     try:
         reference = gate.solve(start, reference)
     except GoalRejected as exc:
@@ -142,7 +142,7 @@ def dry_run(checked: CheckedProgram, settings: Settings, *, feedforward: bool = 
         bus.advance(SETTLE_S)
         errors = np.empty((len(times), 3))
         for k in range(len(times)):
-            measured = robot.fk(bus.read_state().position_rad).points
+            measured = gate.tip(robot.fk(bus.read_state().position_rad).points)
             errors[k] = goals[k] - measured
             try:  # as the loop: a point the gate refuses is not followed (the robot holds)
                 joints = gate.solve(gate.clamp_point(commanded[k]), reference)

@@ -25,17 +25,20 @@ def check_path(gate: Gate, times_s: np.ndarray, points_m: np.ndarray, near: np.n
     Args:
         gate: the controller's gate (limits in force).
         times_s: sample times (N,) [s], evenly spaced by the loop period.
-        points_m: the path (N, 3) [m] in the base frame.
+        points_m: the path (N, 3) [m] in the base frame, of the tool tip (at phi = 0); the
+            checks apply to the platform centre each implies (``gate.platform``) and the
+            failures name the tip.
         near: current joints (3,), to pick the IK branch the robot is on.
     """
     robot = gate.robot
+    platform = gate.platform(points_m)
     checks = [
-        ("outside the workspace", robot.reachable(points_m, margin=gate.margin_m)),
-        ("above the platform ceiling", points_m[:, 2] <= gate.z_max_m),
+        ("outside the workspace", robot.reachable(platform, margin=gate.margin_m)),
+        ("above the platform ceiling", platform[:, 2] <= gate.z_max_m),
     ]
     for reason, mask in checks:
         _raise_at(_first(mask), reason, times_s, points_m)
-    joints, ok = _follow_branch(robot, points_m, near)
+    joints, ok = _follow_branch(robot, platform, near)
     _raise_at(_first(ok), "no joint solution", times_s, points_m)
     low, high = np.asarray(gate.joint_min_rad), np.asarray(gate.joint_max_rad)
     _raise_at(

@@ -15,7 +15,7 @@ import numpy as np
 import viser
 
 from app.scene.geometry import LEG_ANGLES_RAD, radial, robot_lines
-from kinematics import LinearDelta, RotaryDelta
+from kinematics import LinearDelta, RotaryDelta, Tool
 
 LEG_COLOURS = ((222, 76, 64), (64, 168, 90), (60, 112, 214))
 GHOST_COLOUR = (175, 180, 190)
@@ -52,10 +52,12 @@ class RobotView:
         robot: RotaryDelta | LinearDelta,
         root: str = "/robot",
         ghost: bool = False,
+        tool: Tool | None = None,
     ) -> None:
         self.robot = robot
         self.root = root
         self.ghost = ghost
+        self.tool_model = tool if tool is not None and tool.length_m > 0.0 else None
         self._joints: np.ndarray | None = None
         scene = server.scene
         colours = (GHOST_COLOUR,) * 3 if ghost else LEG_COLOURS
@@ -82,6 +84,14 @@ class RobotView:
             side="double",
             opacity=0.35 if ghost else None,
         )
+        self.tool = None  # the tool: a segment from the platform centre to the tip
+        if self.tool_model is not None:
+            self.tool = scene.add_line_segments(
+                f"{root}/tool",
+                np.zeros((1, 2, 3)),
+                np.full((1, 2, 3), 120 if ghost else 230, np.uint8),
+                thickness=0.004 if ghost else 0.008,
+            )
         self.joints = None
         self._static: list[Any] = []
         if not ghost:
@@ -150,7 +160,10 @@ class RobotView:
         self._joints = joints
         self.upper.points = lines.upper
         self.rods.points = lines.rods.reshape(6, 2, 3)
-        self.platform.position = lines.rods[:, :, 1].mean(axis=(0, 1))
+        centre = lines.rods[:, :, 1].mean(axis=(0, 1))
+        self.platform.position = centre
+        if self.tool is not None and self.tool_model is not None:  # phi = 0 until a wrist
+            self.tool.points = np.stack([centre, self.tool_model.tip(centre)])[None]
         if self.joints is not None:
             self.joints.points = np.concatenate(
                 [lines.upper[:, 0], lines.upper[:, 1], lines.rods[:, :, 1].mean(axis=1)]
@@ -163,13 +176,14 @@ class RobotView:
 
     @visible.setter
     def visible(self, value: bool) -> None:
-        for handle in (self.upper, self.rods, self.platform, self.joints):
+        for handle in (self.upper, self.rods, self.platform, self.joints, self.tool):
             if handle is not None:
                 handle.visible = value
 
     def remove(self) -> None:
         """Remove every handle under this view's root."""
-        for handle in (self.upper, self.rods, self.platform, self.joints, *self._static):
+        handles = (self.upper, self.rods, self.platform, self.joints, self.tool, *self._static)
+        for handle in handles:
             if handle is not None:
                 handle.remove()
 

@@ -77,15 +77,21 @@ class Scene:
         settings, robot = self.controller.settings, self.controller.robot
         self._frame_camera(server)
         server.scene.add_frame("/base_frame", axes_length=0.05, axes_radius=0.002)
+        tool = self.controller.gate.tool
         self.workspace = WorkspaceView(
-            server, robot, settings.limits.workspace_margin_m, settings.limits.z_max_m
+            server,
+            robot,
+            settings.limits.workspace_margin_m,
+            settings.limits.z_max_m,
+            tool_offset_m=tool.offset_m,
         )
-        floor = float(self.workspace.mesh.vertices[:, 2].min()) - 0.02
+        lowest = float(self.workspace.mesh.vertices[:, 2].min()) + min(tool.offset_m[2], 0.0)
+        floor = lowest - 0.02
         server.scene.add_grid(
             "/floor", 0.8, 0.8, cell_size=0.05, section_size=0.1, position=(0.0, 0.0, floor)
         )
-        self.robot = RobotView(server, robot, "/robot")
-        self.ghost = RobotView(server, robot, "/ghost", ghost=True)
+        self.robot = RobotView(server, robot, "/robot", tool=tool)
+        self.ghost = RobotView(server, robot, "/ghost", ghost=True, tool=tool)
         runs_settings = getattr(settings, "runs", None)
         store = runs_settings.folder_path / POINTS_FILE if runs_settings is not None else None
         self.access = SceneAccess(server, self.authority)

@@ -20,7 +20,8 @@ VOLUME_COLOUR = (110, 190, 230)
 
 class WorkspaceView:
     """Tori and reachable volume of ``robot`` under ``root``; ``margin_m`` and ``z_max_m``
-    are the gate's (LimitSettings.workspace_margin_m, z_max_m) [m]."""
+    are the gate's (LimitSettings.workspace_margin_m, z_max_m) [m]. The volume is where
+    the tool tip may go: the platform's, moved by ``tool_offset_m`` (3,) [m] (phi = 0)."""
 
     def __init__(
         self,
@@ -29,6 +30,7 @@ class WorkspaceView:
         margin_m: float,
         z_max_m: float,
         root: str = "/workspace",
+        tool_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> None:
         scene = server.scene
         self.tori = []
@@ -56,6 +58,7 @@ class WorkspaceView:
             side="double",
             cast_shadow=False,
             receive_shadow=False,
+            position=tool_offset_m,
         )
 
     @property

@@ -44,11 +44,12 @@ class Section(NamedTuple):
 
 
 def inside(gate: Gate, points: np.ndarray) -> np.ndarray:
-    """``Gate.inside`` for many points: (*, 3) [m] -> (*) bool (vectorised, same rule)."""
-    points = np.asarray(points, dtype=np.float64)
+    """``Gate.inside`` for many tool tips: (*, 3) [m] -> (*) bool (vectorised, same rule,
+    on the platform centre each tip implies)."""
+    platform = gate.platform(np.asarray(points, dtype=np.float64))
     with np.errstate(invalid="ignore"):
-        below = points[..., 2] <= gate.z_max_m
-    return below & gate.robot.reachable(points, margin=gate.margin_m)
+        below = platform[..., 2] <= gate.z_max_m
+    return below & gate.robot.reachable(platform, margin=gate.margin_m)
 
 
 def accepted(gate: Gate, points: np.ndarray) -> np.ndarray:
@@ -60,7 +61,7 @@ def accepted(gate: Gate, points: np.ndarray) -> np.ndarray:
     ok = inside(gate, points)
     if not ok.any():
         return ok
-    solution = gate.robot.ik(points[ok])
+    solution = gate.robot.ik(gate.platform(points[ok]))
     joints = solution.joints
     low, high = np.array(gate.joint_min_rad), np.array(gate.joint_max_rad)
     with np.errstate(invalid="ignore"):
@@ -80,7 +81,7 @@ def anchor(gate: Gate) -> np.ndarray:
     good = accepted(gate, column)
     if not good.any():
         raise ValueError("the gate accepts no point on the z axis")
-    depth = np.where(good, -gate.robot.signed_distance(column), -np.inf)
+    depth = np.where(good, -gate.robot.signed_distance(gate.platform(column)), -np.inf)
     return column[int(np.argmax(depth))]
 
 
@@ -186,11 +187,13 @@ def _towards(gate: Gate, start: np.ndarray, home: np.ndarray, samples: int) -> n
 @functools.lru_cache(maxsize=8)
 def extent(gate: Gate) -> tuple[np.ndarray, np.ndarray]:
     """The accepted volume's bounding box (lower (3,), upper (3,)) [m], from a 60^3 grid,
-    padded by one of its steps (so the ceiling shows too); ValueError if nothing is accepted."""
+    padded by one of its steps (so the ceiling shows too); ValueError if nothing is accepted.
+    Tool tips: the platform's box moved by the tool offset (phi = 0)."""
     reach = gate.robot.R + getattr(gate.robot, "L", 0.0) + gate.robot.l
     top = min(gate.z_max_m, 0.0)
-    lower = np.array([-reach, -reach, top - 2.0 * reach])
-    upper = np.array([reach, reach, top])
+    offset = gate.tip(np.zeros(3))
+    lower = np.array([-reach, -reach, top - 2.0 * reach]) + offset
+    upper = np.array([reach, reach, top]) + offset
     axes = [np.linspace(lower[k], upper[k], 60) for k in range(3)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
     found_inside = inside(gate, grid)

@@ -74,7 +74,7 @@ def test_the_gate_checks_phi_against_the_wrist_s_limits() -> None:
     assert gate.wrist_max_step_rad == pytest.approx(2.0 / 200)  # speed * period
     plain = Controller(load_settings(), SimBus(SimBusConfig(realtime=False)), "sim").gate
     assert plain.check_phi(0.0) == 0.0
-    with pytest.raises(GoalRejected, match="no wrist is configured"):
+    with pytest.raises(GoalRejected, match="no wrist axis is configured"):
         plain.check_phi(0.1)
 
 
@@ -247,7 +247,7 @@ def test_without_a_wrist_the_loop_writes_three_goals_and_refuses_a_phi() -> None
     commands.torque_to(control.state, control.ctx, control.servos, True)
     assert goals(fake) == [HOME_RAD]
     assert math.isnan(control.snapshot().phi_measured_rad)
-    with pytest.raises(GoalRejected, match="no wrist is configured"):
+    with pytest.raises(GoalRejected, match="no wrist axis is configured"):
         control.turn_wrist(0.2)
 
 

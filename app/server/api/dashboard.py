@@ -90,7 +90,8 @@ def peak_joint_speed(controller: Controller, params: SinusoidParams) -> float | 
     read as hundreds of rad/s.
     """
     times = np.arange(0.0, params.duration_s, controller.period_s)
-    joints, ok = controller.robot.ik(sinusoid_points(params, times))
+    platform = controller.gate.platform(sinusoid_points(params, times))  # a tip's path
+    joints, ok = controller.robot.ik(platform)
     if times.size < 2 or not ok.any():
         return None
     speed = np.abs(np.diff(joints, axis=0)) / controller.period_s

@@ -20,8 +20,17 @@ class _Body(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
 
 
+PHI_DESCRIPTION = (
+    "wrist angle [rad] of the tool about the platform's z; 0 (the default) is the only one "
+    "without a [wrist] section"
+)
+
+
 class GoalRequest(_Body):
-    position_m: Vector3 = Field(description="platform goal [m], 3 finite numbers")
+    position_m: Vector3 = Field(
+        description="tool tip goal [m], 3 finite numbers (the platform centre without [tool])"
+    )
+    phi_rad: Finite = Field(0.0, description=PHI_DESCRIPTION)
     frame: Literal["base"] = Field("base", description="only the base frame for now")
 
 
@@ -45,7 +54,8 @@ class JogRequest(_Body):
 
 
 class MoveRequest(_Body):
-    position_m: Vector3 | None = Field(None, description="Cartesian target [m]")
+    position_m: Vector3 | None = Field(None, description="Cartesian target of the tool tip [m]")
+    phi_rad: Finite = Field(0.0, description=PHI_DESCRIPTION)
     joints_rad: Vector3 | None = Field(None, description="joint target [rad]")
     space: Literal["cartesian", "joint"] = Field("cartesian", description="path shape")
     duration_s: Annotated[float, Field(gt=0, le=60, allow_inf_nan=False)] | None = Field(

@@ -53,10 +53,13 @@ class JointsStatus(_Out):
 
 
 class PlatformStatus(_Out):
-    """The platform (end effector) [m]: measured (FK), commanded, their difference, and an
-    external measurement (e.g. motion capture) when one is fed in."""
+    """The end effector [m]: the tool tip measured (FK plus the tool offset), commanded,
+    their difference, and an external measurement (e.g. motion capture) when one is fed in;
+    the platform centre and the wrist angle. Without [tool] the tip is the platform centre."""
 
-    position_m: MaybeVector3
+    position_m: MaybeVector3 = Field(description="the tool tip, measured [m]")
+    platform_m: MaybeVector3 = Field(description="the platform centre, measured (FK) [m]")
+    phi_rad: float = Field(description="the wrist angle [rad]; 0 without a wrist")
     commanded_m: MaybeVector3
     error_m: MaybeVector3 = Field(
         description="commanded - measured [m]; null without a setpoint (torque off, e-stop, fault)"
@@ -65,7 +68,7 @@ class PlatformStatus(_Out):
 
 
 class GoalStatus(_Out):
-    position_m: MaybeVector3
+    position_m: MaybeVector3 = Field(description="the tool tip goal [m]")
 
 
 class TimingStatsOut(_Out):
@@ -182,6 +185,14 @@ class WorldFrame(_Out):
     error_m: MaybeVector3
 
 
+class TelemetryEe(_Out):
+    """The end effector this tick: tool tip and platform centre [m], wrist angle [rad]."""
+
+    position_m: MaybeVector3
+    platform_m: MaybeVector3
+    phi_rad: float
+
+
 class TelemetryMessage(_Out):
     """One message of the telemetry WebSocket (/api/telemetry), one per loop tick sent."""
 
@@ -192,10 +203,11 @@ class TelemetryMessage(_Out):
     commanded_joints_rad: MaybeVector3
     measured_joints_rad: MaybeVector3
     commanded_m: MaybeVector3
-    measured_m: MaybeVector3
+    measured_m: MaybeVector3 = Field(description="the tool tip, measured [m] (= ee.position_m)")
     error_m: MaybeVector3 = Field(
         description="commanded - measured [m]; null without a setpoint (torque off, e-stop, fault)"
     )
+    ee: TelemetryEe
     loop: TelemetryLoop
     faults: list[FaultOut]
     world: WorldFrame | None

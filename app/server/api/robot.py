@@ -36,14 +36,16 @@ async def _outcome(future: Future) -> Accepted:
 
 @router.get("/status", response_model=StatusOut, responses=UNAVAILABLE)
 def get_status(controller: ControllerDep) -> dict[str, Any]:
-    """Mode, backend, faults, joints, measured and commanded platform, goal and loop timing."""
+    """Mode, backend, faults, joints, the measured and commanded tool tip, the platform
+    centre, the wrist angle, the goal and loop timing."""
     return serialize.status(controller)
 
 
 @router.post("/goal", response_model=Accepted, responses=CONTROL)
 async def post_goal(body: GoalRequest, controller: ControllerDep, _: ControlClient):
-    """Move the platform to a goal (base frame); refused with the nearest point if outside."""
-    return await _outcome(controller.set_goal(body.position_m))
+    """Move the tool tip to a goal (base frame) at wrist angle ``phi_rad``; refused with the
+    nearest tip if the platform point it implies is outside the workspace."""
+    return await _outcome(controller.set_goal(body.position_m, body.phi_rad))
 
 
 @router.post("/jog", response_model=Accepted, responses=CONTROL)
@@ -64,6 +66,7 @@ async def post_move(body: MoveRequest, controller: ControllerDep, _: ControlClie
         joints=body.joints_rad,
         duration_s=body.duration_s,
         joint_space=body.space == "joint",
+        phi_rad=body.phi_rad,
     )
     return await _outcome(future)
 

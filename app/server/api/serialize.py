@@ -47,6 +47,8 @@ def status(controller: Controller) -> dict[str, Any]:
         },
         "ee": {
             "position_m": floats(snap.point_measured_m),
+            "platform_m": floats(snap.platform_measured_m),
+            "phi_rad": snap.phi_rad,
             "commanded_m": floats(snap.point_commanded_m),
             "error_m": floats(snap.shown_error_m),
             "external_m": floats(snap.external_m),
@@ -90,6 +92,11 @@ def telemetry(snap: Snapshot, controller: Controller) -> dict[str, Any]:
         "commanded_m": floats(snap.point_commanded_m),
         "measured_m": floats(snap.point_measured_m),
         "error_m": floats(snap.shown_error_m),
+        "ee": {
+            "position_m": floats(snap.point_measured_m),
+            "platform_m": floats(snap.platform_measured_m),
+            "phi_rad": snap.phi_rad,
+        },
         "loop": {
             "measured_hz": window.measured_hz,
             "jitter_p99_ms": window.jitter_p99_ms,

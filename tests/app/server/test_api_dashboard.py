@@ -11,6 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.config import load_settings
+from app.control.commands import CommandContext
 from app.runs.trajectories import SinusoidParams
 from app.server.api.dashboard import peak_joint_speed
 from tests.support.app_client import make_client, torque_on
@@ -69,12 +70,14 @@ def test_check_names_the_infeasible_time_and_starts_nothing(client: TestClient) 
 def test_peak_joint_speed_does_not_depend_on_where_the_arm_hangs() -> None:
     """A relaxed arm hanging nearly straight down (1.55 rad) must not change the preview:
     IK near those joints picked other branches for some samples (jumps of ~650 rad/s)."""
-    robot = load_settings().robot.build()
+    ctx = CommandContext.from_settings(load_settings())
     params = SinusoidParams(duration_s=2.0)
 
     def controller(joints_rad: float) -> Any:
         snapshot = SimpleNamespace(joints_measured_rad=np.full(3, joints_rad))
-        return SimpleNamespace(period_s=0.005, robot=robot, snapshot=lambda: snapshot)
+        return SimpleNamespace(
+            period_s=0.005, robot=ctx.robot, gate=ctx.gate, snapshot=lambda: snapshot
+        )
 
     hanging, held = (peak_joint_speed(controller(j), params) for j in (1.55, 0.3))
     assert hanging == pytest.approx(held)
