@@ -82,8 +82,10 @@ def test_a_passing_program_runs_with_its_error_per_line(fresh):
         if entry["samples"] == 0:
             assert entry["rmse_m"] is None and entry["max_m"] is None, entry
             continue
-        # RMSE <= max (equal, to rounding, where the error is constant: the dwell)
-        assert 0.0 <= entry["rmse_m"] <= entry["max_m"] * (1 + 1e-9) < 0.05, entry
+        # RMSE <= max (equal, to rounding, where the error is constant: the dwell); a
+        # bound only against a run gone wild: on a starved machine the servos lag a rapid
+        # by up to 57 mm (seen in CI at load 10)
+        assert 0.0 <= entry["rmse_m"] <= entry["max_m"] * (1 + 1e-9) < 0.1, entry
     # the log's line column gives the same figures: the stats are the log's, per line
     rows = list(csv.DictReader(io.StringIO(fresh.get(f"/api/runs/{run_id}/log.csv").text)))
     assert len(rows) == run["samples"]
