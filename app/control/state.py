@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -134,6 +135,12 @@ class Snapshot:
             and not self.faults
             and bool(np.all(np.isfinite(self.goal_m)))
         )
+
+    @property
+    def tool_phi_rad(self) -> float:
+        """The wrist angle the tool is at [rad]: the wrist servo's reading, else (no wrist)
+        the angle the loop holds the tool at (``phi_rad``, the tip's goals' angle)."""
+        return self.phi_measured_rad if math.isfinite(self.phi_measured_rad) else self.phi_rad
 
     @property
     def shown_error_m(self) -> np.ndarray:

@@ -59,7 +59,10 @@ class PlatformStatus(_Out):
 
     position_m: MaybeVector3 = Field(description="the tool tip, measured [m]")
     platform_m: MaybeVector3 = Field(description="the platform centre, measured (FK) [m]")
-    phi_rad: float = Field(description="the wrist angle [rad]; 0 without a wrist")
+    phi_rad: float = Field(
+        description="the wrist angle the tool is at [rad]: the wrist servo's reading; "
+        "0 without a wrist"
+    )
     commanded_m: MaybeVector3
     error_m: MaybeVector3 = Field(
         description="commanded - measured [m]; null without a setpoint (torque off, e-stop, fault)"
@@ -69,6 +72,7 @@ class PlatformStatus(_Out):
 
 class GoalStatus(_Out):
     position_m: MaybeVector3 = Field(description="the tool tip goal [m]")
+    phi_rad: float = Field(description="the wrist angle of the tip's goal [rad]; 0 without a wrist")
 
 
 class TimingStatsOut(_Out):

@@ -48,12 +48,12 @@ def status(controller: Controller) -> dict[str, Any]:
         "ee": {
             "position_m": floats(snap.point_measured_m),
             "platform_m": floats(snap.platform_measured_m),
-            "phi_rad": snap.phi_rad,
+            "phi_rad": snap.tool_phi_rad,
             "commanded_m": floats(snap.point_commanded_m),
             "error_m": floats(snap.shown_error_m),
             "external_m": floats(snap.external_m),
         },
-        "goal": {"position_m": floats(snap.goal_m)},
+        "goal": {"position_m": floats(snap.goal_m), "phi_rad": snap.phi_rad},
         "loop": loop_timing(controller),
         "bus": {"missed_reads": snap.missed_reads, **asdict(controller.bus.stats)},
         "pose": controller.pose_status() if controller.pose_status else None,
@@ -95,7 +95,7 @@ def telemetry(snap: Snapshot, controller: Controller) -> dict[str, Any]:
         "ee": {
             "position_m": floats(snap.point_measured_m),
             "platform_m": floats(snap.platform_measured_m),
-            "phi_rad": snap.phi_rad,
+            "phi_rad": snap.tool_phi_rad,
         },
         "loop": {
             "measured_hz": window.measured_hz,
