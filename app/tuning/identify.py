@@ -51,14 +51,21 @@ class IdentificationError(ValueError):
 
 @dataclass(frozen=True)
 class Record:
-    """One run's signals for one joint: times t_s [s] (N,), increasing and evenly spaced
-    to within the loop's jitter; commanded u_rad and measured y_rad [rad] (N,)."""
+    """One run's signals for one joint: times t_s [s] (N,), increasing (the clock the
+    servos ran on); commanded u_rad and measured y_rad [rad] (N,); loop_t_s [s] (N,): the
+    loop's run time of each sample, the clock the run's path was computed on (None: t_s).
+    """
 
     t_s: np.ndarray
     u_rad: np.ndarray
     y_rad: np.ndarray
+    loop_t_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        loop = self.t_s if self.loop_t_s is None else np.asarray(self.loop_t_s, dtype=float)
+        if np.shape(loop) != np.shape(self.t_s):
+            raise IdentificationError("loop_t_s must have one time per sample")
+        object.__setattr__(self, "loop_t_s", loop)
         t, u, y = (np.asarray(a, dtype=float) for a in (self.t_s, self.u_rad, self.y_rad))
         if not (t.ndim == 1 and t.shape == u.shape == y.shape):
             raise IdentificationError(
@@ -201,7 +208,7 @@ class JointFit:
 @dataclass(frozen=True)
 class Bode:
     """A measured frequency response: freqs_hz [Hz] (F,), response (F,) complex (y over
-    u), coherence (F,): the R^2 of the measured angle's sinusoid fit at each frequency;
+    u), coherence (F,): the lower R^2 of the sinusoid fits of u and y at each frequency;
     hold_s [s]: the mean period the commands were held (compare a model with
     ``frequency_response(f, hold_s)``)."""
 
@@ -235,7 +242,8 @@ def record_of(rows: Sequence[dict[str, Any]], joint: int, phases: Sequence[str] 
     u = np.array([r[cmd] for r in kept], dtype=float)
     y = np.array([r[meas] for r in kept], dtype=float)
     last = np.append(np.diff(t) > 0, True)  # the last row of each time
-    return Record(t[last], u[last], y[last])
+    loop = np.array([r["t_s"] for r in kept], dtype=float)
+    return Record(t[last], u[last], y[last], loop[last])
 
 
 def _residuals(model: JointModel, records: Sequence[Record]) -> np.ndarray:
@@ -251,7 +259,7 @@ def _residuals(model: JointModel, records: Sequence[Record]) -> np.ndarray:
 def fit_joint(records: Sequence[Record], joint: int = 1) -> JointFit:
     """Fit `JointModel` to `records` (deviations from each record's first sample) by
     least squares on the time-domain error, from three starting bandwidths; the best fit
-    wins. Bounds: K 0.2..5, wn 1..3000 rad/s, zeta 0.05..5, T 0..0.2 s.
+    wins. Bounds: K 0.7..1.3 (a position loop reaches about its goal), wn 1..3000 rad/s, zeta 0.05..5, T 0..0.1 s.
     Raises IdentificationError without records."""
     if not records:
         raise IdentificationError("no records to fit")
@@ -259,7 +267,7 @@ def fit_joint(records: Sequence[Record], joint: int = 1) -> JointFit:
     def model_of(x: np.ndarray) -> JointModel:
         return JointModel(float(x[0]), float(x[1]), float(x[2]), float(x[3]))
 
-    lower, upper = [0.2, 1.0, 0.05, 0.0], [5.0, 3000.0, 5.0, 0.2]
+    lower, upper = [0.7, 1.0, 0.05, 0.0], [1.3, 3000.0, 5.0, 0.1]
     best = None
     for wn0 in (15.0, 60.0, 250.0):
         result = optimize.least_squares(
@@ -298,36 +306,45 @@ def empirical_response(
     tau_c over u's, (c_y + j d_y) / (c_u + j d_u). A lock-in on the sweep's own phase:
     unlike an FFT (scipy.signal.csd / welch) it needs no even sampling, so a loop's late
     ticks and gaps, and a starved twin's stale reads, cost samples, not bias. `coherence`
-    is the R^2 of y's fit in each window (1: all of y's motion is at the sweep). Raises
+    is the lower R^2 of u's and y's fits in each window (1: all their motion is at the
+    sweep). Windows with fewer than 8 samples, or a gap over a tenth of the period, are
+    left out. Raises
     IdentificationError on a band or duration that is not positive."""
     if not (0 < f0_hz < f1_hz and duration_s > 0):
         raise IdentificationError(f"chirp band {f0_hz}..{f1_hz} Hz over {duration_s} s")
-    tau = record.t_s - record.t_s[0]
+    # the sweep's phase on the loop's clock (the one the path was computed on), the fit's
+    # windows on the servos' (a starved twin's falls behind the loop's)
+    assert record.loop_t_s is not None
+    loop = record.loop_t_s - record.loop_t_s[0]
     rate = (f1_hz - f0_hz) / duration_s
-    phase = 2 * math.pi * (f0_hz * tau + 0.5 * rate * tau * tau)
+    phase = 2 * math.pi * (f0_hz * loop + 0.5 * rate * loop * loop)
+    tau = loop
     freqs, response, quality = [], [], []
     for f in np.geomspace(f0_hz, f1_hz, points):
         centre = (f - f0_hz) / rate
         window = np.abs(tau - centre) <= 0.5 * cycles / f
-        if window.sum() < 8:
+        # a window with a gap over a tenth of a period (a starved loop) cannot be fitted
+        if window.sum() < 8 or np.max(np.diff(record.t_s[window])) > 0.1 / f:
             continue
         sin, cos, dt = np.sin(phase[window]), np.cos(phase[window]), tau[window] - centre
         basis = np.column_stack([np.ones(dt.size), dt, sin, cos, dt * sin, dt * cos])
         cu, *_ = np.linalg.lstsq(basis, record.u_rad[window], rcond=None)
-        cy, res, *_ = np.linalg.lstsq(basis, record.y_rad[window], rcond=None)
+        cy, *_ = np.linalg.lstsq(basis, record.y_rad[window], rcond=None)
         # a sin(p) + b cos(p) = Im((a + j b) e^{jp}): complex amplitude a + j b
         amplitude_u, amplitude_y = complex(cu[2], cu[3]), complex(cy[2], cy[3])
         if abs(amplitude_u) == 0:
             continue
-        centred = record.y_rad[window] - record.y_rad[window].mean()
-        total = float(centred @ centred)
-        residual = (
-            float(res[0]) if res.size else float(np.sum((basis @ cy - record.y_rad[window]) ** 2))
-        )
         freqs.append(f)
         response.append(amplitude_y / amplitude_u)
-        quality.append(1.0 - residual / total if total > 0 else 0.0)
+        fits = ((basis @ cu, record.u_rad[window]), (basis @ cy, record.y_rad[window]))
+        quality.append(min(_r_squared(fitted, seen) for fitted, seen in fits))
     return Bode(np.array(freqs), np.array(response), np.array(quality), 1.0 / record.sample_hz)
+
+
+def _r_squared(fitted: np.ndarray, seen: np.ndarray) -> float:
+    centred = seen - seen.mean()
+    total = float(centred @ centred)
+    return 1.0 - float(np.sum((fitted - seen) ** 2)) / total if total > 0 else 0.0
 
 
 def identify(
