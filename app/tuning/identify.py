@@ -13,8 +13,7 @@ PWM k (u - y) (hardware/sim/xm430.py) drives a DC motor whose back-EMF damps it,
 J y'' + b y' = k (u - y) with k the loop's stiffness (app/control/gravity.py, 13.8 N m/rad
 at P 800), b = Kt Ke / R and J the joint's inertia with the arm's share; hence
 wn^2 = k / J and 2 zeta wn = b / J (`JointModel.inertia_kgm2`). Gravity's constant sag
-and the runs' starting point drop out: the fit works on deviations from each record's
-first sample, where the arm is at rest.
+and the runs' starting point drop out: each record's constant offset is left free.
 
 The fit (`fit_joint`) is scipy.optimize.least_squares on the time-domain error of the
 simulated response (scipy.signal.lsim, the input delayed by linear interpolation) over all
@@ -257,10 +256,10 @@ def _residuals(model: JointModel, records: Sequence[Record]) -> np.ndarray:
 
 
 def fit_joint(records: Sequence[Record], joint: int = 1) -> JointFit:
-    """Fit `JointModel` to `records` (deviations from each record's first sample) by
-    least squares on the time-domain error, from three starting bandwidths; the best fit
-    wins. Bounds: K 0.7..1.3 (a position loop reaches about its goal), wn 1..3000 rad/s, zeta 0.05..5, T 0..0.1 s.
-    Raises IdentificationError without records."""
+    """Fit `JointModel` to `records` by least squares on the time-domain error (each
+    record's constant offset left free), from three starting bandwidths; the best fit
+    wins. Bounds: K 0.7..1.3 (a position loop reaches about its goal), wn 1..3000 rad/s,
+    zeta 0.05..5, T 0..0.1 s. Raises IdentificationError without records."""
     if not records:
         raise IdentificationError("no records to fit")
 
