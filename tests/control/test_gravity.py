@@ -104,3 +104,32 @@ def test_the_loop_rests_on_its_goal_with_compensation_on(tmp_path):
                 f"the true platform within 0.2 mm of {point}",
                 seen=external_error_m,
             )
+
+
+def test_the_loop_writes_the_goal_plus_the_offset_and_reports_the_goal():
+    from app.control.controller import Controller
+    from tests.support.fake_bus import FakeBus
+
+    bus = FakeBus()  # an ideal servo: it reads back what was written
+    loop = Controller(load_settings(control={"gravity_compensation": True}), bus, "fake")
+    goal = np.array([0.02, -0.01, -0.23])
+    loop.start()
+    try:
+        loop.set_torque(True).result(timeout=10)
+        loop.set_goal(list(goal)).result(timeout=10)
+
+        def arrived() -> bool:  # the jerk-limited move done, holding the goal
+            snap = loop.snapshot()
+            return np.allclose(
+                THESIS_DELTA.fk(np.array(snap.joints_commanded_rad)).points, goal, atol=1e-9
+            )
+
+        wait_for(arrived, "the move to the goal", seen=lambda: loop.snapshot().point_commanded_m)
+    finally:
+        loop.stop()
+    commanded = np.array(loop.snapshot().joints_commanded_rad)
+    np.testing.assert_allclose(THESIS_DELTA.fk(commanded).points, goal, atol=1e-9)
+    written = np.array([c[1] for c in bus.calls if c[0] == "write_goal"][-1])
+    expected = commanded + gravity_offset(THESIS_DELTA).offset_rad(commanded)
+    np.testing.assert_allclose(written, expected, atol=1e-12)
+    assert np.all(np.abs(written - commanded) > 3e-3)  # the offset is there (~5 mrad)
