@@ -269,6 +269,19 @@ class LoopSettings(_Section):
     )
 
 
+class ControlSettings(_Section):
+    """How the loop turns goals into servo goals (app/control/gravity.py)."""
+
+    gravity_compensation: bool = Field(
+        False,
+        description="shift each joint's servo goal by its predicted sag under gravity "
+        "(gravity torque / the position loop's stiffness), so the arm rests on its goal",
+    )
+    payload_kg: float = Field(
+        0.0, ge=0, le=2.0, description="load on the platform the compensation holds up [kg]"
+    )
+
+
 class LimitSettings(_Section):
     """Where and how fast the platform may go; every goal passes these (app/control/gate.py)."""
 
@@ -449,6 +462,7 @@ class Settings(BaseSettings):
     tool: ToolSettings = ToolSettings()
     hardware: HardwareSettings = HardwareSettings()
     loop: LoopSettings = LoopSettings()
+    control: ControlSettings = ControlSettings()
     limits: LimitSettings = LimitSettings()
     jog: JogSettings = JogSettings()
     safety: SafetySettings = SafetySettings()
@@ -471,6 +485,15 @@ class Settings(BaseSettings):
         """The servos on the bus in bus order: the three legs, then the wrist if enabled."""
         joints = list(self.hardware.joints)
         return joints + [self.wrist] if self.wrist.enabled else joints
+
+    @model_validator(mode="after")
+    def _gravity_model(self) -> Settings:
+        if self.control.gravity_compensation and self.robot.type != "rotary":
+            raise ValueError(
+                "control.gravity_compensation: only rotary Deltas have a gravity model "
+                f"(robot.type is {self.robot.type!r})"
+            )
+        return self
 
     @model_validator(mode="after")
     def _twin_buildable(self) -> Settings:

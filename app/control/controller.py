@@ -27,6 +27,7 @@ from app.config import Settings
 from app.control import commands, held_jog
 from app.control.commands import CommandContext, record_fault
 from app.control.errors import GoalRejected
+from app.control.gravity import GravityOffset, gravity_offset
 from app.control.loop_state import LoopState
 from app.control.safety import servo_faults
 from app.control.sources import GoalSource, Setpoint
@@ -80,6 +81,13 @@ class Controller:
         wrist = settings.wrist
         self.wrist = WristBus(bus, wrist.servo_id) if wrist.enabled else None
         self.servos: ServoBus = self.wrist if self.wrist is not None else bus
+        # [control] gravity_compensation: servo goals shifted by the predicted sag (the
+        # loop's commanded joints stay the goal's, so status and following errors see it)
+        self.gravity: GravityOffset | None = None
+        if settings.control.gravity_compensation:
+            self.gravity = gravity_offset(
+                self.robot, settings.control.payload_kg, wrist=settings.wrist.enabled
+            )
         self.backend_description = backend_description or backend
         self.timing = TimingRecorder(settings.loop.rate_hz)
         self.state = LoopState.initial(settings.safety, self.period_s)
@@ -462,8 +470,12 @@ class Controller:
         joints = self.gate.limit_step(joints, state.reference_rad)
         if self.wrist is not None:  # the wrist's goal goes out in the same sync write
             self.wrist.phi_rad = next_phi(state, self.wrist, self.gate.wrist_max_step_rad)
+        servo_goal = joints
+        if self.gravity is not None:
+            offset = self.gravity.offset_rad(joints)
+            servo_goal = joints + np.where(np.isfinite(offset), offset, 0.0)
         try:
-            self.servos.write_goal(joints)
+            self.servos.write_goal(servo_goal)
         except BusError as exc:
             if state.misses.miss():
                 reason = f"goal writes failing: {exc}"
