@@ -3,15 +3,20 @@
 Dragging the gizmo sends the goal to the loop live (every drag update, not only at the
 end) through ``controller.set_goal``, the same gate the REST API uses. A point outside the
 workspace is projected onto it on the server (``gate.clamp_point``); when the drag ends
-there the gizmo snaps back to the projected point. viser runs these callbacks on its own
-threads: they only call the controller's thread-safe methods, never the bus. Saved goal
-points are kept in a JSON file (app/scene/goal_store.py) in the runs folder.
+there the gizmo snaps back to the projected point. With a wrist the gizmo also turns about
+z: its heading (the turned x axis's direction in the x-y plane, `yaw_of`) is the goal's
+wrist angle phi, kept within the wrist's limits; any tilt is ignored and the gizmo snaps
+back to a turn about z alone at the drag's end. Without a wrist it only translates. viser
+runs these callbacks on its own threads: they only call the controller's thread-safe
+methods, never the bus. Saved goal points are kept in a JSON file (app/scene/goal_store.py)
+in the runs folder.
 """
 
 from __future__ import annotations
 
 import itertools
 import logging
+import math
 import threading
 import time
 from collections import deque
@@ -40,6 +45,20 @@ SAVED_COLOUR = (230, 190, 40)
 FOLLOW_AFTER_DRAG_S = 0.5  # keep the gizmo where the operator left it this long
 
 
+def yaw_of(wxyz) -> float:
+    """The heading [rad] of the orientation ``wxyz`` (a unit quaternion, w first): the angle
+    about z of its x axis projected on the x-y plane, atan2(R[1, 0], R[0, 0]) with
+    R[0, 0] = 1 - 2 (y^2 + z^2), R[1, 0] = 2 (x y + w z) (the rotation matrix of a
+    quaternion); in (-pi, pi]. A tilt about x or y does not change it."""
+    w, x, y, z = (float(v) for v in wxyz)
+    return math.atan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z))
+
+
+def about_z(phi_rad: float) -> tuple[float, float, float, float]:
+    """The unit quaternion (w, x, y, z) of a turn by ``phi_rad`` [rad] about z."""
+    return (math.cos(phi_rad / 2.0), 0.0, 0.0, math.sin(phi_rad / 2.0))
+
+
 def polyline(points: np.ndarray) -> np.ndarray:
     """Consecutive points (N, 3) as segments (N - 1, 2, 3) for viser's line segments."""
     points = np.asarray(points, dtype=np.float64)
@@ -62,6 +81,9 @@ class GoalView:
         self.store = store  # where saved points are kept across restarts (None: not kept)
         self.controller = controller
         self.gate = controller.gate
+        # with a wrist the gizmo turns about z (phi, within these limits [rad]); else None
+        wrist = controller.settings.wrist
+        self.phi_limits = (wrist.min_angle_rad, wrist.max_angle_rad) if wrist.enabled else None
         self.trail_s = trail_s
         self.message = ""  # the last refusal, shown in the panel
         self.saved: dict[str, np.ndarray] = {}
@@ -74,9 +96,16 @@ class GoalView:
         self._trail: deque[tuple[float, np.ndarray]] = deque()
         self._show_trail = True
         scene = server.scene
-        start = self._start_point(controller.snapshot())
+        snap = controller.snapshot()
+        start = self._start_point(snap)
+        self.phi_rad = self._goal_phi(snap) if self.phi_limits is not None else 0.0
         self.gizmo = scene.add_transform_controls(
-            "/goal/gizmo", scale=0.07, disable_rotations=True, position=start, depth_test=False
+            "/goal/gizmo",
+            scale=0.07,
+            disable_rotations=self.phi_limits is None,
+            position=start,
+            wxyz=about_z(self.phi_rad),
+            depth_test=False,
         )
         self.marker = scene.add_icosphere(
             "/goal/marker", radius=0.007, color=INSIDE_COLOUR, position=start
@@ -99,21 +128,48 @@ class GoalView:
                 return np.asarray(point, dtype=np.float64)
         return self.gate.nearest(np.array([0.0, 0.0, -0.24]))
 
+    @staticmethod
+    def _goal_phi(snap: Snapshot) -> float:
+        """The wrist's goal [rad] (else as commanded, else as measured; 0 if none known)."""
+        for phi in (snap.phi_goal_rad, snap.phi_commanded_rad, snap.phi_rad):
+            if math.isfinite(phi):
+                return float(phi)
+        return 0.0
+
     # ---- dragging (viser's threads) ----
     def _on_gizmo(self, event: viser.TransformControlsEvent) -> None:
         if self.access is not None and not self.access.allow(event.client_id):
             if event.phase == "end":  # a refused drag: the gizmo goes back to the goal
                 self.gizmo.position = self.marker.position
+                self.gizmo.wxyz = about_z(self.phi_rad)
             return
         self._dragging = event.phase != "end"
-        self.drag_to(np.asarray(event.target.position, dtype=np.float64), event.phase == "end")
+        self.drag_pose(event.target.position, event.target.wxyz, event.phase == "end")
 
-    def drag_to(self, point: np.ndarray, final: bool = False) -> np.ndarray | None:
-        """The drag path: project ``point`` [m] onto the workspace, send it as the goal.
+    def phi_of(self, wxyz) -> float | None:
+        """The wrist angle [rad] a gizmo orientation ``wxyz`` asks for: its heading
+        (`yaw_of`) clamped to the wrist's limits; None without a wrist (only translation)."""
+        if self.phi_limits is None:
+            return None
+        low, high = self.phi_limits
+        return min(max(yaw_of(wxyz), low), high)
+
+    def drag_pose(self, position, wxyz, final: bool = False) -> np.ndarray | None:
+        """A gizmo pose: ``position`` (3,) [m] is the tip's goal, with a wrist the turn
+        ``wxyz`` (w, x, y, z) about z its phi (`phi_of`); see `drag_to`."""
+        phi = self.phi_of(wxyz)
+        return self.drag_to(np.asarray(position, dtype=np.float64), final, phi)
+
+    def drag_to(
+        self, point: np.ndarray, final: bool = False, phi_rad: float | None = None
+    ) -> np.ndarray | None:
+        """The drag path: project ``point`` [m] onto the workspace, send it as the goal,
+        with a wrist at ``phi_rad`` [rad] (None: the wrist keeps its goal).
 
         Only the newest of overlapping drag updates is processed (viser may run them in
-        parallel threads); ``final`` (drag end) snaps the gizmo to the point sent. Returns
-        the goal handed to the loop, or None if this update was superseded or refused.
+        parallel threads); ``final`` (drag end) snaps the gizmo to the point sent (and to a
+        turn about z alone). Returns the goal handed to the loop, or None if this update
+        was superseded or refused.
         """
         with self._sequence_lock:  # number and record together, or a late thread could
             sequence = next(self._sequence)  # overwrite a newer number with its older one
@@ -121,6 +177,8 @@ class GoalView:
         with self._lock:
             if sequence != self._latest and not final:
                 return None
+            if self.phi_limits is not None and phi_rad is not None:
+                self.phi_rad = float(phi_rad)
             goal = self._send(point)
             if final:
                 self._drag_ended_at = time.monotonic()  # the clock Scene.update uses
@@ -132,20 +190,23 @@ class GoalView:
             self.marker.color = INSIDE_COLOUR if inside else PROJECTED_COLOUR
             if final:  # snap back onto the workspace; other clients see where it went
                 self.gizmo.position = goal
+                if self.phi_limits is not None:
+                    self.gizmo.wxyz = about_z(self.phi_rad)
             return goal
 
     def _send(self, point: np.ndarray) -> np.ndarray | None:
         """gate-clamped goal handed to ``controller.set_goal``; None if refused."""
-        goal = self.gate.clamp_point(point)
+        phi = self.phi_rad if self.phi_limits is not None else 0.0
+        goal = self.gate.clamp_point(point, phi)
         try:
-            future = self.controller.set_goal(goal)
+            future = self.controller.set_goal(goal, phi)
         except GoalRejected:
             # In the workspace but past a joint limit or near a singularity: the furthest
             # good point on the way there from where the loop is now, as jog does.
             start = self._here()
             try:
-                goal = self.gate.clamp_towards(start, goal, self._near())
-                future = self.controller.set_goal(goal)
+                goal = self.gate.clamp_towards(start, goal, self._near(), phi)
+                future = self.controller.set_goal(goal, phi)
             except GoalRejected as exc:
                 self.message = str(exc)
                 return None
@@ -193,7 +254,8 @@ class GoalView:
 
     def go_to(self, name: str, on_done: Callable[[Future], None] | None = None) -> Future:
         """Smooth move to a saved point (controller.move); GoalRejected if it is out of reach."""
-        future = self.controller.move(point=self.saved[name])
+        phi = self.phi_rad if self.phi_limits is not None else 0.0  # a saved point keeps phi
+        future = self.controller.move(point=self.saved[name], phi_rad=phi)
         future.add_done_callback(on_done or self._outcome)
         return future
 
@@ -234,6 +296,11 @@ class GoalView:
             self.gizmo.position = goal
             self.marker.position = goal
             self.marker.color = INSIDE_COLOUR
+        if idle and self.phi_limits is not None:  # and turns with wrist goals set elsewhere
+            phi = self._goal_phi(snap)
+            if abs(phi - self.phi_rad) > 1e-4:
+                self.phi_rad = phi
+                self.gizmo.wxyz = about_z(phi)
 
     def _update_trail(self, point: np.ndarray, now_s: float) -> None:
         changed = False

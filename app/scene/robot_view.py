@@ -19,6 +19,7 @@ from kinematics import LinearDelta, RotaryDelta, Tool
 
 LEG_COLOURS = ((222, 76, 64), (64, 168, 90), (60, 112, 214))
 GHOST_COLOUR = (175, 180, 190)
+HEADING_M = 0.03  # the wrist's heading arrow: its length [m]
 SERVO_SIZE_M = (0.0465, 0.034, 0.0285)  # XM430-W210 case: radial, along the shaft, height
 
 
@@ -58,7 +59,9 @@ class RobotView:
         self.root = root
         self.ghost = ghost
         self.tool_model = tool if tool is not None and tool.length_m > 0.0 else None
+        self.has_wrist = tool is not None and tool.wrist  # the tool turns about z by phi
         self._joints: np.ndarray | None = None
+        self._phi = 0.0
         scene = server.scene
         colours = (GHOST_COLOUR,) * 3 if ghost else LEG_COLOURS
         nan = np.zeros((3, 2, 3))
@@ -91,6 +94,14 @@ class RobotView:
                 np.zeros((1, 2, 3)),
                 np.full((1, 2, 3), 120 if ghost else 230, np.uint8),
                 thickness=0.004 if ghost else 0.008,
+            )
+        self.heading = None  # with a wrist: an arrow along the tool's x axis turned by phi
+        if self.has_wrist:
+            self.heading = scene.add_line_segments(
+                f"{root}/heading",
+                np.zeros((3, 2, 3)),
+                np.full((3, 2, 3), (150, 150, 150) if ghost else (230, 120, 20), np.uint8),
+                thickness=0.003 if ghost else 0.006,
             )
         self.joints = None
         self._static: list[Any] = []
@@ -146,24 +157,37 @@ class RobotView:
             )
         )
 
-    def update(self, joints: Any) -> bool:
-        """Draw the pose for ``joints`` (3,) [rad or m]; False (and nothing sent) if it is
-        unchanged by more than 1e-5 or has no valid FK, so an idle robot costs no traffic."""
+    def update(self, joints: Any, phi_rad: float = 0.0) -> bool:
+        """Draw the pose for ``joints`` (3,) [rad or m] and, with a wrist, the wrist angle
+        ``phi_rad`` [rad] (the tool turned about z, the heading arrow); False (and nothing
+        sent) if both are unchanged by more than 1e-5 or there is no valid FK, so an idle
+        robot costs no traffic. Without a wrist phi is ignored (the tool stays at phi = 0)."""
         joints = np.asarray(joints, dtype=np.float64)
+        phi = float(phi_rad) if self.has_wrist and math.isfinite(phi_rad) else 0.0
         if not np.isfinite(joints).all():
             return False
-        if self._joints is not None and np.abs(joints - self._joints).max() < 1e-5:
+        if (
+            self._joints is not None
+            and np.abs(joints - self._joints).max() < 1e-5
+            and abs(phi - self._phi) < 1e-5
+        ):
             return False
         lines = robot_lines(self.robot, joints)
         if not np.isfinite(lines.rods).all():
             return False
         self._joints = joints
+        self._phi = phi
         self.upper.points = lines.upper
         self.rods.points = lines.rods.reshape(6, 2, 3)
         centre = lines.rods[:, :, 1].mean(axis=(0, 1))
         self.platform.position = centre
-        if self.tool is not None and self.tool_model is not None:  # phi = 0 until a wrist
-            self.tool.points = np.stack([centre, self.tool_model.tip(centre)])[None]
+        if self.tool is not None and self.tool_model is not None:
+            tip = (
+                self.tool_model.tip(centre, phi) if self.has_wrist else self.tool_model.tip(centre)
+            )
+            self.tool.points = np.stack([centre, tip])[None]
+        if self.heading is not None:
+            self.heading.points = heading_arrow(centre, phi, HEADING_M)
         if self.joints is not None:
             self.joints.points = np.concatenate(
                 [lines.upper[:, 0], lines.upper[:, 1], lines.rods[:, :, 1].mean(axis=1)]
@@ -176,16 +200,42 @@ class RobotView:
 
     @visible.setter
     def visible(self, value: bool) -> None:
-        for handle in (self.upper, self.rods, self.platform, self.joints, self.tool):
+        for handle in (self.upper, self.rods, self.platform, self.joints, self.tool, self.heading):
             if handle is not None:
                 handle.visible = value
 
     def remove(self) -> None:
         """Remove every handle under this view's root."""
-        handles = (self.upper, self.rods, self.platform, self.joints, self.tool, *self._static)
+        handles = (
+            self.upper,
+            self.rods,
+            self.platform,
+            self.joints,
+            self.tool,
+            self.heading,
+            *self._static,
+        )
         for handle in handles:
             if handle is not None:
                 handle.remove()
+
+
+def heading_arrow(centre: Any, phi_rad: float, length_m: float) -> np.ndarray:
+    """The wrist's heading as an arrow in the platform's plane: segments (3, 2, 3) [m], the
+    shaft from ``centre`` (3,) along (cos phi, sin phi, 0) for ``length_m`` and two barbs
+    at its head (the tool's x axis turned by the wrist angle ``phi_rad`` [rad] about z)."""
+    centre = np.asarray(centre, dtype=np.float64)
+    along = np.array([math.cos(phi_rad), math.sin(phi_rad), 0.0])
+    across = np.array([-along[1], along[0], 0.0])
+    head = centre + length_m * along
+    barb = 0.3 * length_m
+    return np.stack(
+        [
+            [centre, head],
+            [head, head - barb * along + 0.6 * barb * across],
+            [head, head - barb * along - 0.6 * barb * across],
+        ]
+    )
 
 
 def platform_centre(robot: RotaryDelta | LinearDelta, joints: Any) -> np.ndarray:

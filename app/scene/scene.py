@@ -172,9 +172,13 @@ class Scene:
         snap = self.controller.snapshot()
         assert self.server is not None
         with self.server.atomic():
-            self.robot.update(snap.joints_measured_rad)
+            self.robot.update(snap.joints_measured_rad, snap.phi_rad)
             commanded = np.isfinite(snap.joints_commanded_rad).all()
-            self.ghost.update(snap.joints_commanded_rad)
+            phi_commanded = snap.phi_commanded_rad  # NaN without a wrist
+            self.ghost.update(
+                snap.joints_commanded_rad,
+                phi_commanded if np.isfinite(phi_commanded) else snap.phi_rad,
+            )
             self.ghost.visible = bool(commanded and self.gui_ghost.value)
             self.goals.update(snap, now_s)
             self.world.update(self.controller.current_source)

@@ -3,11 +3,16 @@
 
 import { postControl, takeLease, token } from "./api.js";
 import { operatorText, parseDecimal, showError, showMessage, setText } from "./ui.js";
+import { PHI_STEP_DEG, clampPhi, currentPhiRad, wrist } from "./wrist.js";
 
 const KEY_AXES = {
   ArrowRight: [0, 1], ArrowLeft: [0, -1], ArrowUp: [1, 1], ArrowDown: [1, -1],
   PageUp: [2, 1], PageDown: [2, -1],
 };
+// with a wrist and keyboard jog on: each press turns the wrist PHI_STEP_DEG (a held key on,
+// at most once per PHI_REPEAT_MS)
+const PHI_KEYS = { e: 1, "]": 1, q: -1, "[": -1 };
+const PHI_REPEAT_MS = 150;
 const HEARTBEAT_MS = 50; // a held jog's heartbeat; the server brakes 150 ms after the last
 const GAMEPAD_PERIOD_MS = 50;
 const DEADZONE = 0.15;
@@ -131,7 +136,8 @@ function distanceMm(targetMm) {
   return Math.hypot(...targetMm.map((v, i) => v - here[i] * 1000));
 }
 
-// The form's target in mm, or the first field's error; marks bad fields.
+// The form's target in mm (and, with a wrist, phiDeg: its phi [deg] to 0.1 deg), or the
+// first field's error; marks bad fields.
 function formTarget() {
   const form = document.getElementById("goal-form");
   const target = [];
@@ -143,36 +149,50 @@ function formTarget() {
     if (parsed.error && !error) error = `${k}: ${parsed.error}`;
     target.push(parsed.value);
   }
-  return error ? { error } : { target };
+  let phiDeg = null;
+  if (wrist.enabled) {
+    const input = form.elements.phi;
+    const parsed = parseDecimal(input.value);
+    input.setAttribute("aria-invalid", parsed.error ? "true" : "false");
+    if (parsed.error && !error) error = `φ: ${parsed.error}`;
+    phiDeg = parsed.error ? null : Math.round(parsed.value * 10) / 10;
+  }
+  return error ? { error } : { target, phiDeg };
 }
 
-function describeMove(targetMm) {
+function describeMove(targetMm, phiDeg = null) {
   const d = distanceMm(targetMm);
-  return `target ${tripleMm(targetMm)}` + (d === null ? "" : `, distance ${d.toFixed(2)} mm`);
+  const phi = phiDeg === null ? "" : ` at φ ${phiDeg.toFixed(1)}°`;
+  return `target ${tripleMm(targetMm)}${phi}` + (d === null ? "" : `, distance ${d.toFixed(2)} mm`);
 }
 
 function updateGoalPreview() {
   const out = document.getElementById("goal-preview");
-  const { target, error } = formTarget();
-  out.textContent = error ? `Not sent: ${error}` : `Go will send: ${describeMove(target)}`;
+  const { target, phiDeg, error } = formTarget();
+  out.textContent = error ? `Not sent: ${error}` : `Go will send: ${describeMove(target, phiDeg)}`;
   out.className = error ? "goal-preview bad" : "goal-preview muted";
 }
 
-// Go to ``targetMm`` (3 numbers, mm): a move longer than confirm_move_m asks first, naming the
-// target and the distance; nothing is sent on cancel. Resolves true if the goal was accepted.
-export async function goTo(targetMm, what = "Go to") {
+// Go to ``targetMm`` (3 numbers, mm), with a wrist at ``phiDeg`` [deg] (null: the wrist
+// keeps its goal): a move longer than confirm_move_m asks first, naming the target and the
+// distance; nothing is sent on cancel. Resolves true if the goal was accepted.
+export async function goTo(targetMm, what = "Go to", phiDeg = null) {
   const d = distanceMm(targetMm);
+  if (!wrist.enabled) phiDeg = null;
   if (d === null || d > confirmMoveM * 1000) {
     const why = d === null ? "the robot's position is not known yet" : `longer than ${(confirmMoveM * 1000).toFixed(0)} mm`;
-    const ok = await askConfirm(`${what}: ${describeMove(targetMm)} (${why}). Move?`, "Move");
+    const ok = await askConfirm(`${what}: ${describeMove(targetMm, phiDeg)} (${why}). Move?`, "Move");
     if (!ok) {
       showMessage("Move cancelled: nothing was sent");
       return false;
     }
   }
+  const body = { position_m: targetMm.map((v) => v / 1000) };
+  // the API's phi_rad defaults to 0: with a wrist it is always sent, so no goal turns it back
+  if (wrist.enabled) body.phi_rad = phiDeg === null ? currentPhiRad(latest) : phiDeg * Math.PI / 180;
   try {
-    await command("/api/goal", { position_m: targetMm.map((v) => v / 1000) });
-    showMessage(`Going to ${tripleMm(targetMm)}`);
+    await command("/api/goal", body);
+    showMessage(`Going to ${tripleMm(targetMm)}${phiDeg === null ? "" : ` at φ ${phiDeg.toFixed(1)}°`}`);
     return true;
   } catch (err) {
     showError(err);
@@ -263,6 +283,32 @@ export function releaseHold(owner = null) {
     command("/api/jog", { velocity_m_s: [0, 0, 0] }).catch(showError));
 }
 
+// ---- the wrist: steps of PHI_STEP_DEG, sent as a goal at the tip's goal (or where it is) ----
+const phiJog = { target: null, at: -Infinity }; // the last phi a step sent [rad], and when
+
+// Turn the wrist one step (sign +1 or -1) from its goal (or from the last step, when the
+// status has not caught up yet), within its limits.
+export async function stepPhi(sign) {
+  if (!wrist.enabled) return;
+  const now = performance.now();
+  if (now - phiJog.at < PHI_REPEAT_MS) return; // a held key: at most one step per PHI_REPEAT_MS
+  const where = robotPointM();
+  if (!where) {
+    showMessage("Not sent: the robot's position is not known yet", "error");
+    return;
+  }
+  const base = phiJog.target !== null && now - phiJog.at < 1000 ? phiJog.target : currentPhiRad(latest);
+  const phi = clampPhi(base + sign * PHI_STEP_DEG * Math.PI / 180);
+  phiJog.target = phi;
+  phiJog.at = now;
+  try {
+    await command("/api/goal", { position_m: where, phi_rad: phi });
+  } catch (err) {
+    phiJog.target = null;
+    showError(err);
+  }
+}
+
 function axisVelocity(axis, sign) {
   const velocity = [0, 0, 0];
   velocity[axis] = sign * speedMS();
@@ -282,6 +328,12 @@ function onKey(event) {
     event.stopImmediatePropagation();
     // Esc still closes what it closes elsewhere (the report's lightbox), after the e-stop
     if (event.key === "Escape") document.querySelectorAll("dialog[open]").forEach((d) => d.close());
+    return;
+  }
+  const phiSign = wrist.enabled ? PHI_KEYS[String(event.key || "").toLowerCase()] : undefined;
+  if (phiSign && !typing(event.target) && document.getElementById("jog-keys").checked && document.hasFocus()) {
+    event.preventDefault();
+    stepPhi(phiSign); // a held key repeats, at most once per PHI_REPEAT_MS
     return;
   }
   const axis = KEY_AXES[event.key];
@@ -311,6 +363,10 @@ function bindButtons() {
   document.getElementById("confirm-yes").addEventListener("click", () => answerConfirm(true));
   document.getElementById("confirm-no").addEventListener("click", () => answerConfirm(false));
   const pad = document.querySelector(".pad");
+  pad.addEventListener("click", (event) => {
+    const sign = Number(event.target.closest("[data-phi]")?.dataset.phi);
+    if (sign) stepPhi(sign);
+  });
   pad.addEventListener("pointerdown", (event) => {
     const spec = event.target.closest("[data-jog]")?.dataset.jog;
     if (!spec) return;
@@ -324,13 +380,13 @@ function bindButtons() {
   goalForm.addEventListener("input", updateGoalPreview);
   goalForm.addEventListener("submit", (event) => {
     event.preventDefault();
-    const { target, error } = formTarget();
+    const { target, phiDeg, error } = formTarget();
     updateGoalPreview();
     if (error) {
       showMessage(`Not sent: ${error}`, "error");
       return;
     }
-    goTo(target);
+    goTo(target, "Go to", phiDeg);
   });
 }
 

@@ -9,6 +9,7 @@ import { onStatus, startRuns } from "./runs.js";
 import { startScene } from "./scene.js";
 import { setStreamOnline, startStatus, state } from "./status.js";
 import { onWorkspaceStatus, startWorkspace2d } from "./workspace2d.js";
+import { renderWrist, startWrist } from "./wrist.js";
 
 async function boot() {
   let info = null;
@@ -17,9 +18,10 @@ async function boot() {
   } catch {
     // offline at load: status polling shows the banner and keeps retrying
   }
+  startWrist(info); // first: what the other parts show depends on whether a wrist is fitted
   startScene(info);
   startStatus();
-  state.listeners.push(onStatus);
+  state.listeners.push(onStatus, renderWrist);
   state.listeners.push(renderHealth, onWorkspaceStatus);
   startControl(info);
   startRuns();

@@ -18,6 +18,7 @@
 // - The time window: 5, 10, 30 or 60 s.
 
 import { telemetryUrl, promptToken, token } from "./api.js";
+import { phiSample, startPhiPlot } from "./phiplot.js";
 import { Ring } from "./ring.js";
 
 const HZ = 50;
@@ -231,6 +232,7 @@ function onMessage(message) {
     return;
   }
   const raw = JSON.parse(message.data);
+  phiSample(raw); // the wrist's plot (phiplot.js; nothing without a wrist)
   if (raw.t < lastT - 1) for (const r of Object.values(series)) r.clear(); // server restarted
   else if (raw.t <= lastT) return;
   if (gapNext && lastT > -Infinity) { // the lines break where the pause was
@@ -427,6 +429,7 @@ export function startPlots(onState) {
     return;
   }
   startControls();
+  startPhiPlot(() => ({ windowS, paused }));
   connect(onState);
   requestAnimationFrame(draw);
 }

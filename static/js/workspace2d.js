@@ -11,6 +11,7 @@
 import { get } from "./api.js";
 import { command } from "./control.js";
 import { setText, showError, showMessage } from "./ui.js";
+import { currentPhiRad, hasTool, wrist } from "./wrist.js";
 
 const MIN_FRAME_MS = 100; // at most ~10 redraws a second
 // Cuts on a 5 mm grid: a sinusoid's z sweep asks for a few dozen sections once, then the
@@ -18,7 +19,7 @@ const MIN_FRAME_MS = 100; // at most ~10 redraws a second
 const LEVEL_STEP_M = 0.005;
 const TYPED_DEBOUNCE_MS = 150;
 const COLOURS = {
-  reachable: "#d3f9d8", outside: "#f1f3f5", edge: "#2b8a3e", robot: "#1864ab",
+  reachable: "#d3f9d8", outside: "#f1f3f5", edge: "#2b8a3e", robot: "#1864ab", platform: "#862e9c",
   goal: "#343a40", typed: "#e8590c", nearest: "#9c36b5", text: "#495057",
   program: "#0b7285", violation: "#c92a2a",
 };
@@ -29,7 +30,9 @@ const views = {
   top: { plane: "xy", levelAxis: 2, fallback: -0.24, section: null, image: null, loading: false, error: null },
   side: { plane: "xz", levelAxis: 1, fallback: 0.0, section: null, image: null, loading: false, error: null },
 };
-const seen = { robot: null, goal: null, typed: null, inside: true, nearest: null };
+// robot: the tool tip (the point goals are for); platform: its centre, drawn too when a tool
+// offset is set; phi: the wrist angle a goal from here keeps [rad]
+const seen = { robot: null, platform: null, phi: 0, goal: null, typed: null, inside: true, nearest: null };
 let drawnKey = "";
 let lastDraw = 0;
 let drawTimer = null;
@@ -113,6 +116,9 @@ function marker(ctx, [x, y], kind) {
   if (kind === "goal") {
     ctx.moveTo(x - 6, y - 6); ctx.lineTo(x + 6, y + 6); ctx.moveTo(x + 6, y - 6); ctx.lineTo(x - 6, y + 6);
     ctx.stroke();
+  } else if (kind === "platform") { // a diamond: the platform centre, the tool tip's root
+    ctx.moveTo(x, y - 6); ctx.lineTo(x + 6, y); ctx.lineTo(x, y + 6); ctx.lineTo(x - 6, y); ctx.closePath();
+    ctx.stroke();
   } else if (kind === "typed") {
     ctx.arc(x, y, 7, 0, 2 * Math.PI);
     ctx.stroke();
@@ -161,6 +167,17 @@ function drawView(name) {
   }
   drawProgram(ctx, t, view, canvas);
   if (seen.goal) marker(ctx, t.at(seen.goal, view), "goal");
+  if (seen.robot && seen.platform) { // the tool: a line from the platform centre to the tip
+    const from = t.at(seen.platform, view), to = t.at(seen.robot, view);
+    ctx.save();
+    ctx.strokeStyle = COLOURS.platform;
+    ctx.beginPath(); ctx.moveTo(...from); ctx.lineTo(...to); ctx.stroke();
+    ctx.restore();
+    marker(ctx, from, "platform");
+    canvas.dataset.platformPx = from.map((c) => Math.round(c)).join(",");
+  } else {
+    delete canvas.dataset.platformPx;
+  }
   if (seen.robot) {
     const at = t.at(seen.robot, view);
     marker(ctx, at, "robot");
@@ -231,6 +248,9 @@ export function onWorkspaceStatus(s) {
   const point = measured && measured.every((v) => v !== null) ? measured :
     commanded && commanded.every((v) => v !== null) ? commanded : null;
   seen.robot = rounded(point);
+  const platform = s.ee.platform_m;
+  seen.platform = hasTool() && platform && platform.every((v) => v !== null) ? rounded(platform) : null;
+  seen.phi = currentPhiRad(s);
   const goal = s.goal.position_m;
   seen.goal = goal && goal.every((v) => v !== null) ? rounded(goal) : null;
   setText("ws-robot", seen.robot ? `${mmText(seen.robot)} mm` : "–");
@@ -285,7 +305,8 @@ function typedChanged() {
 function goNearest() {
   const nearest = JSON.parse(document.getElementById("ws-go-nearest").dataset.nearest || "null");
   if (!nearest) return;
-  command("/api/goal", { position_m: nearest })
+  const body = wrist.enabled ? { position_m: nearest, phi_rad: seen.phi } : { position_m: nearest };
+  command("/api/goal", body)
     .then(() => {
       showMessage(`Going to the nearest reachable point ${mmText(nearest)} mm`);
       const form = document.getElementById("goal-form"); // the form now shows the goal sent

@@ -66,7 +66,8 @@ def _viser_port(scene: Scene | None) -> int | None:
 @router.get("/api/info", response_model=InfoOut)
 def get_info(settings: SettingsDep, scene: SceneDep, estop_port: EstopPortDep) -> dict[str, Any]:
     """Viser and e-stop ports, token requirement and the limits the page shows beside its
-    controls."""
+    controls; the tool offset and the wrist (the page shows phi only with one)."""
+    wrist = settings.wrist
     return {
         "viser_port": _viser_port(scene),
         "estop_port": estop_port,
@@ -78,6 +79,12 @@ def get_info(settings: SettingsDep, scene: SceneDep, estop_port: EstopPortDep) -
         "home_m": list(settings.jog.home_m),
         "joint_speed_limit_rad_s": settings.limits.joint_speed_rad_s,
         "loop_rate_hz": settings.loop.rate_hz,
+        "tool_offset_m": list(settings.tool.offset_m),
+        "wrist": {
+            "enabled": wrist.enabled,
+            "min_rad": wrist.min_angle_rad if wrist.enabled else None,
+            "max_rad": wrist.max_angle_rad if wrist.enabled else None,
+        },
     }
 
 

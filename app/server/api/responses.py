@@ -72,7 +72,10 @@ class PlatformStatus(_Out):
 
 class GoalStatus(_Out):
     position_m: MaybeVector3 = Field(description="the tool tip goal [m]")
-    phi_rad: float = Field(description="the wrist angle of the tip's goal [rad]; 0 without a wrist")
+    phi_rad: float | None = Field(
+        None,
+        description="the wrist's goal [rad] (as commanded while it holds); null without a wrist",
+    )
 
 
 class TimingStatsOut(_Out):
@@ -195,6 +198,9 @@ class TelemetryEe(_Out):
     position_m: MaybeVector3
     platform_m: MaybeVector3
     phi_rad: float
+    goal_phi_rad: float | None = Field(
+        None, description="the wrist's goal [rad] (as commanded while it holds); null without one"
+    )
 
 
 class TelemetryMessage(_Out):
@@ -387,6 +393,14 @@ class PoseAccepted(_Out):
     input: PoseInputStatus
 
 
+class WristInfo(_Out):
+    """The wrist ([wrist] section): whether one is fitted and its limits [rad]."""
+
+    enabled: bool
+    min_rad: float | None = Field(description="lowest wrist angle [rad]; null without a wrist")
+    max_rad: float | None = Field(description="highest wrist angle [rad]; null without a wrist")
+
+
 class InfoOut(_Out):
     """Facts the dashboard cannot read from status."""
 
@@ -403,6 +417,11 @@ class InfoOut(_Out):
     home_m: list[float]
     joint_speed_limit_rad_s: float
     loop_rate_hz: float
+    tool_offset_m: list[float] = Field(
+        description="the tool tip in the platform frame at phi = 0 [m] ([tool] offset_m; "
+        "zeros without a tool: the tip is the platform centre)"
+    )
+    wrist: WristInfo
 
 
 class WorkspaceSectionOut(_Out):

@@ -53,12 +53,23 @@ def status(controller: Controller) -> dict[str, Any]:
             "error_m": floats(snap.shown_error_m),
             "external_m": floats(snap.external_m),
         },
-        "goal": {"position_m": floats(snap.goal_m), "phi_rad": snap.phi_rad},
+        "goal": {"position_m": floats(snap.goal_m), "phi_rad": goal_phi(snap)},
         "loop": loop_timing(controller),
         "bus": {"missed_reads": snap.missed_reads, **asdict(controller.bus.stats)},
         "pose": controller.pose_status() if controller.pose_status else None,
         "phase": snap.phase,
     }
+
+
+def goal_phi(snap: Snapshot) -> float | None:
+    """The wrist's goal [rad]: its goal, else (holding) what is commanded; None without a
+    wrist (both NaN) or without a setpoint (torque off: nothing holds it)."""
+    if not snap.torque:
+        return None
+    for phi in (snap.phi_goal_rad, snap.phi_commanded_rad):
+        if math.isfinite(phi):
+            return float(phi)
+    return None
 
 
 def loop_timing(controller: Controller) -> dict[str, Any]:
@@ -96,6 +107,7 @@ def telemetry(snap: Snapshot, controller: Controller) -> dict[str, Any]:
             "position_m": floats(snap.point_measured_m),
             "platform_m": floats(snap.platform_measured_m),
             "phi_rad": snap.tool_phi_rad,
+            "goal_phi_rad": goal_phi(snap),
         },
         "loop": {
             "measured_hz": window.measured_hz,
