@@ -46,7 +46,12 @@ def test_a_tip_goal_with_a_heading_turns_the_wrist_and_puts_the_tip_there(client
         ee = _ee(client)
         return abs(ee["phi_rad"] - PHI) < 0.01 and np.linalg.norm(ee["position_m"] - TIP) < 0.003
 
-    wait_for(there, "the wrist at 0.6 rad and the tip at the goal", seen=lambda: _ee(client))
+    wait_for(
+        there,
+        "the wrist at 0.6 rad and the tip at the goal",
+        timeout_s=60,
+        seen=lambda: _ee(client),
+    )
     ee = _ee(client)
     tip, platform = np.array(ee["position_m"]), np.array(ee["platform_m"])
     # the tip is the platform plus the offset turned by the wrist's own (measured) angle
