@@ -26,6 +26,7 @@ from app.config import Settings
 from app.control import commands, held_jog
 from app.control.commands import CommandContext, record_fault
 from app.control.errors import GoalRejected
+from app.control.joint_offsets import OffsetBus, set_offsets
 from app.control.loop_state import LoopState
 from app.control.safety import servo_faults
 from app.control.sources import GoalSource, Setpoint
@@ -73,6 +74,8 @@ class Controller:
         self.robot, self.gate = self.ctx.robot, self.ctx.gate
         self.servo_ids, self.period_s = self.ctx.servo_ids, self.ctx.period_s
         self.bus, self.backend = bus, backend
+        # joint positions read and goals written through calibration's joint offsets
+        self.joint_bus = OffsetBus(bus)
         self.backend_description = backend_description or backend
         self.timing = TimingRecorder(settings.loop.rate_hz)
         self.state = LoopState.initial(settings.safety, self.period_s)
@@ -207,19 +210,30 @@ class Controller:
         return self.submit(lambda: commands.stop_source(self.state, source))
 
     def set_torque(self, enabled: bool) -> Future:
-        return self.submit(lambda: commands.torque_to(self.state, self.ctx, self.bus, enabled))
+        bus = self.joint_bus
+        return self.submit(lambda: commands.torque_to(self.state, self.ctx, bus, enabled))
 
     def estop(self) -> Future:
         """Stop at once and hold or release per config; nothing moves until reset."""
         if not self.running:  # no loop to queue on: act directly
             future: Future = Future()
-            future.set_result(commands.estop_now(self.state, self.ctx, self.bus))
+            future.set_result(commands.estop_now(self.state, self.ctx, self.joint_bus))
             return future
-        return self.submit(lambda: commands.estop_now(self.state, self.ctx, self.bus))
+        return self.submit(lambda: commands.estop_now(self.state, self.ctx, self.joint_bus))
 
     def reset(self) -> Future:
         """Clear e-stop and faults, rebooting servos that report hardware errors."""
-        return self.submit(lambda: commands.reset_now(self.state, self.ctx, self.bus))
+        return self.submit(lambda: commands.reset_now(self.state, self.ctx, self.joint_bus))
+
+    def set_joint_offsets(self, offsets_rad: Any) -> Future:
+        """Joint offsets [rad] (3,) from calibration, added to every joint read from now on
+        (app/control/joint_offsets.py); refused while a motion runs."""
+        return self.submit(lambda: set_offsets(self.state, self.robot, self.joint_bus, offsets_rad))
+
+    @property
+    def joint_offsets_rad(self) -> np.ndarray:
+        """The joint offsets in use [rad], (3,): zeros until a calibration is applied."""
+        return self.joint_bus.offsets_rad.copy()
 
     def _near_measured(self) -> np.ndarray:
         near = self.snapshot().joints_measured_rad
@@ -284,7 +298,7 @@ class Controller:
     def _read(self) -> bool:
         state = self.state
         try:
-            joints = self.bus.read_state()
+            joints = self.joint_bus.read_state()
         except BusError as exc:
             if state.misses.miss():
                 reason = f"{state.misses.consecutive} reads failed: {exc}"
@@ -345,7 +359,7 @@ class Controller:
         state = self.state
         joints = self.gate.limit_step(joints, state.reference_rad)
         try:
-            self.bus.write_goal(joints)
+            self.joint_bus.write_goal(joints)
         except BusError as exc:
             if state.misses.miss():
                 reason = f"goal writes failing: {exc}"
