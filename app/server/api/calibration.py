@@ -5,27 +5,19 @@ from __future__ import annotations
 import asyncio
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Depends, HTTPException
+from fastapi import APIRouter, HTTPException
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
-from starlette.requests import HTTPConnection
 
 from app.calibration.fit import CalibrationError
 from app.calibration.procedure import CalibrationManager, CalibrationRun
-from app.server.api.deps import ControlClient, ControllerDep, SettingsDep
+from app.server.api.deps import CalibrationDep, ControlClient, ControllerDep, SettingsDep
 from app.server.backends import _calibrations
-from app.server.errors import CONTROL, NOT_FOUND
+from app.server.errors import CONTROL, INVALID, NOT_FOUND
 
 router = APIRouter(tags=["calibration"])
 MAX_POSES = 300
 FILES = {"report.png": "image/png", "pairs.csv": "text/csv", "result.json": "application/json"}
-
-
-def get_calibration(connection: HTTPConnection) -> CalibrationManager:
-    return connection.app.state.calibration
-
-
-CalibrationDep = Annotated[CalibrationManager, Depends(get_calibration)]
 
 
 class CalibrationRequest(BaseModel):
@@ -42,6 +34,58 @@ class CalibrationRequest(BaseModel):
 
 class CalibrationStarted(BaseModel):
     run_id: str
+
+
+class CalibrationParameters(BaseModel):
+    """The fitted model: joint offsets [rad] and each leg's lengths [m] (nominal where not
+    fitted)."""
+
+    joint_offsets_rad: list[float]
+    L_m: list[float]
+    l_m: list[float]
+    R_m: list[float]
+    r_m: list[float]
+
+
+class Progress(BaseModel):
+    pose: int = Field(description="poses measured so far")
+    poses: int = Field(description="poses to visit (fit and held out)")
+
+
+class Frame(BaseModel):
+    position_m: list[float]
+    rpy_rad: list[float]
+
+
+class CalibrationOut(BaseModel):
+    """A calibration run. state: planned, moving, fitting, done, refused (worse than the
+    current model on held-out poses: never applied), failed (error says why), applied.
+    RMSE [m] is the root mean square 3D distance between FK and the measurement; *_before
+    the current model (its measurement frame fitted), holdout_* on the held-out poses."""
+
+    run_id: str
+    state: str
+    kind: str
+    parameters_fitted: str
+    progress: Progress
+    error: str | None
+    parameters: CalibrationParameters | None
+    rmse_before_m: float | None
+    rmse_after_m: float | None
+    holdout_rmse_before_m: float | None
+    holdout_rmse_m: float | None
+    condition_number: float | None
+    singular_values: list[float]
+    unobservable: list[str]
+    holdout_poses: int
+    measurement_frame: Frame | None
+    files: list[str]
+
+
+class CalibrationApplied(BaseModel):
+    run_id: str
+    joint_offsets_rad: list[float] = Field(description="the offsets the controller now uses")
+    config_written: str | None = Field(description="the config file written, if one is in use")
 
 
 def _run(calibration: CalibrationManager, run_id: str) -> CalibrationRun:
@@ -65,14 +109,20 @@ async def start_calibration(
     return {"run_id": run.run_id}
 
 
-@router.get("/calibration/{run_id}", responses=NOT_FOUND)
+@router.get(
+    "/calibration/{run_id}", response_model=CalibrationOut, responses={**NOT_FOUND, **INVALID}
+)
 def get_calibration_run(run_id: str, calibration: CalibrationDep) -> dict[str, Any]:
     """State, progress, fitted parameters, RMSE before / after / held out [m], the
     identification's condition number, singular values and unobservable parameters."""
     return _run(calibration, run_id).view()
 
 
-@router.post("/calibration/{run_id}/apply", responses={**CONTROL, **NOT_FOUND})
+@router.post(
+    "/calibration/{run_id}/apply",
+    response_model=CalibrationApplied,
+    responses={**CONTROL, **NOT_FOUND},
+)
 async def apply_calibration(
     run_id: str, calibration: CalibrationDep, settings: SettingsDep, _: ControlClient
 ) -> dict[str, Any]:
@@ -84,7 +134,11 @@ async def apply_calibration(
     return await asyncio.to_thread(calibration.apply, run_id, joints)
 
 
-@router.get("/calibration/{run_id}/{name}", responses=NOT_FOUND)
+@router.get(
+    "/calibration/{run_id}/{name}",
+    response_class=FileResponse,
+    responses={**NOT_FOUND, **INVALID},
+)
 def get_calibration_file(run_id: str, name: str, calibration: CalibrationDep) -> FileResponse:
     """A run's file: report.png (residuals before and after), pairs.csv, result.json."""
     run = _run(calibration, run_id)

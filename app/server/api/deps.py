@@ -1,6 +1,6 @@
-"""Typed dependencies: what routes read from ``app.state`` (controller, runs, world, scene,
-settings, authority), the token check and the control lease (app/control/authority.py).
-Only this module reads ``app.state``; routes declare what they need as
+"""Typed dependencies: what routes read from ``app.state`` (controller, runs, calibration,
+world, scene, settings, authority), the token check and the control lease
+(app/control/authority.py). Only this module reads ``app.state``; routes declare what they need as
 ``Annotated[..., Depends(...)]`` aliases."""
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ from typing import Annotated
 from fastapi import Depends, Header, HTTPException, WebSocket
 from starlette.requests import HTTPConnection
 
+from app.calibration.procedure import CalibrationManager
 from app.config import Settings
 from app.control.authority import Authority, ControlRefused, TokenRequired, is_loopback
 from app.control.controller import Controller
@@ -34,6 +35,10 @@ def get_settings(connection: HTTPConnection) -> Settings:
 
 def get_runs(connection: HTTPConnection) -> RunManager:
     return connection.app.state.runs
+
+
+def get_calibration(connection: HTTPConnection) -> CalibrationManager:
+    return connection.app.state.calibration
 
 
 def get_world(connection: HTTPConnection) -> WorldService:
@@ -112,6 +117,7 @@ def require_control(
 ControllerDep = Annotated[Controller, Depends(get_controller)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 RunsDep = Annotated[RunManager, Depends(get_runs)]
+CalibrationDep = Annotated[CalibrationManager, Depends(get_calibration)]
 WorldDep = Annotated[WorldService, Depends(get_world)]
 SceneDep = Annotated[Scene | None, Depends(get_scene)]
 AuthorityDep = Annotated[Authority, Depends(get_authority)]
