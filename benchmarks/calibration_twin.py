@@ -77,6 +77,10 @@ def case(poses: int, parameters: str, rods: bool) -> None:
             ):
                 time.sleep(0.5)
             took = time.monotonic() - began
+            if args_keep := os.environ.get("CALIBRATION_KEEP"):
+                import shutil
+
+                shutil.copytree(Path(folder) / "calibration", args_keep, dirs_exist_ok=True)
     if run["parameters"] is None:
         print(f"{poses} poses, {parameters}: {run['state']}: {run['error']}")
         return

@@ -2,8 +2,10 @@
 
 A ``CalibrationRun`` plans its poses (``fit.plan``: D-optimal fit poses, random held-out
 ones; the observability is known before anything moves), then, in its own thread, moves
-the arm to each pose with the controller's joint-space move, waits for it to come to rest,
-and averages the joints and the external measurement over ``AVERAGE_TICKS`` ticks. Then it
+the arm to each pose with the controller's joint-space move, waits for it to come to rest
+(``REST_TICKS`` fresh ticks within ``REST_TOLERANCE_RAD``, every joint slower than
+``REST_SPEED_RAD_S``; a stalled simulator's repeated state is not rest), and averages the
+joints and the external measurement over ``AVERAGE_TICKS`` fresh ticks. Then it
 fits (``fit.fit``) and writes its files under the runs folder: ``pairs.csv`` (what it
 measured: ``deltadash calibrate --from-csv`` fits it again offline), ``report.png`` (the
 residuals before and after) and ``result.json``.
@@ -47,6 +49,7 @@ Measure = Callable[[Snapshot], np.ndarray]
 AVERAGE_TICKS = 20  # samples averaged at each rest (0.1 s at 200 Hz)
 REST_TICKS = 40  # the joints must stay within REST_TOLERANCE_RAD this many ticks
 REST_TOLERANCE_RAD = 2 * RAD_PER_TICK
+REST_SPEED_RAD_S = 0.02  # and every joint's speed below this (about 1 deg/s)
 MOVE_TIMEOUT_S = 60.0
 POLL_S = 0.005
 
@@ -243,16 +246,25 @@ class CalibrationManager:
             if snap.tick == last:
                 return False
             last = snap.tick
+            if snap.stale:  # a simulator that stalled: its old state says nothing of rest
+                return False
             window.append(snap.joints_measured_rad)
             del window[:-REST_TICKS]
             spread = np.ptp(np.array(window), axis=0)
-            return len(window) == REST_TICKS and bool((spread <= REST_TOLERANCE_RAD).all())
+            moving = np.abs(snap.velocity_rad_s) > REST_SPEED_RAD_S  # NaN (unknown): not
+            return (
+                len(window) == REST_TICKS
+                and bool((spread <= REST_TOLERANCE_RAD).all())
+                and not moving.any()
+            )
 
         self._wait("the arm to come to rest", rested, MOVE_TIMEOUT_S)
         joints, measured = [], []
         while len(joints) < AVERAGE_TICKS:
             snap = self._wait("a fresh tick", self._fresh(last), 5.0)
             last = snap.tick
+            if snap.stale:
+                continue  # the same state again: it would count twice
             y = self.measure(snap)
             if not np.isfinite(y).all():
                 raise Stopped("no external measurement of the platform (ee.external_m)")
