@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from kinematics.identification import (
     Identification,
@@ -164,6 +163,8 @@ class FitResult:
 
 
 def _solve(ident: Identification, joints: np.ndarray, measured: np.ndarray, start: np.ndarray):
+    from scipy.optimize import least_squares  # here: the server imports this module at start
+
     lower, upper = ident.bounds()
     x0 = np.clip(start, lower, upper)
     return least_squares(

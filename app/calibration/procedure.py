@@ -36,7 +36,6 @@ import numpy as np
 
 from app.calibration.fit import CalibrationError, FitResult, Plan, fit, plan
 from app.calibration.pairs import write_pairs
-from app.calibration.report import write_report
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
 from app.control.state import Snapshot
@@ -199,6 +198,8 @@ class CalibrationManager:
             write_pairs(run.folder / "pairs.csv", joints, measured, holdout)
             result = fit(self.nominal(), joints, measured, holdout, run.parameters)
             run.result = result
+            from app.calibration.report import write_report  # matplotlib: only when needed
+
             write_report(run.folder / "report.png", result, f"calibration {run.run_id}")
             run.state = "done" if result.better else "refused"
             if not result.better:

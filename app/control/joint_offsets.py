@@ -35,6 +35,9 @@ class OffsetBus:
         return replace(state, position_rad=np.asarray(state.position_rad) + self.offsets_rad)
 
     def write_goal(self, positions_rad: Any) -> None:
+        if not self.offsets_rad.any():  # none applied: the goal goes as it is
+            self.inner.write_goal(positions_rad)
+            return
         self.inner.write_goal(np.asarray(positions_rad, dtype=np.float64) - self.offsets_rad)
 
     def __getattr__(self, name: str) -> Any:
