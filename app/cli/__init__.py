@@ -2,7 +2,7 @@
 
 ``serve`` (serve.py), ``run`` (run.py), ``runs`` (runs.py), ``design`` (design/), ``home``
 (home.py), ``ik`` and ``fk`` (kinematics.py); ``emulate`` (emulate.py); ``gcode``
-(gcode.py).
+(gcode.py); ``calibrate`` (calibrate.py).
 
 Building the parser imports no heavy library (fastapi, uvicorn, mujoco, matplotlib, scipy,
 viser, pydantic): each handler imports what it needs, so ``deltadash --help``, ``ik`` and
@@ -15,7 +15,7 @@ import argparse
 import os
 import sys
 
-from app.cli import design, emulate, gcode, home, kinematics, run, runs, serve
+from app.cli import calibrate, design, emulate, gcode, home, kinematics, run, runs, serve
 from kinematics import DeltaError
 
 DESCRIPTION = """\
@@ -53,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     home.add_parser(commands)
     emulate.add_parser(commands)
     gcode.add_parser(commands)
+    calibrate.add_parser(commands)
     kinematics.add_parsers(commands)
     return parser
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import os
+import pathlib
 import sys
 from typing import TYPE_CHECKING, Any
 
@@ -93,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
             flush=True,
         )
     uvicorn.run(
-        create_app(settings),
+        create_app(settings, config_path=pathlib.Path(args.config) if args.config else None),
         host=server.host,
         port=server.http_port,
         log_level="info",

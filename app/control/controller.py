@@ -28,6 +28,7 @@ from app.control import commands, held_jog
 from app.control.commands import CommandContext, record_fault
 from app.control.errors import GoalRejected
 from app.control.gravity import GravityOffset, gravity_offset
+from app.control.joint_offsets import OffsetBus, set_offsets
 from app.control.loop_state import LoopState
 from app.control.safety import servo_faults
 from app.control.sources import GoalSource, Setpoint
@@ -88,6 +89,8 @@ class Controller:
             self.gravity = gravity_offset(
                 self.robot, settings.control.payload_kg, wrist=settings.wrist.enabled
             )
+        # joint positions read and goals written through calibration's joint offsets
+        self.joint_bus = OffsetBus(self.servos)
         self.backend_description = backend_description or backend
         self.timing = TimingRecorder(settings.loop.rate_hz)
         self.state = LoopState.initial(settings.safety, self.period_s)
@@ -231,15 +234,17 @@ class Controller:
         return self.submit(lambda: commands.stop_source(self.state, source))
 
     def set_torque(self, enabled: bool) -> Future:
-        return self.submit(lambda: commands.torque_to(self.state, self.ctx, self.servos, enabled))
+        return self.submit(
+            lambda: commands.torque_to(self.state, self.ctx, self.joint_bus, enabled)
+        )
 
     def estop(self) -> Future:
         """Stop at once and hold or release per config; nothing moves until reset."""
         if not self.running:  # no loop to queue on: act directly
             future: Future = Future()
-            future.set_result(commands.estop_now(self.state, self.ctx, self.servos))
+            future.set_result(commands.estop_now(self.state, self.ctx, self.joint_bus))
             return future
-        return self.submit(lambda: commands.estop_now(self.state, self.ctx, self.servos))
+        return self.submit(lambda: commands.estop_now(self.state, self.ctx, self.joint_bus))
 
     def estop_request(self, via: str, press: str | None = None) -> Future:
         """An e-stop request arrived by path ``via`` (e.g. "listener", "middleware",
@@ -267,7 +272,7 @@ class Controller:
     def _reset_now(self) -> dict:
         """Reset (commands.reset_now), and reboot a wrist that reports a hardware error."""
         wrist_failing = self.wrist is not None and self.wrist.faulted
-        outcome = commands.reset_now(self.state, self.ctx, self.servos)
+        outcome = commands.reset_now(self.state, self.ctx, self.joint_bus)
         if self.wrist is not None and wrist_failing:
             self.wrist.reboot([self.wrist.servo_id])
             self.state.torque = False  # a reboot leaves torque off
@@ -280,6 +285,16 @@ class Controller:
         (in the Future) when the robot may not move. The hook for goals with a heading."""
         phi = self.gate.check_phi(phi_rad)
         return self.submit(lambda: turn_to(self.state, phi))
+
+    def set_joint_offsets(self, offsets_rad: Any) -> Future:
+        """Joint offsets [rad] (3,) from calibration, added to every joint read from now on
+        (app/control/joint_offsets.py); refused while a motion runs."""
+        return self.submit(lambda: set_offsets(self.state, self.robot, self.joint_bus, offsets_rad))
+
+    @property
+    def joint_offsets_rad(self) -> np.ndarray:
+        """The joint offsets in use [rad], (3,): zeros until a calibration is applied."""
+        return self.joint_bus.offsets_rad.copy()
 
     def _near_measured(self) -> np.ndarray:
         near = self.snapshot().joints_measured_rad
@@ -348,7 +363,7 @@ class Controller:
     def _read(self) -> bool:
         state = self.state
         try:
-            joints = self.servos.read_state()
+            joints = self.joint_bus.read_state()
         except BusError as exc:
             if state.misses.miss():
                 reason = f"{state.misses.consecutive} reads failed: {exc}"
@@ -475,7 +490,7 @@ class Controller:
             offset = self.gravity.offset_rad(joints)
             servo_goal = joints + np.where(np.isfinite(offset), offset, 0.0)
         try:
-            self.servos.write_goal(servo_goal)
+            self.joint_bus.write_goal(servo_goal)
         except BusError as exc:
             if state.misses.miss():
                 reason = f"goal writes failing: {exc}"

@@ -158,6 +158,12 @@ class RunManager:
             self._refuse_if_busy()
             return self._launch(kind, params, 0.0, source, None)
 
+    def busy(self) -> str | None:
+        """Why another motion may not start now (a run in progress), or None."""
+        if self._active is not None and self._active[0].state == "running":
+            return f"run {self._active[0].run_id} is in progress; abort it first"
+        return None
+
     def _refuse_if_busy(self) -> None:
         if self._active is not None and self._active[0].state == "running":
             raise MotionRefused(f"run {self._active[0].run_id} is in progress; abort it first")

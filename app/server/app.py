@@ -14,18 +14,30 @@ import gc
 import logging
 import sys
 from collections.abc import AsyncIterator, Callable
+from pathlib import Path
 
 from fastapi import Depends, FastAPI
 from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 
+from app.calibration.procedure import CalibrationManager
 from app.config import Settings
 from app.control.authority import Authority
 from app.control.controller import Controller
 from app.programs.workers import ProgramWorkers
 from app.runs.manager import RunManager
 from app.scene import start_scene
-from app.server.api import compare, dashboard, mav, programs, robot, runs, telemetry, workspace
+from app.server.api import (
+    calibration,
+    compare,
+    dashboard,
+    mav,
+    programs,
+    robot,
+    runs,
+    telemetry,
+    workspace,
+)
 from app.server.api.deps import require_read_token
 from app.server.backends import open_backend
 from app.server.errors import install_error_handlers
@@ -52,8 +64,11 @@ def _start_estop_listener(settings: Settings, controller: Controller) -> EstopLi
         return None
 
 
-def create_app(settings: Settings, backend_opener: Callable = open_backend) -> FastAPI:
-    """The app for ``settings``; ``backend_opener`` is swappable for tests."""
+def create_app(
+    settings: Settings, backend_opener: Callable = open_backend, config_path: Path | None = None
+) -> FastAPI:
+    """The app for ``settings``; ``backend_opener`` is swappable for tests; ``config_path``:
+    the TOML file the settings came from, where an applied calibration is written."""
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -77,6 +92,12 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
             app.state.program_workers = ProgramWorkers(
                 settings, programs.CONCURRENT_CHECKS, settings.programs.check_timeout_s
             )
+            app.state.calibration = CalibrationManager(
+                controller,
+                settings.runs.folder_path / "calibration",
+                busy=app.state.runs.busy,
+                config_path=config_path,
+            )
             controller.pose_status = app.state.world.tracker.status
             runs = lambda: app.state.runs  # noqa: E731
             app.state.scene = await asyncio.to_thread(
@@ -88,6 +109,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
                 if app.state.scene is not None:
                     await asyncio.to_thread(app.state.scene.stop)
                 await asyncio.to_thread(app.state.program_workers.close)
+                await asyncio.to_thread(app.state.calibration.close)
                 await asyncio.to_thread(app.state.runs.close)
                 app.state.world.close()
                 if app.state.estop_listener is not None:
@@ -113,6 +135,7 @@ def create_app(settings: Settings, backend_opener: Callable = open_backend) -> F
     app.include_router(mav.router, prefix="/api", dependencies=reads)
     app.include_router(workspace.router, prefix="/api", dependencies=reads)
     app.include_router(programs.router, prefix="/api", dependencies=reads)
+    app.include_router(calibration.router, prefix="/api", dependencies=reads)
     # /api/info (the page asks it whether to prompt for the token), sinusoid check, /vendor
     app.include_router(dashboard.router)
     if (STATIC_DIR / "index.html").exists():

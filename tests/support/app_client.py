@@ -21,12 +21,17 @@ from tests.support.wait import ok_json, wait_for
 
 
 def make_client(
-    runs_folder: Path, backend: Literal["emulated", "sim"] = "emulated", **overrides
+    runs_folder: Path,
+    backend: Literal["emulated", "sim"] = "emulated",
+    config_path: Path | None = None,
+    **overrides,
 ) -> TestClient:
     """A client of an app with its runs under ``runs_folder`` (a tmp_path); ``with`` starts it.
 
     ``backend`` "emulated" runs the servo emulator in-process (for fault injection), "sim"
     the MuJoCo twin. ``overrides`` are settings sections, merged over these defaults.
+    ``config_path``: the config file the app says it runs from (an applied calibration is
+    written there); the settings do not come from it.
     """
     hardware = {"backend": backend, **overrides.pop("hardware", {})}
     server = {"scene": False, "viser_port": 0, **overrides.pop("server", {})}
@@ -35,7 +40,7 @@ def make_client(
     opener = open_backend
     if backend == "emulated":
         opener = functools.partial(open_backend, emulator_in_process=True)
-    return TestClient(create_app(settings, backend_opener=opener))
+    return TestClient(create_app(settings, backend_opener=opener, config_path=config_path))
 
 
 def cleared(client: TestClient) -> TestClient:

@@ -1,5 +1,5 @@
-"""Typed dependencies: what routes read from ``app.state`` (controller, runs, world, scene,
-settings, authority, program workers), the token check and the control lease
+"""Typed dependencies: what routes read from ``app.state`` (controller, runs, calibration,
+world, scene, settings, authority, program workers), the token check and the control lease
 (app/control/authority.py). Only this module reads ``app.state``; routes declare what they need as
 ``Annotated[..., Depends(...)]`` aliases."""
 
@@ -10,6 +10,7 @@ from typing import Annotated
 from fastapi import Depends, Header, HTTPException, WebSocket
 from starlette.requests import HTTPConnection
 
+from app.calibration.procedure import CalibrationManager
 from app.config import Settings
 from app.control.authority import Authority, ControlRefused, TokenRequired, is_loopback
 from app.control.controller import Controller
@@ -40,6 +41,10 @@ def get_runs(connection: HTTPConnection) -> RunManager:
 def get_program_workers(connection: HTTPConnection) -> ProgramWorkers:
     """The worker processes that check programs (created by the lifespan)."""
     return connection.app.state.program_workers
+
+
+def get_calibration(connection: HTTPConnection) -> CalibrationManager:
+    return connection.app.state.calibration
 
 
 def get_world(connection: HTTPConnection) -> WorldService:
@@ -125,6 +130,7 @@ ControllerDep = Annotated[Controller, Depends(get_controller)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 RunsDep = Annotated[RunManager, Depends(get_runs)]
 ProgramWorkersDep = Annotated[ProgramWorkers, Depends(get_program_workers)]
+CalibrationDep = Annotated[CalibrationManager, Depends(get_calibration)]
 WorldDep = Annotated[WorldService, Depends(get_world)]
 SceneDep = Annotated[Scene | None, Depends(get_scene)]
 AuthorityDep = Annotated[Authority, Depends(get_authority)]

@@ -1,0 +1,332 @@
+"""The guided calibration on the robot: plan, move, rest, measure, fit, validate, apply.
+
+A ``CalibrationRun`` plans its poses (``fit.plan``: D-optimal fit poses, random held-out
+ones; the observability is known before anything moves), then, in its own thread, moves
+the arm to each pose with the controller's joint-space move, waits for it to come to rest
+(``REST_TICKS`` fresh ticks within ``REST_TOLERANCE_RAD``, every joint slower than
+``REST_SPEED_RAD_S``; a stalled simulator's repeated state is not rest), and averages the
+joints and the external measurement over ``AVERAGE_TICKS`` fresh ticks. Then it
+fits (``fit.fit``) and writes its files under the runs folder: ``pairs.csv`` (what it
+measured: ``deltadash calibrate --from-csv`` fits it again offline), ``report.png`` (the
+residuals before and after) and ``result.json``.
+
+The measurement is pluggable: ``measure(snapshot)`` returns the platform in the
+measurement frame [m] (3,), NaN when there is none; the default is the snapshot's
+``external_m`` (the twin's motion capture).
+
+States: planned -> moving -> fitting -> done | refused (the fit is worse than the current
+model on the held-out poses: never applied) | failed (a fault, e-stop, torque off, no
+measurement); done -> applied.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import threading
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.calibration.fit import CalibrationError, FitResult, Plan, fit, plan
+from app.calibration.pairs import write_pairs
+from app.control.controller import Controller
+from app.control.errors import GoalRejected, MotionRefused
+from app.control.state import Snapshot
+from hardware.calibration import JointCalibration, save
+from hardware.encoder import RAD_PER_TICK
+from kinematics import PerLegRotaryDelta, RotaryDelta
+
+log = logging.getLogger(__name__)
+Measure = Callable[[Snapshot], np.ndarray]
+AVERAGE_TICKS = 20  # samples averaged at each rest (0.1 s at 200 Hz)
+REST_TICKS = 40  # the joints must stay within REST_TOLERANCE_RAD this many ticks
+REST_TOLERANCE_RAD = 2 * RAD_PER_TICK
+REST_SPEED_RAD_S = 0.02  # and every joint's speed below this (about 1 deg/s)
+MOVE_TIMEOUT_S = 60.0
+POLL_S = 0.005
+
+
+def external(snapshot: Snapshot) -> np.ndarray:
+    """The default measurement: the snapshot's external position (the twin's capture)."""
+    return np.asarray(snapshot.external_m, dtype=np.float64)
+
+
+class Stopped(Exception):
+    """The run cannot go on (fault, e-stop, torque off, shutdown); the message says why."""
+
+
+@dataclass
+class CalibrationRun:
+    """One calibration: its plan, progress, result and files (``folder``)."""
+
+    run_id: str
+    parameters: str
+    poses: int
+    plan: Plan
+    folder: Path
+    state: str = "planned"
+    pose: int = 0  # poses measured so far
+    error: str | None = None
+    result: FitResult | None = None
+    joints: list[np.ndarray] = field(default_factory=list)
+    measured: list[np.ndarray] = field(default_factory=list)
+
+    def view(self) -> dict[str, Any]:
+        """The API's body (GET /api/calibration/{run_id}); SI units; NaN -> None."""
+        obs = self.plan.observability
+        result = self.result
+        body: dict[str, Any] = {
+            "run_id": self.run_id,
+            "state": self.state,
+            "kind": "calibration",
+            "parameters_fitted": self.parameters,
+            "progress": {"pose": self.pose, "poses": self.poses},
+            "error": self.error,
+            "parameters": result.parameters_out() if result else None,
+            "rmse_before_m": _num(result.rmse_before_m) if result else None,
+            "rmse_after_m": _num(result.rmse_after_m) if result else None,
+            "holdout_rmse_before_m": _num(result.holdout_before_m) if result else None,
+            "holdout_rmse_m": _num(result.holdout_rmse_m) if result else None,
+            "condition_number": _num(obs.condition_number),
+            "singular_values": [float(v) for v in obs.singular_values],
+            "unobservable": list(obs.unobservable),
+            "holdout_poses": len(self.plan.holdout_joints),
+            "measurement_frame": (
+                {"position_m": list(result.frame.position_m), "rpy_rad": list(result.frame.rpy_rad)}
+                if result
+                else None
+            ),
+            "files": sorted(p.name for p in self.folder.glob("*") if p.is_file()),
+        }
+        return body
+
+
+def _num(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+class CalibrationManager:
+    """Starts calibration runs on one controller and keeps them (in memory) by id."""
+
+    def __init__(
+        self,
+        controller: Controller,
+        folder: Path,
+        busy: Callable[[], str | None] = lambda: None,
+        config_path: Path | None = None,
+        measure: Measure = external,
+    ) -> None:
+        self.controller, self.folder, self.busy = controller, Path(folder), busy
+        self.config_path, self.measure = config_path, measure
+        self._runs: dict[str, CalibrationRun] = {}
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+
+    def nominal(self) -> PerLegRotaryDelta:
+        robot = self.controller.robot
+        if not isinstance(robot, RotaryDelta):
+            raise CalibrationError("robot.type: calibration models rotary Deltas only")
+        return PerLegRotaryDelta.from_symmetric(robot)
+
+    def _allowed(self, joints: np.ndarray) -> np.ndarray:
+        gate, robot = self.controller.gate, self.controller.robot
+        ok = np.zeros(len(joints), dtype=bool)
+        points = robot.fk(joints).points
+        for k, q in enumerate(joints):
+            try:
+                gate.check_joints(q)
+            except GoalRejected:
+                continue
+            ok[k] = gate.inside(points[k])
+        return ok
+
+    def get(self, run_id: str) -> CalibrationRun | None:
+        return self._runs.get(run_id)
+
+    def start(self, poses: int, parameters: str) -> CalibrationRun:
+        """Plan and start a run (returns at once; the thread moves the arm).
+
+        Raises:
+            CalibrationError: poses or parameters that cannot be planned (422).
+            MotionRefused: the robot may not move now, or a run is in progress (409).
+        """
+        with self._lock:
+            if self._thread is not None and self._thread.is_alive():
+                raise MotionRefused("a calibration run is in progress")
+            if (other := self.busy()) is not None:
+                raise MotionRefused(other)
+            snap = self.controller.snapshot()
+            _require_motion(snap)
+            chosen = plan(self.nominal(), poses, parameters, allowed=self._allowed)
+            run_id = "cal-" + time.strftime("%Y%m%d-%H%M%S") + "-" + uuid.uuid4().hex[:4]
+            folder = self.folder / run_id
+            folder.mkdir(parents=True, exist_ok=True)
+            run = CalibrationRun(run_id, parameters, poses, chosen, folder)
+            self._runs[run_id] = run
+            self._stop.clear()
+            self._thread = threading.Thread(
+                target=self._execute, args=(run,), name="deltadash-calibration", daemon=True
+            )
+            self._thread.start()
+            return run
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+
+    # ---- the run's thread ----
+    def _execute(self, run: CalibrationRun) -> None:
+        try:
+            run.state = "moving"
+            for q in run.plan.joints:
+                joints, measured = self._visit(q)
+                run.joints.append(joints)
+                run.measured.append(measured)
+                run.pose += 1
+            run.state = "fitting"
+            holdout = len(run.plan.holdout_joints)
+            joints, measured = np.array(run.joints), np.array(run.measured)
+            write_pairs(run.folder / "pairs.csv", joints, measured, holdout)
+            result = fit(self.nominal(), joints, measured, holdout, run.parameters)
+            run.result = result
+            from app.calibration.report import write_report  # matplotlib: only when needed
+
+            write_report(run.folder / "report.png", result, f"calibration {run.run_id}")
+            run.state = "done" if result.better else "refused"
+            if not result.better:
+                run.error = (
+                    f"the fit is worse on the held-out poses than the current model "
+                    f"({result.holdout_rmse_m * 1e3:.3f} mm vs "
+                    f"{result.holdout_before_m * 1e3:.3f} mm): it is not offered"
+                )
+        except (Stopped, CalibrationError, GoalRejected, MotionRefused) as exc:
+            run.state, run.error = "failed", str(exc)
+        except Exception as exc:  # a bug ends the run, saying so, never the server
+            log.exception("calibration run %s failed", run.run_id)
+            run.state, run.error = "failed", f"internal error: {exc!r}"
+        self._save(run)
+
+    def _save(self, run: CalibrationRun) -> None:
+        (run.folder / "result.json").write_text(json.dumps(run.view(), indent=1))
+
+    def _wait(self, what: str, until: Callable[[Snapshot], bool], timeout_s: float) -> Snapshot:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            snap = self.controller.snapshot()
+            if self._stop.is_set():
+                raise Stopped("the server is shutting down")
+            _require_motion(snap, Stopped)
+            if until(snap):
+                return snap
+            if time.monotonic() > deadline:
+                raise Stopped(f"timed out after {timeout_s:g} s waiting for {what}")
+            time.sleep(POLL_S)
+
+    def _fresh(self, after: int) -> Callable[[Snapshot], bool]:
+        return lambda snap: snap.tick > after
+
+    def _visit(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Move to ``q`` [rad], wait for rest, average joints and measurement; (3,), (3,)."""
+        started = self.controller.move(joints=q, joint_space=True).result(timeout=MOVE_TIMEOUT_S)
+        del started
+        self._wait("the move to end", lambda s: s.mode == "idle", MOVE_TIMEOUT_S)
+        window: list[np.ndarray] = []
+        last = -1
+
+        def rested(snap: Snapshot) -> bool:
+            nonlocal last
+            if snap.tick == last:
+                return False
+            last = snap.tick
+            if snap.stale:  # a simulator that stalled: its old state says nothing of rest
+                return False
+            window.append(snap.joints_measured_rad)
+            del window[:-REST_TICKS]
+            spread = np.ptp(np.array(window), axis=0)
+            moving = np.abs(snap.velocity_rad_s) > REST_SPEED_RAD_S  # NaN (unknown): not
+            return (
+                len(window) == REST_TICKS
+                and bool((spread <= REST_TOLERANCE_RAD).all())
+                and not moving.any()
+            )
+
+        self._wait("the arm to come to rest", rested, MOVE_TIMEOUT_S)
+        joints, measured = [], []
+        while len(joints) < AVERAGE_TICKS:
+            snap = self._wait("a fresh tick", self._fresh(last), 5.0)
+            last = snap.tick
+            if snap.stale:
+                continue  # the same state again: it would count twice
+            y = self.measure(snap)
+            if not np.isfinite(y).all():
+                raise Stopped("no external measurement of the platform (ee.external_m)")
+            joints.append(snap.joints_measured_rad)
+            measured.append(y)
+        return np.mean(joints, axis=0), np.mean(measured, axis=0)
+
+    # ---- apply ----
+    def apply(self, run_id: str, settings_joints: list[JointCalibration]) -> dict[str, Any]:
+        """Make the controller use the run's joint offsets and write them to the config file
+        when one is in use; the body says what was done.
+
+        Raises:
+            MotionRefused: the run is not done (refused, failed, running), it fitted
+                per-leg geometry, which the controller's symmetric model cannot use, or a
+                motion is running (409).
+        """
+        run = self._runs[run_id]
+        if run.state == "refused":
+            raise MotionRefused(f"run {run_id} was refused: {run.error}")
+        if run.state == "applied":
+            raise MotionRefused(f"run {run_id} is applied already")
+        if run.state != "done" or run.result is None:
+            raise MotionRefused(f"run {run_id} is {run.state}: only a done run can be applied")
+        if run.parameters != "offsets":
+            raise MotionRefused(
+                "parameters: a geometry fit cannot be applied: the controller uses the "
+                "symmetric model (one L, l, R, r); run with parameters 'offsets' to apply "
+                "joint offsets (the fitted per-leg geometry is in the report)"
+            )
+        fitted = np.array(run.result.robot.joint_offsets_rad)
+        total = self.controller.joint_offsets_rad + fitted
+        in_use = self.controller.set_joint_offsets(total).result(timeout=5.0)
+        written = None
+        if self.config_path is not None:
+            joints = offsets_into_zero_ticks(settings_joints, total)
+            save(self.config_path, joints)
+            written = str(self.config_path)
+        run.state = "applied"
+        self._save(run)
+        return {"run_id": run_id, "joint_offsets_rad": in_use, "config_written": written}
+
+
+def offsets_into_zero_ticks(
+    joints: list[JointCalibration], offsets_rad: Any
+) -> list[JointCalibration]:
+    """Joint records whose zero offsets read ``q + o`` where ``joints`` read q:
+    zero' = zero - direction * round(o / RAD_PER_TICK) (hardware/calibration.py's relation
+    ticks = zero + direction * theta / RAD_PER_TICK)."""
+    return [
+        replace(
+            j, zero_offset_ticks=j.zero_offset_ticks - j.direction * round(float(o) / RAD_PER_TICK)
+        )
+        for j, o in zip(joints, offsets_rad, strict=True)
+    ]
+
+
+def _require_motion(snap: Snapshot, error: type[Exception] = MotionRefused) -> None:
+    if snap.estopped:
+        raise error("e-stop is active: POST /api/reset first")
+    if snap.faults:
+        raise error(f"fault: {snap.faults[0].reason}; POST /api/reset first")
+    if not snap.torque:
+        raise error('torque is off: POST /api/torque {"enabled": true} first')

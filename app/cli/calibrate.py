@@ -1,0 +1,229 @@
+"""``deltadash calibrate``: kinematic calibration (issue 20, docs/calibration.md).
+
+On a running server (--url): take control, turn torque on, start a calibration run
+(POST /api/calibration/run), show the identification's observability before the arm
+moves and the progress while it does, then the fit. Offline (--from-csv FILE): fit pairs
+of joint values and external measurements (columns q0_rad, q1_rad, q2_rad, x_m, y_m, z_m
+and an optional set = fit | holdout; a run's pairs.csv is one) on the config's robot.
+
+--write CONFIG saves the fitted joint offsets as new zero offsets in the config's
+[[hardware.joints]] (with --url the server's controller uses them at once too, through
+POST /api/calibration/{run_id}/apply). A fit worse than the current model on the held-out
+poses is never written, nor a per-leg geometry fit (the config's robot is symmetric).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+_EPILOG = (
+    "Exit 0: fitted (and written when asked); 1: the run failed or the fit was refused; "
+    "2: bad input or the server refused; 130: Ctrl-C."
+)
+
+
+def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = commands.add_parser(
+        "calibrate",
+        help="find the robot's joint offsets (and geometry) from external measurements",
+        description=__doc__,
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "--url", default="http://127.0.0.1:8000", help="the server (default %(default)s)"
+    )
+    parser.add_argument("--poses", type=int, default=40, help="poses to visit (default 40)")
+    parser.add_argument(
+        "--parameters",
+        choices=("offsets", "geometry"),
+        default="offsets",
+        help="offsets: joint offsets and measurement frame; geometry: also each leg's L, l, R",
+    )
+    parser.add_argument("--from-csv", metavar="FILE", help="fit these pairs offline")
+    parser.add_argument("--config", help="TOML config of the robot (offline fit)")
+    parser.add_argument("--write", metavar="CONFIG", help="save the joint offsets to CONFIG")
+    parser.add_argument(
+        "--token", default=os.environ.get("DELTADASH_TOKEN"), help="the server's token"
+    )
+    parser.add_argument(
+        "--take-over", action="store_true", help="take control from another client that holds it"
+    )
+    parser.add_argument("--json", action="store_true", help="print the result as JSON (SI)")
+    parser.set_defaults(handler=run)
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.from_csv:
+        return _offline(args)
+    return _remote(args)
+
+
+def format_result(body: dict[str, Any]) -> str:
+    """The result in mm and degrees for a person."""
+    lines = [f"state: {body['state']}" + (f" ({body['error']})" if body.get("error") else "")]
+    if body.get("condition_number") is not None:
+        lines.append(f"condition number: {body['condition_number']:.1f}")
+    lines.append("unobservable: " + (", ".join(body.get("unobservable") or []) or "none"))
+    params = body.get("parameters")
+    if params:
+        offsets = ", ".join(f"{math.degrees(v):+.3f}" for v in params["joint_offsets_rad"])
+        lines.append(f"joint offsets: {offsets} deg")
+        if body.get("parameters_fitted") == "geometry":
+            for key in ("L_m", "l_m", "R_m", "r_m"):
+                values = ", ".join(f"{v * 1e3:.3f}" for v in params[key])
+                lines.append(f"{key[0]}: {values} mm")
+    for label, key in (
+        ("RMSE before (fit poses)", "rmse_before_m"),
+        ("RMSE after (fit poses)", "rmse_after_m"),
+        ("RMSE before (held out)", "holdout_rmse_before_m"),
+        ("RMSE after (held out)", "holdout_rmse_m"),
+    ):
+        if body.get(key) is not None:
+            lines.append(f"{label}: {body[key] * 1e3:.3f} mm")
+    return "\n".join(lines)
+
+
+def _offline(args: argparse.Namespace) -> int:
+    from app.calibration.fit import CalibrationError, fit
+    from app.calibration.pairs import read_pairs
+    from app.config import ConfigError, load_settings
+    from kinematics import PerLegRotaryDelta, RotaryDelta
+
+    try:
+        settings = load_settings(args.config)
+        robot = settings.robot.build()
+        if not isinstance(robot, RotaryDelta):
+            raise CalibrationError("robot.type: calibration models rotary Deltas only")
+        pairs = read_pairs(args.from_csv)
+        result = fit(
+            PerLegRotaryDelta.from_symmetric(robot),
+            pairs.joints,
+            pairs.measured,
+            pairs.holdout,
+            args.parameters,
+        )
+    except (ConfigError, CalibrationError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    obs = result.observability
+    body = {
+        "state": "done" if result.better else "refused",
+        "error": None if result.better else "worse than the current model on held-out poses",
+        "parameters_fitted": args.parameters,
+        "parameters": result.parameters_out(),
+        "rmse_before_m": result.rmse_before_m,
+        "rmse_after_m": result.rmse_after_m,
+        "holdout_rmse_before_m": result.holdout_before_m,
+        "holdout_rmse_m": result.holdout_rmse_m,
+        "condition_number": obs.condition_number,
+        "singular_values": obs.singular_values.tolist(),
+        "unobservable": list(obs.unobservable),
+        "measurement_frame": {
+            "position_m": list(result.frame.position_m),
+            "rpy_rad": list(result.frame.rpy_rad),
+        },
+    }
+    code = _show(body, args.json)
+    if code == 0 and args.write:
+        code = _write(args.write, args.parameters, body["parameters"]["joint_offsets_rad"])
+    return code
+
+
+def _show(body: dict[str, Any], as_json: bool) -> int:
+    print(json.dumps(body, indent=1) if as_json else format_result(body))
+    return 0 if body["state"] in ("done", "applied") else 1
+
+
+def _write(config: str, parameters: str, offsets_rad: list[float]) -> int:
+    """Save ``offsets_rad`` into CONFIG's joint zero offsets (relative to what it holds)."""
+    from app.calibration.procedure import offsets_into_zero_ticks
+    from app.config import ConfigError, load_settings
+    from app.server.backends import _calibrations
+    from hardware.calibration import save
+
+    if parameters != "offsets":
+        print(
+            "error: --write: a geometry fit is not written (the config's robot is symmetric); "
+            "calibrate with --parameters offsets to save joint offsets",
+            file=sys.stderr,
+        )
+        return 2
+    try:
+        settings = load_settings(config if Path(config).exists() else None)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    save(config, offsets_into_zero_ticks(list(_calibrations(settings)), offsets_rad))
+    print(f"joint zero offsets written to {config}", file=sys.stderr)
+    return 0
+
+
+def _remote(args: argparse.Namespace) -> int:
+    import urllib.error
+
+    from app.cli import run as cli_run
+    from app.cli.progress import Progress
+
+    url = args.url.rstrip("/")
+    problems: list[str] = []
+    code = 0
+    try:
+        headers = cli_run._take_control(url, args.token, args.take_over)
+        try:
+            cli_run._http(f"{url}/api/torque", "POST", {"enabled": True}, headers)
+            request = {"poses": args.poses, "parameters": args.parameters}
+            run_id = cli_run._http(f"{url}/api/calibration/run", "POST", request, headers)["run_id"]
+            body = cli_run._http(f"{url}/api/calibration/{run_id}", headers=headers)
+            print(
+                f"calibration {run_id}: {body['progress']['poses']} poses "
+                f"({body['holdout_poses']} held out), condition number "
+                f"{body['condition_number']:.1f}, unobservable: "
+                f"{', '.join(body['unobservable']) or 'none'}",
+                file=sys.stderr,
+            )
+            with Progress(body["progress"]["poses"], f"calibration {run_id}", "poses") as bar:
+                while body["state"] in ("planned", "moving", "fitting"):
+                    bar.update_to(body["progress"]["pose"], body["state"])
+                    time.sleep(0.5)
+                    body = cli_run._http(f"{url}/api/calibration/{run_id}", headers=headers)
+            code = _show(body, args.json)
+            if code == 0 and args.write:
+                code = _apply(url, run_id, headers, args)
+        finally:
+            cli_run._try(problems, "give control back", url, "/api/lease", "DELETE", headers)
+    except cli_run.LeaseRefused as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        code = 2
+    except urllib.error.HTTPError as exc:
+        print(f"error: {exc.code} {cli_run._detail(exc)}", file=sys.stderr)
+        code = 2
+    except (urllib.error.URLError, OSError) as exc:
+        print(f"error: {url}: {exc}", file=sys.stderr)
+        code = 2
+    except KeyboardInterrupt:
+        print("interrupted (the run goes on; e-stop the robot to stop it)", file=sys.stderr)
+        code = 130
+    for problem in problems:
+        print(f"error: {problem}", file=sys.stderr)
+    return code
+
+
+def _apply(url: str, run_id: str, headers: dict[str, str], args: argparse.Namespace) -> int:
+    """POST apply; the server writes its own config when it has one, else we write --write."""
+    from app.cli import run as cli_run
+
+    body = cli_run._http(f"{url}/api/calibration/{run_id}/apply", "POST", None, headers)
+    print(f"applied: the controller uses joint offsets {body['joint_offsets_rad']} rad")
+    if body.get("config_written"):
+        print(f"the server wrote {body['config_written']}", file=sys.stderr)
+        return 0
+    return _write(args.write, args.parameters, body["joint_offsets_rad"])

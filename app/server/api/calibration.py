@@ -1,0 +1,148 @@
+"""Calibration resource (issue 20): start a guided calibration run, read it, apply it."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, HTTPException
+from fastapi.responses import FileResponse
+from pydantic import BaseModel, ConfigDict, Field
+
+from app.calibration.fit import CalibrationError
+from app.calibration.procedure import CalibrationManager, CalibrationRun
+from app.server.api.deps import CalibrationDep, ControlClient, ControllerDep, SettingsDep
+from app.server.backends import _calibrations
+from app.server.errors import CONTROL, INVALID, NOT_FOUND
+
+router = APIRouter(tags=["calibration"])
+MAX_POSES = 300
+FILES = {"report.png": "image/png", "pairs.csv": "text/csv", "result.json": "application/json"}
+
+
+class CalibrationRequest(BaseModel):
+    """How many poses to visit (a quarter, at least 3, held out) and what to fit."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    poses: Annotated[int, Field(ge=12, le=MAX_POSES, description="poses visited")] = 40
+    parameters: Literal["offsets", "geometry"] = Field(
+        "offsets",
+        description="offsets: joint offsets and the measurement frame; geometry: also each "
+        "leg's L, l and R",
+    )
+
+
+class CalibrationStarted(BaseModel):
+    run_id: str
+
+
+class CalibrationParameters(BaseModel):
+    """The fitted model: joint offsets [rad] and each leg's lengths [m] (nominal where not
+    fitted)."""
+
+    joint_offsets_rad: list[float]
+    L_m: list[float]
+    l_m: list[float]
+    R_m: list[float]
+    r_m: list[float]
+
+
+class Progress(BaseModel):
+    pose: int = Field(description="poses measured so far")
+    poses: int = Field(description="poses to visit (fit and held out)")
+
+
+class Frame(BaseModel):
+    position_m: list[float]
+    rpy_rad: list[float]
+
+
+class CalibrationOut(BaseModel):
+    """A calibration run. state: planned, moving, fitting, done, refused (worse than the
+    current model on held-out poses: never applied), failed (error says why), applied.
+    RMSE [m] is the root mean square 3D distance between FK and the measurement; *_before
+    the current model (its measurement frame fitted), holdout_* on the held-out poses."""
+
+    run_id: str
+    state: str
+    kind: str
+    parameters_fitted: str
+    progress: Progress
+    error: str | None
+    parameters: CalibrationParameters | None
+    rmse_before_m: float | None
+    rmse_after_m: float | None
+    holdout_rmse_before_m: float | None
+    holdout_rmse_m: float | None
+    condition_number: float | None
+    singular_values: list[float]
+    unobservable: list[str]
+    holdout_poses: int
+    measurement_frame: Frame | None
+    files: list[str]
+
+
+class CalibrationApplied(BaseModel):
+    run_id: str
+    joint_offsets_rad: list[float] = Field(description="the offsets the controller now uses")
+    config_written: str | None = Field(description="the config file written, if one is in use")
+
+
+def _run(calibration: CalibrationManager, run_id: str) -> CalibrationRun:
+    run = calibration.get(run_id)
+    if run is None:
+        raise HTTPException(404, f"no calibration run {run_id!r}")
+    return run
+
+
+@router.post("/calibration/run", response_model=CalibrationStarted, responses=CONTROL)
+async def start_calibration(
+    body: CalibrationRequest, calibration: CalibrationDep, _c: ControllerDep, _: ControlClient
+) -> dict[str, Any]:
+    """Plan the poses (the observability is in GET at once), then move through them,
+    measuring at rest, and fit. 409 when the robot may not move (torque off, e-stop, a
+    fault, another run); 422 naming the field for bad input."""
+    try:
+        run = await asyncio.to_thread(calibration.start, body.poses, body.parameters)
+    except CalibrationError as exc:
+        raise HTTPException(422, str(exc)) from None
+    return {"run_id": run.run_id}
+
+
+@router.get(
+    "/calibration/{run_id}", response_model=CalibrationOut, responses={**NOT_FOUND, **INVALID}
+)
+def get_calibration_run(run_id: str, calibration: CalibrationDep) -> dict[str, Any]:
+    """State, progress, fitted parameters, RMSE before / after / held out [m], the
+    identification's condition number, singular values and unobservable parameters."""
+    return _run(calibration, run_id).view()
+
+
+@router.post(
+    "/calibration/{run_id}/apply",
+    response_model=CalibrationApplied,
+    responses={**CONTROL, **NOT_FOUND},
+)
+async def apply_calibration(
+    run_id: str, calibration: CalibrationDep, settings: SettingsDep, _: ControlClient
+) -> dict[str, Any]:
+    """The controller uses the fitted joint offsets from now on; written to the config file
+    when the server runs from one. 409 for a run not done (refused: worse on held-out
+    poses), a geometry fit (the controller's model is symmetric), or a motion running."""
+    _run(calibration, run_id)
+    joints = list(_calibrations(settings))
+    return await asyncio.to_thread(calibration.apply, run_id, joints)
+
+
+@router.get(
+    "/calibration/{run_id}/{name}",
+    response_class=FileResponse,
+    responses={**NOT_FOUND, **INVALID},
+)
+def get_calibration_file(run_id: str, name: str, calibration: CalibrationDep) -> FileResponse:
+    """A run's file: report.png (residuals before and after), pairs.csv, result.json."""
+    run = _run(calibration, run_id)
+    path = run.folder / name
+    if name not in FILES or not path.is_file():
+        raise HTTPException(404, f"run {run_id} has no file {name!r}")
+    return FileResponse(path, media_type=FILES[name], filename=name)
