@@ -326,11 +326,11 @@ class SafetySettings(_Section):
     estop_action: Literal["hold", "release"] = Field("hold", description="torque on e-stop")
     torque_off_on_exit: bool = Field(True, description="relax the servos on shutdown")
     torque_on_limit_slack_rad: float = Field(
-        0.09,
+        0.2,
         ge=0,
-        le=0.2,
+        le=0.35,
         description="torque on a relaxed arm resting up to this far past a joint limit [rad] "
-        "holds it at the limit (a few degrees' move back inside); farther: refused",
+        "holds it, then steps it back inside at the joint speed limit; farther: refused",
     )
 
 

@@ -51,7 +51,7 @@ class CommandContext:
     joint_speed_rad_s: float
     estop_action: Literal["hold", "release"]
     hold_timeout_s: float = 0.15
-    torque_on_slack_rad: float = 0.09
+    torque_on_slack_rad: float = 0.2
 
     @classmethod
     def from_settings(cls, settings: Settings) -> CommandContext:
@@ -305,8 +305,9 @@ def torque_to(state: LoopState, ctx: CommandContext, bus: ServoBus, enabled: boo
     Torque on while it is on keeps holding the commanded joints (not the sagged measured
     ones); from off it holds the measured joints, where the relaxed arm is. A relaxed arm
     hangs near its joint limits and can come to rest just past one (the twin rests at 95 deg
-    against a 94.5 deg limit): up to ``ctx.torque_on_slack_rad`` past, the hold is the
-    nearest joints inside the limits, a move of at most that much back inside. Farther
+    against a 94.5 deg limit, or at 100 deg): up to ``ctx.torque_on_slack_rad`` past, it
+    holds where it is and the loop then steps it to the nearest joints inside the limits at
+    the joint speed limit (``state.settle_rad``). Farther
     (a relaxed arm still swinging, or pushed past them): MotionRefused, since holding there
     would command the servos beyond their limits.
     """
@@ -316,11 +317,14 @@ def torque_to(state: LoopState, ctx: CommandContext, bus: ServoBus, enabled: boo
         if state.joints is None:
             raise MotionRefused("no joint state read yet: check the bus")
         hold, point = held(state)
-        if not state.torque:
-            hold, point = _into_limits(ctx, hold, point)
+        settle = goal = None
+        if not state.torque:  # a relaxed arm resting just past a limit is taken back inside
+            settle, goal = _into_limits(ctx, hold, state.phi_rad)
         bus.write_goal(hold)  # where it is, so enabling torque moves nothing
         bus.torque(True)
-        state.commanded_rad, state.commanded_point_m, state.goal_m = hold, point, point.copy()
+        state.commanded_rad, state.commanded_point_m = hold, point
+        state.goal_m = (point if goal is None else goal).copy()
+        state.settle_rad = settle  # the tick steps there at the joint speed limit
     else:
         bus.torque(False)
     state.torque = enabled
@@ -330,11 +334,11 @@ def torque_to(state: LoopState, ctx: CommandContext, bus: ServoBus, enabled: boo
 
 
 def _into_limits(
-    ctx: CommandContext, joints_rad: np.ndarray, point_m: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The hold for a relaxed arm at ``joints_rad`` (3,) [rad]: itself inside the limits,
-    the nearest joints inside them up to ``ctx.torque_on_slack_rad`` past, with its point
-    [m]; MotionRefused farther past."""
+    ctx: CommandContext, joints_rad: np.ndarray, phi_rad: float
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """For a relaxed arm at ``joints_rad`` (3,) [rad]: (None, None) inside the limits; up
+    to ``ctx.torque_on_slack_rad`` past them, the nearest joints inside and their tool tip
+    [m] at wrist angle ``phi_rad``; MotionRefused farther past."""
     low, high = np.asarray(ctx.gate.joint_min_rad), np.asarray(ctx.gate.joint_max_rad)
     for i, (value, lo, hi) in enumerate(zip(joints_rad, low, high, strict=True)):
         if not lo - ctx.torque_on_slack_rad <= value <= hi + ctx.torque_on_slack_rad:
@@ -346,11 +350,11 @@ def _into_limits(
             )
     inside = np.clip(joints_rad, low, high)
     if np.array_equal(inside, joints_rad):
-        return joints_rad, point_m
+        return None, None
     fk = ctx.robot.fk(inside)
     if not fk.ok:
         raise MotionRefused("torque on: the joints inside the limits have no platform point")
-    return inside, np.asarray(fk.points, dtype=np.float64)
+    return inside, ctx.gate.tip(np.asarray(fk.points, dtype=np.float64), phi_rad)
 
 
 def held(state: LoopState) -> tuple[np.ndarray, np.ndarray]:

@@ -464,24 +464,6 @@ def test_motion_is_allowed_exactly_when_not_refused(torque, estopped, faulted) -
     assert commands.motion_allowed(state) == (not refused) == expected
 
 
-@pytest.mark.parametrize("past_rad", [0.001, 0.05, 0.09])
-def test_torque_on_a_relaxed_arm_resting_just_past_a_limit_holds_it_at_the_limit(past_rad):
-    """The twin's relaxed arm rests near its joint limits, at times just past one (95 deg
-    against 94.5): torque on takes it back to the limit rather than refusing for ever."""
-    state, ctx, bus = arrange(Given())
-    high = ctx.gate.joint_max_rad[1]
-    bus.position = np.array([HOME_RAD[0], high + past_rad, HOME_RAD[2]])
-    state.joints = bus.read_state()
-    state.point_m = ROBOT.fk(state.joints.position_rad).points
-    assert commands.torque_to(state, ctx, bus, True)
-    inside = [HOME_RAD[0], high, HOME_RAD[2]]
-    assert bus.calls[-2:] == [("write_goal", tuple(inside)), ("torque", True)]
-    np.testing.assert_allclose(state.commanded_rad, inside)
-    np.testing.assert_allclose(state.commanded_point_m, ROBOT.fk(np.array(inside)).points)
-    assert (np.asarray(ctx.gate.joint_min_rad) <= state.commanded_rad).all()
-    assert (state.commanded_rad <= np.asarray(ctx.gate.joint_max_rad)).all()
-
-
 # ---- the tick, without the thread ----
 def controller(bus: FakeBus, **overrides) -> Controller:
     return Controller(load_settings(**overrides) if overrides else SETTINGS, bus, "fake")
@@ -526,6 +508,32 @@ def test_a_move_ends_on_its_goal_even_when_ticks_come_late(late) -> None:
     assert loop.snapshot().mode == "idle"
     if late > 1:  # the limit did hold the joints back when the source ended
         assert short[0] > 1e-3, short[:3]
+
+
+@pytest.mark.parametrize("past_rad", [0.001, 0.09, 0.19])
+def test_torque_on_a_relaxed_arm_resting_just_past_a_limit_steps_it_back_inside(past_rad):
+    """The twin's relaxed arm rests near its joint limits, at times past one (95 and 100 deg
+    against 94.5): torque on holds it where it is (nothing jumps), then the loop steps it
+    inside at the joint speed limit, rather than refusing torque for ever."""
+    bus = FakeBus()
+    loop = controller(bus)
+    high = loop.gate.joint_max_rad[1]
+    bus.position = np.array([HOME_RAD[0], high + past_rad, HOME_RAD[2]])
+    loop.step()
+    commands.torque_to(loop.state, loop.ctx, bus, True)
+    assert bus.calls[-2:] == [("write_goal", tuple(bus.position)), ("torque", True)]
+    inside = np.array([HOME_RAD[0], high, HOME_RAD[2]])
+    np.testing.assert_allclose(loop.state.goal_m, ROBOT.fk(inside).points, atol=1e-12)
+    steps = []
+    for _ in range(100):
+        loop.step()
+        steps.append(bus.calls[-1][1][1] if bus.calls[-1][0] == "write_goal" else None)
+        if loop.state.settle_rad is None:
+            break
+    np.testing.assert_allclose(loop.state.commanded_rad, inside, atol=0)
+    moves = np.abs(np.diff([high + past_rad, *[v for v in steps if v is not None]]))
+    assert moves.max() <= loop.gate.max_step_rad * (1 + 1e-9)  # at the joint speed limit
+    assert loop.snapshot().mode == "idle" and not loop.snapshot().faults
 
 
 def test_a_jog_is_ticked_towards_its_goal_and_a_servo_error_stops_it() -> None:

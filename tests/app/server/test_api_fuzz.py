@@ -84,7 +84,7 @@ def to_rest(client) -> None:
             return answers[-1].status_code == 200
 
         wait_for(accepted, f"POST {path} accepted", seen=lambda answers=answers: answers[-1].text)
-    wait_for(lambda: at_rest(client), "the arm at rest at the start point")
+    wait_for(lambda: at_rest(client), "the arm at rest at the start point", timeout_s=60)
 
 
 @st.composite
