@@ -19,9 +19,15 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.ge
 
 
 def pytest_unconfigure(config):  # pragma: no cover - diagnostics
+    """Say which threads outlive the session, and where they are: a daemon thread inside
+    native code when the interpreter finalizes crashes the process after every test passed
+    (CI saw "terminate called without an active exception")."""
     import sys
     import threading
+    import traceback
 
     alive = [t for t in threading.enumerate() if t is not threading.main_thread()]
-    if alive:
-        print("\nthreads alive at exit:", [(t.name, t.daemon) for t in alive], file=sys.stderr)
+    frames = sys._current_frames()
+    for thread in alive:
+        where = traceback.format_stack(frames[thread.ident])[-2:] if thread.ident in frames else []
+        print(f"\nthread alive at exit: {thread.name}\n{''.join(where)}", file=sys.stderr)

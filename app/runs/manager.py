@@ -23,7 +23,7 @@ from app.control.errors import GoalRejected, MotionRefused
 from app.control.sources import Progressing
 from app.runs.feasibility import check_path
 from app.runs.logs import RunLog
-from app.runs.recorder import Recorder
+from app.runs.recorder import Recorder, wait_for_recorders
 from app.runs.recovery import abandoned, draw_report, recover
 from app.runs.run import Run
 from app.runs.source import TrajectorySource
@@ -228,6 +228,7 @@ class RunManager:
                 self.abort(run.run_id, "server shutting down")
                 run.done.wait(timeout=5.0)
             self._active = None
+        wait_for_recorders()  # reports still being drawn: native code must not be cut off
 
     def _new_run(self, kind: str, params: dict[str, Any], lead_s: float) -> Run:
         run_id = time.strftime("%Y%m%d-%H%M%S") + "-" + uuid.uuid4().hex[:4]

@@ -7,11 +7,13 @@ closes the files, computes the stats and draws the report.
 
 from __future__ import annotations
 
+import atexit
 import math
 import queue
 import shutil
 import threading
 import time
+import weakref
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -118,6 +120,20 @@ def with_unsampled(per_line: list[dict[str, Any]], lines_met: list[int]) -> list
     return [sampled.get(line, {"line": line, **empty}) for line in order]
 
 
+# Recorders whose writer thread still runs. After its run ends a recorder draws the report
+# (matplotlib, native code) in that daemon thread; a process that exits meanwhile crashed
+# in finalization ("terminate called without an active exception", after every test had
+# passed), so the server's shutdown and the interpreter's exit wait for them.
+_LIVE: weakref.WeakSet[Recorder] = weakref.WeakSet()
+
+
+@atexit.register
+def wait_for_recorders(timeout_s: float = 60.0) -> None:
+    """Wait up to ``timeout_s`` [s] for every recorder's logs and report to be written."""
+    for recorder in list(_LIVE):
+        recorder.join(timeout_s)
+
+
 class Recorder:
     """Feeds one run's ticks from the controller to its logs; finalises the run at the end."""
 
@@ -130,7 +146,13 @@ class Recorder:
         self._t0: float | None = None
         self._rows: list[dict[str, Any]] = []
         self._thread = threading.Thread(target=self._write, name=f"run-{run.run_id}", daemon=True)
+        _LIVE.add(self)
         self._thread.start()
+
+    def join(self, timeout_s: float) -> None:
+        """Wait up to ``timeout_s`` [s] for the logs and the report (any thread)."""
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout_s)
 
     # control thread
     def on_tick(self, snap: Snapshot) -> None:
@@ -164,13 +186,16 @@ class Recorder:
 
     # writer thread
     def _write(self) -> None:
-        while True:
-            item = self._queue.get()
-            if isinstance(item, tuple) and item[0] is _END:
-                self._finish(item[1])
-                return
-            self.log.write(item)
-            self._rows.append(item)
+        try:
+            while True:
+                item = self._queue.get()
+                if isinstance(item, tuple) and item[0] is _END:
+                    self._finish(item[1])
+                    return
+                self.log.write(item)
+                self._rows.append(item)
+        finally:
+            _LIVE.discard(self)
 
     def _finish(self, abort_reason: str | None) -> None:
         self.log.close()
