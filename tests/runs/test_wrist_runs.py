@@ -62,7 +62,10 @@ def test_phi_without_a_wrist_is_refused_naming_the_field(tmp_path):
 
 @pytest.mark.slow  # an end-to-end run of seconds on the twin
 def test_a_sinusoid_with_phi_on_the_twin_logs_the_wrist_following_its_goal(tmp_path):
-    sections = {"wrist": WRIST, "tool": {"offset_m": [0.0, 0.0, -0.05]}}
+    # a loaded machine stalls the simulator for tenths of a second: the test checks the
+    # wrist's run, not the stale-feedback guard (tests/runs/test_run_health.py has that)
+    safety = {"stale_feedback_s": 5.0}
+    sections = {"wrist": WRIST, "tool": {"offset_m": [0.0, 0.0, -0.05]}, "safety": safety}
     with make_client(tmp_path, "sim", **sections) as client:
         take_lease(client)
         client.post("/api/torque", json={"enabled": True})

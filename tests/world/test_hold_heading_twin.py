@@ -14,13 +14,16 @@ from tests.support.wait import ok_json, wait_for
 
 TOOL = {"offset_m": [0.0, 0.0, -0.05]}
 WRIST = {"enabled": True, "min_angle_rad": -1.5, "max_angle_rad": 1.5}
+# a loaded machine stalls the simulator for tenths of a second: these tests check the hold,
+# not the stale-feedback guard (tests/runs/test_run_health.py has that)
+SAFETY = {"stale_feedback_s": 5.0}
 YAW_DEG = 10.0  # RMS: a lively yaw, so the heading and the tip's lever show
 
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory):
     runs = tmp_path_factory.mktemp("runs")
-    with make_client(runs, "sim", tool=TOOL, wrist=WRIST) as test_client:
+    with make_client(runs, "sim", tool=TOOL, wrist=WRIST, safety=SAFETY) as test_client:
         take_lease(test_client)
         yield test_client
 
