@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from tests.support.app_client import make_client
+from tests.support.app_client import make_client, torque_on
 from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
@@ -30,7 +30,7 @@ def client(tmp_path_factory):
 
 def _hold(client, compensate: bool) -> dict:
     client.post("/api/reset")
-    ok_json(client.post("/api/torque", json={"enabled": True}))
+    torque_on(client)
     ok_json(client.post("/api/goal", json={"position_m": [0.0, 0.0, -0.29]}))
     body = {"duration_s": 3.0, "yaw_deg": YAW_DEG, "seed": 2, "latency_compensation": compensate}
     run_id = ok_json(client.post("/api/tests/hold", json=body))["run_id"]
