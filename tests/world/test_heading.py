@@ -144,3 +144,22 @@ def test_without_a_wrist_the_hold_sends_no_phi_and_no_heading():
         setpoint = source.next(0.005)
         assert setpoint.phi_rad is None
         assert set(setpoint.extra) == {"goal_world_m", "measured_world_m", "outside", "pose_age_s"}
+
+
+def test_telemetry_world_frame_gives_the_wrapped_heading_error():
+    from app.control.state import Snapshot
+    from app.server.api import serialize
+    from app.server.api.responses import WorldFrame
+
+    extra = {
+        "goal_world_m": [1.0, 2.0, 3.0],
+        "measured_world_m": [1.0, 2.0, 3.0],
+        "heading_world_rad": 3.1,
+        "measured_heading_world_rad": -3.1,  # 0.08 rad short of a half turn the other way
+        "heading_limited": False,
+    }
+    frame = WorldFrame.model_validate(serialize.world_frame(Snapshot(tick=1, extra=extra)))
+    assert frame.heading_rad == 3.1 and frame.heading_limited is False
+    assert frame.heading_error_rad == pytest.approx(6.2 - 2 * math.pi)
+    plain = serialize.world_frame(Snapshot(tick=1, extra={**extra, "heading_world_rad": None}))
+    assert "heading_rad" not in plain  # no wrist: the frame as before
