@@ -44,6 +44,15 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
             help=f"per axis [{unit}] (default {default})",
         )
     sine.add_argument("--duration", type=float, default=_D.duration_s, help="timed part [s]")
+    sine.add_argument(
+        "--phi-amplitude",
+        type=float,
+        default=0.0,
+        help="with a [wrist]: the wrist's sinusoid amplitude [rad] (default 0: left alone)",
+    )
+    sine.add_argument(
+        "--phi-frequency", type=float, default=0.0, help="the wrist's sinusoid frequency [Hz]"
+    )
     sine.add_argument("--feedforward", action="store_true", help="command the path ahead")
     sine.add_argument("--url", help="a running server, e.g. http://127.0.0.1:8000")
     token = os.environ.get("DELTADASH_TOKEN")
@@ -65,6 +74,8 @@ def _params(args: argparse.Namespace) -> SinusoidParams:
         tuple(args.offset),
         args.duration,
         args.feedforward,
+        args.phi_amplitude,
+        args.phi_frequency,
     )
 
 
@@ -132,6 +143,9 @@ def _remote(
             "duration_s": params.duration_s,
             "feedforward": params.feedforward,
         }
+        if params.moves_wrist:  # an older server without a wrist knows no phi fields
+            body["phi_amplitude_rad"] = params.phi_amplitude_rad
+            body["phi_frequency_hz"] = params.phi_frequency_hz
         run_id = running = _http(f"{url}/api/tests/sinusoid", "POST", body, headers)["run_id"]
         with Progress(_expected_s(params), f"run {run_id}", "s") as bar:
             while (run := _http(f"{url}/api/runs/{run_id}", headers=headers))["state"] == "running":

@@ -419,10 +419,12 @@ class Controller:
     def _follow(self, setpoint: Setpoint) -> None:
         if setpoint.phi_rad is not None:
             try:  # a wrist goal beyond its limits is refused: nothing of this tick is written
-                self.state.phi_goal_rad = self.gate.check_phi(setpoint.phi_rad)
+                phi = self.gate.check_phi(setpoint.phi_rad)
             except GoalRejected as exc:
                 self.state.warning = f"holding: {exc}"
                 return
+            # the wrist turns there, and the tip's goals stay at it once the source ends
+            self.state.phi_goal_rad = self.state.phi_rad = phi
         if (joints := self._setpoint_joints(setpoint)) is None:
             return
         self._write(joints)
@@ -517,6 +519,12 @@ class Controller:
     def measured_point(self) -> np.ndarray:
         """This tick's measured tool tip (call from the control thread)."""
         return self.state.point_m
+
+    @property
+    def measured_phi(self) -> float:
+        """This tick's wrist angle [rad]: read, else the one the loop holds the tool at (0
+        without a wrist) (call from the control thread)."""
+        return self._phi_measured()
 
     @property
     def current_source(self) -> GoalSource | None:

@@ -19,19 +19,27 @@ def _first(mask: np.ndarray) -> int | None:
     return int(bad[0]) if bad.size else None
 
 
-def check_path(gate: Gate, times_s: np.ndarray, points_m: np.ndarray, near: np.ndarray) -> None:
+def check_path(
+    gate: Gate,
+    times_s: np.ndarray,
+    points_m: np.ndarray,
+    near: np.ndarray,
+    phi_rad: np.ndarray | None = None,
+) -> None:
     """Raise GoalRejected at the first sample that would fail; return None if all pass.
 
     Args:
         gate: the controller's gate (limits in force).
         times_s: sample times (N,) [s], evenly spaced by the loop period.
-        points_m: the path (N, 3) [m] in the base frame, of the tool tip (at phi = 0); the
+        points_m: the path (N, 3) [m] in the base frame, of the tool tip (at ``phi_rad``); the
             checks apply to the platform centre each implies (``gate.platform``) and the
             failures name the tip.
         near: current joints (3,), to pick the IK branch the robot is on.
+        phi_rad: the wrist angle (N,) [rad] at each sample (None: 0, no wrist turning).
     """
     robot = gate.robot
-    platform = gate.platform(points_m)
+    phi = 0.0 if phi_rad is None else np.asarray(phi_rad, dtype=np.float64)
+    platform = gate.platform(points_m, phi)
     checks = [
         ("outside the workspace", robot.reachable(platform, margin=gate.margin_m)),
         ("above the platform ceiling", platform[:, 2] <= gate.z_max_m),

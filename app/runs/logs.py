@@ -81,6 +81,14 @@ COLUMNS = [
     "stale",
     "feedback_age_ms",
     "line",  # a G-code program's line in execution (app/programs); None for other runs
+    # the wrist (a [wrist] section), empty without one: its goal, last command and reading
+    "phi_goal_rad",
+    "phi_commanded_rad",
+    "phi_measured_rad",
+    # hold-in-world with a wrist: the tool's world heading kept, and measured
+    "world_heading_goal_rad",
+    "world_heading_measured_rad",
+    "heading_limited",
 ]
 
 SCHEMA = {

@@ -119,8 +119,39 @@ class RunManager:
                 f"(runs.max_samples = {limit} loop periods)"
             )
         times, points = plan.sample(period_s)
-        check_path(self.controller.gate, times, points, snap.joints_measured_rad)
+        phi = self._check_wrist(plan, times)
+        check_path(self.controller.gate, times, points, snap.joints_measured_rad, phi)
         return plan, start
+
+    def _check_wrist(self, plan, times: np.ndarray) -> np.ndarray | None:
+        """A path that turns the wrist: its phi (N,) [rad] at ``times`` (N,) [s], checked
+        against the wrist (there is one, within its limits and speed); GoalRejected naming
+        the path's phi field. None for a path that leaves the wrist alone."""
+        if not plan.moves_wrist:
+            return None
+        params, gate = plan.params, self.controller.gate
+        field = params.phi_field
+        if gate.wrist_min_rad is None or gate.wrist_max_rad is None:
+            raise GoalRejected(
+                f"{field}: no wrist axis is configured ([wrist] enabled = false), so the "
+                "tool cannot turn"
+            )
+        phi = np.array([plan.phi_at(float(t)) for t in times])
+        worst = float(phi[np.argmax(np.abs(phi))])
+        if phi.min() < gate.wrist_min_rad or phi.max() > gate.wrist_max_rad:
+            raise GoalRejected(
+                f"{field}: phi reaches {math.degrees(worst):.1f} deg, outside the wrist's "
+                f"limits [{math.degrees(gate.wrist_min_rad):.1f}, "
+                f"{math.degrees(gate.wrist_max_rad):.1f}] deg"
+            )
+        speed = params.phi_peak_speed()
+        limit = self.controller.settings.wrist.max_speed_rad_s
+        if speed > limit:
+            raise GoalRejected(
+                f"{field}: the wrist would turn at {speed:.2f} rad/s, over its limit "
+                f"{limit:.2f} rad/s (wrist.max_speed_rad_s)"
+            )
+        return phi
 
     def start_sinusoid(self, params: SinusoidParams) -> Run:
         """Plan, check, start and record a sinusoid run; raises before anything moves."""

@@ -118,6 +118,20 @@ class StepParams:
     offset_m: tuple[float, float, float] = (0.0, 0.0, -0.24)
     duration_s: float = 2.0
     feedforward: bool = False
+    phi_step_rad: float = 0.0  # with a wrist: a step of phi [rad] at step_at_s too
+
+    phi_field = "phi_step_rad"  # the field to name when the wrist cannot do it
+
+    @property
+    def moves_wrist(self) -> bool:
+        return self.phi_step_rad != 0.0
+
+    def phi_at(self, t: np.ndarray) -> np.ndarray:
+        """The wrist angle phi [rad] at timed-part times ``t`` (*) [s]: 0, then the step."""
+        return np.where(np.asarray(t, dtype=np.float64) >= self.step_at_s, self.phi_step_rad, 0.0)
+
+    def phi_peak_speed(self) -> float:
+        return 0.0  # a step: the tick turns the wrist at its speed limit
 
     def derivatives(self, t: np.ndarray, order: int) -> np.ndarray:
         t = np.asarray(t, dtype=np.float64)

@@ -23,7 +23,7 @@ from app.runs.health import assess
 from app.runs.logs import RunLog
 from app.runs.report import write_report
 from app.runs.run import Run
-from app.runs.stats import error_stats, line_stats, window_mask
+from app.runs.stats import angle_stats, error_stats, line_stats, window_mask
 
 if TYPE_CHECKING:
     from app.control.controller import Controller
@@ -67,7 +67,20 @@ def row_of(snap: Snapshot, t_s: float) -> dict[str, Any]:
     row["stale"] = snap.stale
     row["feedback_age_ms"] = snap.feedback_age_ms
     row["line"] = None  # a program's line: set by the recorder from its source
+    for kind in ("goal", "commanded", "measured"):  # NaN (no wrist) is logged empty
+        row[f"phi_{kind}_rad"] = _values(np.array([getattr(snap, f"phi_{kind}_rad")]))[0]
+    row["world_heading_goal_rad"] = extra.get("heading_world_rad")
+    row["world_heading_measured_rad"] = extra.get("measured_heading_world_rad")
+    row["heading_limited"] = extra.get("heading_limited")
     return row
+
+
+def _column(rows: list[dict[str, Any]], name: str) -> np.ndarray:
+    return np.array([np.nan if r.get(name) is None else r[name] for r in rows], dtype=float)
+
+
+def _wrapped(angle_rad: np.ndarray) -> np.ndarray:
+    return (angle_rad + np.pi) % (2 * np.pi) - np.pi
 
 
 def _columns(rows: list[dict[str, Any]], prefix: str) -> np.ndarray:
@@ -100,7 +113,16 @@ def run_stats(
         world["inside_only"] = error_stats(
             _columns(rows, "world_goal"), world_measured, active & ~outside
         )
+        heading = _column(rows, "world_heading_goal_rad")
+        if np.isfinite(heading).any():  # with a wrist: the tool's world heading
+            error = _wrapped(heading - _column(rows, "world_heading_measured_rad"))
+            world["heading"] = angle_stats(error, active)
+            limited = np.array([bool(r.get("heading_limited")) for r in rows])
+            world["heading"]["limited_s"] = float(np.sum(limited & active) * dt_s)
         stats["world"] = world
+    phi_goal = _column(rows, "phi_goal_rad")
+    if np.isfinite(phi_goal).any():  # a wrist: its goal against its reading
+        stats["wrist"] = angle_stats(phi_goal - _column(rows, "phi_measured_rad"), active)
     lines = [r.get("line") for r in rows]
     if any(v is not None for v in lines):  # a G-code program: the error per line, every
         timed = np.array([r["phase"] == "timed" for r in rows], dtype=bool)  # sample of it

@@ -9,6 +9,7 @@ the health verdict. Saved as report.png (screen) and report.pdf (vector, for pri
 
 from __future__ import annotations
 
+import math
 import textwrap
 import threading
 from collections.abc import Sequence
@@ -140,15 +141,24 @@ def report_figure(
     gaps = int(t.size - shown.sum())
     axis_stats = stats.get("world", stats.get("tracking")) or {}
     per_line = (stats.get("program") or {}).get("lines") or []
+    phi = _phi_columns(rows)[shown]  # (M, 2) [rad]: the wrist's goal and reading
+    wrist = bool(np.isfinite(phi[:, 0]).any())
+    extras = (["lines"] if per_line else []) + (["wrist"] if wrist else [])
     with plt.rc_context(STYLE):
-        if per_line:  # a G-code program: a third row, the error per program line
-            figure = plt.figure(figsize=(11, 9.6))
-            grid = figure.add_gridspec(3, 3, height_ratios=[2, 1, 1.2])
+        if extras:  # a G-code program: a row of the error per program line; a wrist: phi
+            figure = plt.figure(figsize=(11, 7.2 + 2.4 * len(extras)))
+            ratios = [2, 1, *(1.2 for _ in extras)]
+            grid = figure.add_gridspec(2 + len(extras), 3, height_ratios=ratios)
             axes = np.empty((2, 3), dtype=object)
             for i in range(3):
                 axes[0, i] = figure.add_subplot(grid[0, i], sharex=axes[0, 0] if i else None)
                 axes[1, i] = figure.add_subplot(grid[1, i], sharex=axes[0, 0])
-            _per_line(figure.add_subplot(grid[2, :]), per_line)
+            for k, extra in enumerate(extras):
+                if extra == "lines":
+                    _per_line(figure.add_subplot(grid[2 + k, :]), per_line)
+                else:
+                    row = figure.add_subplot(grid[2 + k, :], sharex=axes[0, 0])
+                    _wrist(row, *break_gaps(times[shown], phi, period_s), stats)
         else:
             figure, axes = plt.subplots(
                 2, 3, figsize=(11, 7.2), sharex=True, gridspec_kw={"height_ratios": [2, 1]}
@@ -172,6 +182,33 @@ def report_figure(
         figure.text(0.01, 0.01, _caption(times, scored, skip_s, gaps), fontsize=8)
         figure.tight_layout(rect=(0, 0.03, 1, 0.8))
     return figure
+
+
+def _phi_columns(rows: list[dict[str, Any]]) -> np.ndarray:
+    """(N, 2) [rad]: the wrist's goal and measured phi (log columns; None becomes NaN)."""
+    names = ("phi_goal_rad", "phi_measured_rad")
+    return np.array(
+        [[np.nan if r.get(n) is None else r[n] for n in names] for r in rows], dtype=np.float64
+    ).reshape(len(rows), 2)
+
+
+def _wrist(axis: Any, t: np.ndarray, phi: np.ndarray, stats: dict[str, Any]) -> None:
+    """The wrist's goal and measured phi [deg] against run time, its error (and, in a hold,
+    the world heading's) in the title."""
+    axis.plot(t, np.degrees(phi[:, 0]), label="goal", **GOAL)
+    axis.plot(t, np.degrees(phi[:, 1]), label="measured", **MEASURED)
+    axis.set_ylabel("wrist phi [deg]")
+    axis.set_xlabel("run time [s]")
+    title = "wrist phi"
+    for label, key in (("phi", "wrist"), ("world heading", "heading")):
+        s = stats.get(key) if key == "wrist" else (stats.get("world") or {}).get("heading")
+        if s and s.get("samples"):
+            title += (
+                f"; {label} RMSE {describe.number(math.degrees(s['rmse_rad']))} deg, max |e| "
+                f"{describe.number(math.degrees(s['max_abs_rad']))} deg"
+            )
+    axis.set_title(title)
+    axis.legend(loc="upper right")
 
 
 def _per_line(axis: Any, per_line: list[dict[str, Any]]) -> None:

@@ -49,9 +49,12 @@ class TrajectorySource:
                     if not self.lines_met or self.lines_met[-1] != line:
                         self.lines_met.append(line)
                 self._timed_s = timed
+        # with a wrist the path's phi, at the commanded point's time (None: left alone)
+        phi = self.plan.phi_at(self.t_s + self.lead_s)
         return Setpoint(
             point_m=commanded,
             goal_m=goal,
+            phi_rad=phi,
             phase=phase,
             finished=self.finished,
         )

@@ -86,3 +86,21 @@ def line_stats(lines: np.ndarray, error: np.ndarray) -> list[dict[str, Any]]:
             }
         )
     return out
+
+
+def angle_stats(error_rad: np.ndarray, mask: np.ndarray | None = None) -> dict[str, Any]:
+    """Statistics of angle errors (N,) [rad], already wrapped, over ``mask`` (N,) if given;
+    NaN samples are left out: mean, RMSE and largest magnitude [rad], and the count."""
+    values = np.asarray(error_rad, dtype=np.float64)
+    if mask is not None:
+        values = values[np.asarray(mask, dtype=bool)]
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        nan = float("nan")
+        return {"mean_rad": nan, "rmse_rad": nan, "max_abs_rad": nan, "samples": 0}
+    return {
+        "mean_rad": float(np.mean(values)),
+        "rmse_rad": float(np.sqrt(np.mean(values**2))),
+        "max_abs_rad": float(np.max(np.abs(values))),
+        "samples": int(values.size),
+    }

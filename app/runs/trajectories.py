@@ -26,6 +26,8 @@ class SinusoidParams:
 
     amplitude_m [m], frequency_hz [Hz], phase_rad [rad], offset_m [m] (base frame), each
     (x, y, z); duration_s: the timed part [s]; feedforward: command the point lead_s ahead.
+    With a wrist, phi(t) = phi_amplitude_rad sin(2 pi phi_frequency_hz t) [rad] turns the
+    tool as a fourth axis (0: the wrist is left alone, as without one).
     """
 
     amplitude_m: tuple[float, float, float] = (0.05, 0.05, 0.08)
@@ -34,6 +36,23 @@ class SinusoidParams:
     offset_m: tuple[float, float, float] = (0.0, 0.0, -0.24)
     duration_s: float = 10.0
     feedforward: bool = False
+    phi_amplitude_rad: float = 0.0
+    phi_frequency_hz: float = 0.0
+
+    phi_field = "phi_amplitude_rad"  # the field to name when the wrist cannot do it
+
+    @property
+    def moves_wrist(self) -> bool:
+        return self.phi_amplitude_rad != 0.0
+
+    def phi_at(self, t: np.ndarray) -> np.ndarray:
+        """The wrist angle phi [rad] at timed-part times ``t`` (*) [s], shape (*)."""
+        omega = TWO_PI * self.phi_frequency_hz
+        return self.phi_amplitude_rad * np.sin(omega * np.asarray(t, dtype=np.float64))
+
+    def phi_peak_speed(self) -> float:
+        """Largest |dphi/dt| [rad/s]."""
+        return abs(self.phi_amplitude_rad) * TWO_PI * self.phi_frequency_hz
 
     def derivatives(self, t: np.ndarray, order: int) -> np.ndarray:
         """d^order p / dt^order at times ``t`` (*), shape (*, 3) [m/s^order]."""
@@ -110,6 +129,19 @@ class PlannedRun:
         if t < self.approach_s:
             return "approach"
         return "timed" if t <= self.approach_s + self.params.duration_s else "stop"
+
+    @property
+    def moves_wrist(self) -> bool:
+        """The path turns the wrist (a ``phi_at`` and a non-zero phi part)."""
+        return bool(getattr(self.params, "moves_wrist", False))
+
+    def phi_at(self, t: float) -> float | None:
+        """The wrist angle [rad] at run time ``t`` [s]: the path's phi at the start over the
+        approach, at its end over the stop; None when the path leaves the wrist alone."""
+        if not self.moves_wrist:
+            return None
+        timed = min(max(t - self.approach_s, 0.0), self.params.duration_s)
+        return float(self.params.phi_at(np.array(timed)))  # type: ignore[attr-defined]
 
     def point_at(self, t: float) -> np.ndarray:
         """Goal point [m] at run time ``t`` [s] (clamped to the plan's ends)."""

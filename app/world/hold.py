@@ -5,6 +5,13 @@ base frame through the drone pose and the mount, clamp it onto the workspace (th
 outside is counted), and command it. With latency compensation the pose is first
 predicted forward by its age plus the servos' lag, from its linear and angular velocity
 (supplied by the source or estimated from the last two samples).
+
+Goals and measurements are the tool tip (with a ``[tool]`` offset, the tip is held, not the
+platform). With a wrist (beyond the thesis) the tool's heading in the world is held too:
+each tick the wrist angle is the one that keeps the world heading under the (predicted)
+base attitude, ``phi = heading - yaw`` wrapped for a level base (app/world/heading.py),
+moved into the wrist's limits (held at the limit, and said so, when it cannot be), and the
+setpoint carries it; the tip goal is converted to the base frame as without a wrist.
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ import numpy as np
 from app.control.gate import Gate
 from app.control.sources import Progress, Setpoint
 from app.world.drone_sim import SimulatedDrone
+from app.world.heading import fit_to_limits, tool_heading, wrist_angle
 from app.world.poses import PoseTracker
 from kinematics import Pose
 from kinematics.pose import quaternion_multiply
@@ -124,7 +132,14 @@ class TrackerProvider:
 
 
 class HoldSource:
-    """Goal source of mode ``hold-world`` (see module docstring)."""
+    """Goal source of mode ``hold-world`` (see module docstring).
+
+    goal_world_m: the tip's world goal (3,) [m]; lead_s: None for the plain method, else
+    the servo lag [s] predicted over beside the pose's age. With a wrist, ``wrist`` holds
+    its limits (low, high) [rad], ``measured_phi`` reads its angle [rad] and
+    ``heading_rad`` is the world heading to keep [rad] (None: the tool's heading at the
+    first pose seen).
+    """
 
     name = "hold-world"
 
@@ -136,6 +151,9 @@ class HoldSource:
         gate: Gate,
         measured: Callable[[], np.ndarray],
         lead_s: float | None,
+        wrist: tuple[float, float] | None = None,
+        measured_phi: Callable[[], float] | None = None,
+        heading_rad: float | None = None,
     ) -> None:
         self.goal_world = np.asarray(goal_world_m, dtype=np.float64)
         self.provider, self.mount, self.gate, self.measured = provider, mount, gate, measured
@@ -146,6 +164,10 @@ class HoldSource:
         self.duration_s: float | None = None
         self.approach_s = 1.0
         self._start: np.ndarray | None = None
+        self.wrist, self.heading = wrist, heading_rad
+        self.measured_phi = measured_phi if measured_phi is not None else lambda: 0.0
+        self._start_phi: float | None = None
+        self._phi: float | None = None  # the last wrist angle commanded
 
     def progress(self) -> Progress:
         """How far a timed hold (a run) is (app/control/sources.py's ``Progressing``)."""
@@ -173,17 +195,40 @@ class HoldSource:
         if self.lead_s is not None:
             ahead = seen.age_s + self.lead_s
             pose = predict(pose, seen.velocity_m_s, seen.angular_velocity_rad_s, ahead)
-        goal_base = (pose @ self.mount).apply_inverse(self.goal_world)
-        commanded = self.gate.clamp_point(self._blend_in(goal_base))
-        outside = not self.gate.inside(goal_base)
+        base = pose @ self.mount
+        goal_base = base.apply_inverse(self.goal_world)
+        phi, limited = self._wrist_angle(seen.pose @ self.mount, base)
+        at = 0.0 if phi is None else phi
+        commanded = self.gate.clamp_point(self._blend_in(goal_base), at)
+        outside = not self.gate.inside(goal_base, at)
         self.outside_s += dt_s if outside and self.t_s >= self.approach_s else 0.0
         return Setpoint(
             point_m=commanded,
             goal_m=goal_base,
+            phi_rad=phi,
             phase="approach" if self.t_s < self.approach_s else "hold",
             finished=self.finished,
-            extra=self._world(outside, seen.age_s),
+            extra=self._world(outside, seen.age_s, limited),
         )
+
+    def _wrist_angle(self, seen_base: Pose, base: Pose) -> tuple[float | None, bool]:
+        """The wrist angle [rad] keeping the world heading under the (predicted) base
+        ``base``, blended in from the wrist's angle over the approach, and whether the
+        limits cut it; (None, False) without a wrist."""
+        if self.wrist is None:
+            return None, False
+        if self.heading is None:  # keep the heading the tool has now
+            self.heading = tool_heading(seen_base.rotation, self.measured_phi())
+        if self._start_phi is None:
+            self._start_phi = self.measured_phi()
+        near = self._start_phi if self._phi is None else self._phi
+        wanted = wrist_angle(base.rotation, self.heading)
+        phi, limited = fit_to_limits(wanted, *self.wrist, near)
+        if self.t_s < self.approach_s:  # both ends inside the limits: so is the blend
+            s = self.t_s / self.approach_s
+            phi = self._start_phi + (10 * s**3 - 15 * s**4 + 6 * s**5) * (phi - self._start_phi)
+        self._phi = phi
+        return phi, limited
 
     def _blend_in(self, goal_base: np.ndarray) -> np.ndarray:
         """Over the first approach_s, slide from where the robot was onto the moving goal
@@ -196,14 +241,23 @@ class HoldSource:
         weight = 10 * s**3 - 15 * s**4 + 6 * s**5
         return self._start + weight * (goal_base - self._start)
 
-    def _world(self, outside: bool, age_s: float) -> dict:
+    def _world(self, outside: bool, age_s: float, limited: bool = False) -> dict:
         truth = self.provider.true_pose(self.t_s)
         measured_world = None
         if truth is not None:
             measured_world = (truth @ self.mount).apply(self.measured()).tolist()
-        return {
+        world = {
             "goal_world_m": self.goal_world.tolist(),
             "measured_world_m": measured_world,
             "outside": outside,
             "pose_age_s": age_s,
         }
+        if self.wrist is not None:  # the heading: goal, measured (true pose, wrist read)
+            measured_heading = None
+            if truth is not None:
+                turned = (truth @ self.mount).rotation
+                measured_heading = tool_heading(turned, self.measured_phi())
+            world["heading_world_rad"] = self.heading
+            world["measured_heading_world_rad"] = measured_heading
+            world["heading_limited"] = limited
+        return world

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -90,9 +91,15 @@ class WorldService:
             bus.set_base_motion(BaseMotion())
 
     def hold_source(
-        self, goal_world: np.ndarray | None, provider: PoseProvider, compensate: bool
+        self,
+        goal_world: np.ndarray | None,
+        provider: PoseProvider,
+        compensate: bool,
+        heading_rad: float | None = None,
     ) -> HoldSource:
-        """A hold source; ``goal_world`` None holds the tool where it is now."""
+        """A hold source; ``goal_world`` None holds the tool where it is now. With a wrist it
+        also keeps the tool's world heading ``heading_rad`` [rad] (None: the heading now);
+        without one a heading is refused (GoalRejected naming the field)."""
         controller = self.controller
         if goal_world is None:
             seen = provider.observe(0.0)
@@ -102,11 +109,22 @@ class WorldService:
             here = controller.snapshot().point_measured_m
             goal_world = (seen.pose @ self.mount).apply(here)
         lead = controller.settings.world.servo_lag_s if compensate else None
+        gate = controller.gate
+        wrist = None
+        if gate.wrist_min_rad is not None and gate.wrist_max_rad is not None:
+            wrist = (gate.wrist_min_rad, gate.wrist_max_rad)
+        elif heading_rad is not None:
+            raise GoalRejected("heading_rad: no wrist axis is configured ([wrist] enabled = false)")
+        if heading_rad is not None and not math.isfinite(heading_rad):
+            raise GoalRejected(f"heading_rad: must be finite, got {heading_rad}")
         return HoldSource(
             goal_world,
             provider,
             self.mount,
-            controller.gate,
+            gate,
             lambda: controller.measured_point,
             lead,
+            wrist=wrist,
+            measured_phi=lambda: controller.measured_phi,
+            heading_rad=heading_rad,
         )

@@ -3,6 +3,7 @@ missing ticks, PNG and vector PDF."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -171,3 +172,29 @@ def test_a_program_run_has_its_error_per_line_in_stats_and_report(tmp_path):
     finally:
         plt.close(figure)
     assert "program" not in run_stats(synthetic_rows(), SKIP_S, PERIOD_S)
+
+
+def test_a_wrist_run_has_its_phi_in_stats_and_a_phi_row_in_the_report():
+    rows = synthetic_rows()
+    for row in rows:  # the wrist 0.1 rad behind a 0.5 rad sine in the timed part
+        phi = 0.5 * math.sin(row["t_s"])
+        row["phi_goal_rad"] = row["phi_commanded_rad"] = phi
+        row["phi_measured_rad"] = phi - 0.1
+    stats = run_stats(rows, SKIP_S, PERIOD_S)
+    assert stats["wrist"]["mean_rad"] == pytest.approx(0.1)
+    assert stats["wrist"]["rmse_rad"] == pytest.approx(0.1)
+    figure = report_figure(rows, ["title"], stats, SKIP_S, PERIOD_S)
+    plain = report_figure(
+        synthetic_rows(), ["title"], run_stats(synthetic_rows(), SKIP_S, PERIOD_S), SKIP_S, PERIOD_S
+    )
+    try:
+        assert len(figure.axes) == len(plain.axes) + 1  # one more row: phi
+        phi_axis = figure.axes[-1]
+        assert phi_axis.get_ylabel() == "wrist phi [deg]"
+        goal = phi_axis.lines[0].get_ydata()
+        assert np.nanmax(goal) == pytest.approx(math.degrees(0.5), abs=0.5)
+        assert "phi RMSE 5.73 deg" in phi_axis.get_title()
+    finally:
+        plt.close(figure)
+        plt.close(plain)
+    assert "wrist" not in run_stats(synthetic_rows(), SKIP_S, PERIOD_S)

@@ -54,6 +54,11 @@ class HoldRequest(BaseModel):
         "external", description="external: poses posted / streamed / MAVLink; simulated drone"
     )
     latency_compensation: bool = True
+    heading_rad: float | None = Field(
+        None,
+        allow_inf_nan=False,
+        description="with a wrist: the tool's world heading to keep [rad] (null: as it is now)",
+    )
 
 
 class HoldTestRequest(BaseModel):
@@ -120,7 +125,7 @@ async def post_hold(
         raise GoalRejected("position_m: required with frame 'world'")
     provider = world.provider(DroneSimParams() if body.source == "simulated" else None)
     goal = None if body.frame == "current" else np.asarray(body.position_m)
-    source = world.hold_source(goal, provider, body.latency_compensation)
+    source = world.hold_source(goal, provider, body.latency_compensation, body.heading_rad)
     # the hold mode blends in from wherever the robot is: no start point to check
     started = controller.run_source(source, np.zeros(3), tolerance_m=math.inf)
     await asyncio.wait_for(asyncio.wrap_future(started), 2.0)

@@ -190,6 +190,13 @@ class WorldFrame(_Out):
     goal_m: MaybeVector3
     measured_m: MaybeVector3
     error_m: MaybeVector3
+    heading_rad: float | None = Field(None, description="with a wrist: world heading kept [rad]")
+    heading_error_rad: float | None = Field(
+        None, description="with a wrist: heading goal - measured, wrapped [rad]"
+    )
+    heading_limited: bool | None = Field(
+        None, description="with a wrist: its limits cut the heading (held at the limit)"
+    )
 
 
 class TelemetryEe(_Out):
@@ -241,11 +248,26 @@ class ErrorStats(_Out):
     samples: int
 
 
+class AngleStats(_Out):
+    """Angle errors [rad] (reference - measured, wrapped); NaN-free samples only."""
+
+    mean_rad: float
+    rmse_rad: float
+    max_abs_rad: float
+    samples: int
+
+
+class HeadingStats(AngleStats):
+    limited_s: float = Field(description="time the wrist's limits cut the heading [s]")
+
+
 class WorldStats(ErrorStats):
-    """Hold runs: world-frame errors, time outside the workspace, and errors inside only."""
+    """Hold runs: world-frame errors, time outside the workspace, and errors inside only;
+    with a wrist, the tool's world heading error."""
 
     outside_s: float
     inside_only: ErrorStats
+    heading: HeadingStats | None = None
 
 
 class LatenessOut(_Out):
@@ -296,6 +318,7 @@ class RunStats(BaseModel):
     tracking: ErrorStats | None = None
     validation: ErrorStats | None = None
     world: WorldStats | None = None
+    wrist: AngleStats | None = Field(None, description="with a wrist: phi goal - measured")
     health: RunHealth | None = None
     program: ProgramStats | None = None
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 from itertools import pairwise
 from typing import Annotated, Any
@@ -61,6 +62,10 @@ class SinusoidRequest(_RunBody):
     offset_m: ReachVector3 = list(_DEFAULT.offset_m)
     duration_s: Seconds = _DEFAULT.duration_s
     feedforward: bool = False
+    phi_amplitude_rad: Annotated[float, Field(ge=0, le=math.pi, allow_inf_nan=False)] = Field(
+        0.0, description="with a [wrist]: phi(t) = A sin(2 pi f t) [rad]; 0 leaves it alone"
+    )
+    phi_frequency_hz: HzOrZero = Field(0.0, description="the wrist's frequency f [Hz]")
 
     def params(self) -> SinusoidParams:
         return SinusoidParams(
@@ -70,6 +75,8 @@ class SinusoidRequest(_RunBody):
             tuple(self.offset_m),
             self.duration_s,
             self.feedforward,
+            self.phi_amplitude_rad,
+            self.phi_frequency_hz,
         )  # type: ignore[arg-type]
 
 
@@ -96,6 +103,9 @@ class StepRequest(_RunBody):
     step_at_s: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False, strict=True)] = 0.5
     offset_m: ReachVector3 = list(_DEFAULT.offset_m)
     duration_s: Seconds = 2.0
+    phi_step_rad: Annotated[float, Field(ge=-math.pi, le=math.pi, allow_inf_nan=False)] = Field(
+        0.0, description="with a [wrist]: a step of phi [rad] at step_at_s too; 0 leaves it alone"
+    )
 
     @model_validator(mode="after")
     def _step_inside(self) -> StepRequest:

@@ -11,6 +11,7 @@ import numpy as np
 from app.control.controller import Controller
 from app.control.loop_health import classify
 from app.control.state import Snapshot
+from app.world.heading import wrap
 
 
 def floats(values: Any) -> list[float | None]:
@@ -127,4 +128,10 @@ def world_frame(snap: Snapshot) -> dict[str, Any] | None:
     if goal is None or measured is None:
         return None
     error = [g - m for g, m in zip(goal, measured, strict=True)]
-    return {"goal_m": floats(goal), "measured_m": floats(measured), "error_m": floats(error)}
+    frame = {"goal_m": floats(goal), "measured_m": floats(measured), "error_m": floats(error)}
+    heading, seen = extra.get("heading_world_rad"), extra.get("measured_heading_world_rad")
+    if heading is not None:  # a wrist keeps the tool's heading too
+        frame["heading_rad"] = heading
+        frame["heading_error_rad"] = None if seen is None else wrap(heading - seen)
+        frame["heading_limited"] = bool(extra.get("heading_limited"))
+    return frame
