@@ -13,7 +13,7 @@ import pytest
 from app.runs.paths import StepParams
 from app.runs.source import TrajectorySource
 from app.runs.trajectories import SinusoidParams, plan_sinusoid
-from tests.support.app_client import make_client, torque_on
+from tests.support.app_client import make_client, settle_at
 from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
@@ -68,7 +68,7 @@ def test_a_sinusoid_with_phi_on_the_twin_logs_the_wrist_following_its_goal(tmp_p
     sections = {"wrist": WRIST, "tool": {"offset_m": [0.0, 0.0, -0.05]}, "safety": safety}
     with make_client(tmp_path, "sim", **sections) as client:
         take_lease(client)
-        torque_on(client)
+        settle_at(client, [0.0, 0.0, -0.29])  # a run refuses to start from a moving arm
         too_far = {**SMALL, "offset_m": [0, 0, -0.29], "phi_amplitude_rad": 2.0}
         response = client.post("/api/tests/sinusoid", json={**too_far, "phi_frequency_hz": 0.1})
         assert response.status_code == 422 and "phi_amplitude_rad" in response.text
