@@ -21,28 +21,7 @@ def _usable(robot, joints, dexterity=1e-3):
     return ok & below & (np.nan_to_num(robot.dexterity(joints)) > dexterity)
 
 
-@given(per_leg_and_joints())
-def test_fk_then_ik_with_near_returns_the_joints(case):
-    robot, joints = case
-    points, ok = robot.fk(joints)
-    assert points.shape == joints.shape and ok.shape == joints.shape[:-1]
-    usable = _usable(robot, joints)
-    solved, solved_ok = robot.ik(points, near=joints)
-    assert np.all(solved_ok[usable])
-    np.testing.assert_allclose(solved[usable], joints[usable], atol=1e-7)
-
-
-@given(per_leg_and_joints())
-def test_ik_then_fk_returns_the_point(case):
-    robot, joints = case
-    points = robot.fk(joints).points
-    solved, ok = robot.ik(points)
-    assert np.all(ok[_usable(robot, joints)])
-    below_solved_knees = points[..., 2] < robot.knees(solved)[..., 2].min(axis=-1)
-    usable = _usable(robot, joints) & below_solved_knees
-    back, back_ok = robot.fk(solved)
-    assert np.all(back_ok[usable])
-    np.testing.assert_allclose(back[usable], points[usable], atol=TOL_M)
+# FK(IK) and IK(FK) round trips: tests/kinematics/test_roundtrip.py runs them on this model
 
 
 @given(per_leg_and_joints())

@@ -3,9 +3,15 @@
 import numpy as np
 import pytest
 from hypothesis import given
+from hypothesis import strategies as st
 
 from kinematics import THESIS_DELTA, LinearDelta, RotaryDelta
-from tests.support.strategies import robot_and_joints
+from tests.support.strategies import per_leg_and_joints, robot_and_joints
+
+# the symmetric robots and the per-leg one (each leg its own geometry): the same laws
+FAMILIES = pytest.mark.parametrize(
+    "family", [robot_and_joints, per_leg_and_joints], ids=["symmetric", "per-leg"]
+)
 
 TOL_M = 1e-9
 WELL_CONDITIONED = 1e-3  # dexterity below this amplifies rounding past TOL_M
@@ -22,9 +28,10 @@ def _usable(robot, joints):
     return ok & below & (np.nan_to_num(robot.dexterity(joints)) > WELL_CONDITIONED)
 
 
-@given(robot_and_joints())
-def test_fk_then_ik_with_near_returns_the_joints(case):
-    robot, joints = case
+@FAMILIES
+@given(data=st.data())
+def test_fk_then_ik_with_near_returns_the_joints(family, data):
+    robot, joints = data.draw(family())
     points, ok = robot.fk(joints)
     assert points.shape == joints.shape and ok.shape == joints.shape[:-1]
     usable = _usable(robot, joints)
@@ -33,9 +40,10 @@ def test_fk_then_ik_with_near_returns_the_joints(case):
     np.testing.assert_allclose(solved[usable], joints[usable], atol=1e-7)
 
 
-@given(robot_and_joints())
-def test_ik_then_fk_returns_the_point(case):
-    robot, joints = case
+@FAMILIES
+@given(data=st.data())
+def test_ik_then_fk_returns_the_point(family, data):
+    robot, joints = data.draw(family())
     points = robot.fk(joints).points
     solved, ok = robot.ik(points)
     assert np.all(ok[_usable(robot, joints)])
