@@ -19,7 +19,7 @@ from app.control.gate import Gate
 from app.programs.errors import ProgramError
 from app.programs.modal import interpret
 from app.programs.planner import PlanLimits, ProgramPath, plan_program
-from app.programs.tokens import tokenize
+from app.programs.tokens import program_lines, tokenize
 from app.programs.verify import Verification, VerifyLimits, Violation, verify_path
 from kinematics.dynamics import THESIS_MASS, MassModel
 from kinematics.sizing import XM430_W210_12V
@@ -146,7 +146,7 @@ def check_program(
     for name, value in (("start_m", start), ("work_offset_m", offset)):
         if value.shape != (3,) or not np.isfinite(value).all():
             raise ProgramError(0, "", f"{name}: expected 3 finite numbers [m]")
-    line_count = text.count("\n") + 1
+    line_count = len(program_lines(text))  # as the tokenizer counts them (CR too)
     if line_count > programs.max_lines:
         raise ProgramError(
             programs.max_lines + 1,

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 from app.programs.errors import ProgramError
 
-_WORD = re.compile(r"([A-Z])([+-]?(?:\d+\.?\d*|\.\d+))(E[+-]?\d+)?")
+# ASCII digits only: \d would read Arabic-Indic or other Unicode digits as numbers
+_WORD = re.compile(r"([A-Z])([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))(E[+-]?[0-9]+)?")
 _NEWLINE = re.compile(r"\r\n|\n|\r")  # what an editor counts as a line break; not \f, U+2028
 MAX_MAGNITUDE = 1e6  # no coordinate, radius, feed or dwell of the subset is larger
 

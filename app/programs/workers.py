@@ -109,6 +109,15 @@ def _start_worker(settings: Settings) -> None:
     CommandContext.from_settings(settings)
 
 
+def _alive(executor: ProcessPoolExecutor) -> bool:
+    """Whether ``executor`` can take a job: not broken, and no worker of it has died (a
+    worker killed while idle breaks the pool only when the next job finds it)."""
+    if getattr(executor, "_broken", False):
+        return False
+    processes = getattr(executor, "_processes", None) or {}
+    return all(process.is_alive() for process in processes.values())
+
+
 def _kill(executor: ProcessPoolExecutor) -> None:
     """Stop ``executor`` and kill its worker (busy or not); returns without waiting."""
     # killed first: a shutdown alone would let an idle worker exit on its own, and a busy
@@ -155,7 +164,11 @@ class ProgramWorkers:
         try:
             executor = self._executor(slot)
             try:
-                future = executor.submit(function, *args)
+                try:
+                    future = executor.submit(function, *args)
+                except BrokenProcessPool:  # broken before this job: a fresh worker takes it
+                    self._discard(slot)
+                    future = self._executor(slot).submit(function, *args)
                 return future.result(timeout=self.timeout_s)
             except FutureTimeout:
                 self._discard(slot)
@@ -198,6 +211,10 @@ class ProgramWorkers:
             if self._closed:
                 raise ChecksBusy("the server is stopping: no program checks now")
             executor = self._executors[slot]
+            if executor is not None and not _alive(executor):  # its worker died while idle
+                self._executors[slot] = None
+                _kill(executor)
+                executor = None
             if executor is None:  # no process yet: it starts on the first submit
                 executor = ProcessPoolExecutor(
                     1, mp_context=SPAWN, initializer=_start_worker, initargs=(self.settings,)

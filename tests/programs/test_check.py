@@ -108,6 +108,9 @@ def test_a_program_over_the_line_limit_is_refused(settings):
     short = load_settings(programs={"max_lines": 3})
     with pytest.raises(ProgramError, match="max_lines"):
         check_program("G21\n" * 4, short)
+    for newline in ("\r", "\r\n"):  # lines counted as the tokenizer counts them
+        with pytest.raises(ProgramError, match="max_lines"):
+            check_program(newline * 3 + "G21", short)
 
 
 def test_a_program_that_does_not_move_is_checked_where_the_tool_is(settings):

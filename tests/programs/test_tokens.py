@@ -31,7 +31,14 @@ def test_empty_and_comment_lines_keep_the_line_numbers():
 
 @pytest.mark.parametrize(
     ("text", "word"),
-    [("G1 X", "X"), ("#1=2", "#1=2"), ("G1 (open", "("), ("G1 )", ")"), ("/G1", "/G1")],
+    [
+        ("G1 X", "X"),
+        ("#1=2", "#1=2"),
+        ("G1 (open", "("),
+        ("G1 )", ")"),
+        ("/G1", "/G1"),
+        ("G0 X\u0661\u0660\u0660", "X\u0661\u0660\u0660"),  # Arabic-Indic 100: ASCII digits only
+    ],
 )
 def test_text_that_is_not_words_is_refused_with_its_line(text, word):
     with pytest.raises(ProgramError) as caught:

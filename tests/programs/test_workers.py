@@ -131,6 +131,21 @@ def test_a_killed_worker_is_a_clear_error_and_the_next_check_gets_a_new_one(
     assert checked.report.ok and new_pid not in (pid, os.getpid())
 
 
+def test_a_worker_killed_while_idle_is_replaced_before_the_next_check(settings):
+    """A worker that died between checks (killed, out of memory) must not fail the next
+    check that happens to get its slot: that check never ran (an attacker's trial found a
+    false 503 here)."""
+    pool = ProgramWorkers(settings, slots=1, timeout_s=START_S)
+    try:
+        pid = pool.call(os.getpid)  # the slot's worker, now idle
+        os.kill(pid, signal.SIGKILL)
+        wait_for(lambda: not alive(pid), "the idle worker to die")
+        new_pid, _, checked = pool.call(pid_and_check, CheckJob(GOOD, settings))
+        assert checked.report.ok and new_pid != pid
+    finally:
+        pool.close()
+
+
 def test_a_worker_past_its_time_is_stopped_and_the_next_check_gets_a_new_one(settings, tmp_path):
     pool = ProgramWorkers(settings, slots=1, timeout_s=START_S)
     try:

@@ -36,7 +36,7 @@ from app.control.errors import MotionRefused
 from app.programs.check import CheckedProgram
 from app.programs.dry_run import DryRunRefused
 from app.programs.errors import ProgramError
-from app.programs.workers import CheckJob, ChecksBusy, ProgramWorkers, WorkerCrashed, WorkerError
+from app.programs.workers import CheckJob, ProgramWorkers, WorkerError
 from app.server.api.deps import (
     ControlClient,
     ControllerDep,
@@ -211,7 +211,7 @@ def _unreadable(exc: ProgramError) -> JSONResponse:
 def _unavailable(exc: WorkerError) -> JSONResponse:
     """503 for a check that did not come back: all slots busy, its worker died or ran
     too long (the message says which); Retry-After when trying again soon may work."""
-    retry = {"Retry-After": "5"} if isinstance(exc, ChecksBusy | WorkerCrashed) else {}
+    retry = {"Retry-After": "5"}  # busy, a worker died or overran: a later try may pass
     return JSONResponse({"detail": str(exc)}, status_code=503, headers=retry)
 
 
