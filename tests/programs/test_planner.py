@@ -246,3 +246,13 @@ def test_the_stats_list_a_line_met_without_samples_with_no_error():
     out = with_unsampled(sampled, [2, 3])
     assert out == [{"line": 2, "samples": 0, "rmse_m": None, "max_m": None}, sampled[0]]
     assert with_unsampled(sampled, []) == sampled
+
+
+def test_a_line_met_without_samples_is_served_by_the_runs_api_model():
+    """GET /api/runs served a 500 for such a line (null errors against float fields)."""
+    from app.runs.recorder import with_unsampled
+    from app.server.api.responses import ProgramStats
+
+    sampled = [{"line": 3, "samples": 4, "rmse_m": 1e-3, "max_m": 2e-3}]
+    stats = ProgramStats.model_validate({"lines": with_unsampled(sampled, [2, 3])})
+    assert [(e.line, e.samples, e.rmse_m) for e in stats.lines] == [(2, 0, None), (3, 4, 1e-3)]

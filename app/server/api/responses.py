@@ -300,8 +300,11 @@ class LineErrorOut(_Out):
 
     line: int = Field(description="program line (1-based)")
     samples: int = Field(description="loop samples spent on the line")
-    rmse_m: float = Field(description="sqrt(mean |e|^2) over the line [m]")
-    max_m: float = Field(description="largest |e| over the line [m]")
+    rmse_m: float | None = Field(
+        description="sqrt(mean |e|^2) over the line [m]; null for a line with no sample (a "
+        "late tick crossed it whole)"
+    )
+    max_m: float | None = Field(description="largest |e| over the line [m]; null as rmse_m")
 
 
 class ProgramStats(BaseModel):
