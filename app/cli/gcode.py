@@ -171,10 +171,11 @@ def format_line_errors(per_line: list[dict[str, Any]], text: str, title: str) ->
     out = [title, f"  {'line':>5} {'samples':>7} {'RMSE mm':>8} {'max mm':>8}  program"]
     for e in per_line:
         words = source[e["line"] - 1].strip() if 0 < e["line"] <= len(source) else ""
-        out.append(
-            f"  {e['line']:>5} {e['samples']:>7} {e['rmse_m'] * 1e3:8.3f} "
-            f"{e['max_m'] * 1e3:8.3f}  {words[:50]}"
+        # a line a late tick crossed whole has no sample and no error (null)
+        rmse, worst = (
+            f"{e[k] * 1e3:8.3f}" if e[k] is not None else f"{'-':>8}" for k in ("rmse_m", "max_m")
         )
+        out.append(f"  {e['line']:>5} {e['samples']:>7} {rmse} {worst}  {words[:50]}")
     return "\n".join(out)
 
 
