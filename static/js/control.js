@@ -287,11 +287,12 @@ export function releaseHold(owner = null) {
 const phiJog = { target: null, at: -Infinity }; // the last phi a step sent [rad], and when
 
 // Turn the wrist one step (sign +1 or -1) from its goal (or from the last step, when the
-// status has not caught up yet), within its limits.
-export async function stepPhi(sign) {
+// status has not caught up yet), within its limits. ``repeat``: a held key's auto-repeat,
+// at most one step per PHI_REPEAT_MS (each separate press or click steps).
+export async function stepPhi(sign, repeat = false) {
   if (!wrist.enabled) return;
   const now = performance.now();
-  if (now - phiJog.at < PHI_REPEAT_MS) return; // a held key: at most one step per PHI_REPEAT_MS
+  if (repeat && now - phiJog.at < PHI_REPEAT_MS) return;
   const where = robotPointM();
   if (!where) {
     showMessage("Not sent: the robot's position is not known yet", "error");
@@ -333,7 +334,7 @@ function onKey(event) {
   const phiSign = wrist.enabled ? PHI_KEYS[String(event.key || "").toLowerCase()] : undefined;
   if (phiSign && !typing(event.target) && document.getElementById("jog-keys").checked && document.hasFocus()) {
     event.preventDefault();
-    stepPhi(phiSign); // a held key repeats, at most once per PHI_REPEAT_MS
+    stepPhi(phiSign, event.repeat); // a held key repeats, at most once per PHI_REPEAT_MS
     return;
   }
   const axis = KEY_AXES[event.key];
