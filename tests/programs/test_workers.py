@@ -60,9 +60,16 @@ def alive(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    # a killed child not yet reaped by its executor is a zombie: not running
-    status = Path(f"/proc/{pid}/stat")
-    return not (status.exists() and status.read_text().split(") ")[-1].startswith("Z"))
+    # a killed child not yet reaped by its executor is a zombie: not running. Its main
+    # thread shows Z while its other threads still exit: dead once it is the last one (only
+    # then can its parent reap it, and see it dead; CI's loaded run saw the gap)
+    try:
+        fields = dict(
+            line.split(":\t", 1) for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+        )
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return not (fields["State"].startswith("Z") and fields["Threads"].strip() == "1")
 
 
 class Background:
