@@ -68,7 +68,8 @@ class CheckJob:
 
     text: the program; settings: the robot and limits; gate: the limits in force (the
     controller's); start_m, work_offset_m (3,) [m] and near (3,) [rad] or None (the
-    settings' defaults); max_samples: a lower cap and its setting's name, or None.
+    settings' defaults); for_run: the program is about to run (refused beyond
+    runs.max_samples before the costly checks).
     """
 
     text: str
@@ -77,7 +78,7 @@ class CheckJob:
     start_m: np.ndarray | None = None
     work_offset_m: tuple[float, float, float] | None = None
     near: np.ndarray | None = None
-    max_samples: tuple[int, str] | None = None
+    for_run: bool = False
 
 
 def run_check(job: CheckJob) -> CheckedProgram:
@@ -89,7 +90,7 @@ def run_check(job: CheckJob) -> CheckedProgram:
         start_m=job.start_m,
         work_offset_m=job.work_offset_m,
         near=job.near,
-        max_samples=job.max_samples,
+        for_run=job.for_run,
     )
 
 
