@@ -16,7 +16,9 @@ gate's workspace projection once, when it starts. When every slot is busy anothe
 refused at once (:class:`ChecksBusy`, nothing is queued). A job that takes longer than
 ``timeout_s`` has its worker killed (:class:`WorkerTimeout`); a worker that dies (killed,
 out of memory) ends its job with :class:`WorkerCrashed`; either way the slot starts a new
-worker for its next job.
+worker for its next job. :meth:`ProgramWorkers.close` (the server stopping: at the start of
+its shutdown, so a check in flight does not hold it) kills every worker: their jobs end at
+once with :class:`ChecksStopped`, later ones are refused (:class:`ChecksBusy`).
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ import os
 import signal
 import threading
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import CancelledError as FutureCancelled
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -60,6 +63,14 @@ class WorkerCrashed(WorkerError):
 
 class WorkerTimeout(WorkerError):
     """The job took longer than the bound: its worker was killed."""
+
+
+class ChecksStopped(WorkerCrashed):
+    """:meth:`ProgramWorkers.close` (the server stopping) killed the job's worker, or came
+    between the job's slot and its start: the job was abandoned."""
+
+
+STOPPING = "the server is stopping: no program checks now"
 
 
 @dataclass(frozen=True)
@@ -163,23 +174,22 @@ class ProgramWorkers:
         their own)."""
         slot = self._take()
         try:
-            executor = self._executor(slot)
+            future = self._submit(slot, function, args)
             try:
-                try:
-                    future = executor.submit(function, *args)
-                except BrokenProcessPool:  # broken before this job: a fresh worker takes it
-                    self._discard(slot)
-                    future = self._executor(slot).submit(function, *args)
                 return future.result(timeout=self.timeout_s)
             except FutureTimeout:
                 self._discard(slot)
+                if self._closed:
+                    raise self._stopped() from None
                 raise WorkerTimeout(
                     f"the program's check took longer than {self.timeout_s:g} s "
                     "(programs.check_timeout_s): its worker was stopped; a shorter program "
                     "checks faster"
                 ) from None
-            except BrokenProcessPool:
+            except (BrokenProcessPool, FutureCancelled):  # cancelled: close() before it ran
                 self._discard(slot)
+                if self._closed:
+                    raise self._stopped() from None
                 raise WorkerCrashed(
                     "the worker process checking the program ended before answering "
                     "(killed, or out of memory); the next check starts a new one"
@@ -188,8 +198,35 @@ class ProgramWorkers:
             with self._lock:
                 self._free.append(slot)
 
+    def _submit(self, slot: int, function: Callable[..., T], args: tuple) -> Future[T]:
+        """The job in ``slot``'s worker; ChecksStopped when :meth:`close` came first (the
+        executor it shut down refuses new jobs with a bare RuntimeError)."""
+        try:
+            try:
+                return self._executor(slot).submit(function, *args)
+            except BrokenProcessPool:  # broken before this job: a fresh worker takes it
+                self._discard(slot)
+                return self._executor(slot).submit(function, *args)
+        except RuntimeError as exc:  # ChecksBusy, BrokenProcessPool and shutdown's alike
+            if self._closed:
+                raise self._stopped() from None
+            if isinstance(exc, BrokenProcessPool):
+                raise WorkerCrashed(
+                    "the worker process for the program's check could not start; "
+                    "the next check tries a new one"
+                ) from None
+            raise
+
+    @staticmethod
+    def _stopped() -> ChecksStopped:
+        return ChecksStopped(
+            "the server is stopping: the program's check was abandoned (its worker "
+            "stopped); check again once the server is back"
+        )
+
     def close(self) -> None:
-        """Kill every worker (a check running is abandoned); later jobs are ChecksBusy."""
+        """Kill every worker: a job running ends with ChecksStopped (its caller answers at
+        once, it does not wait for the job); later jobs are ChecksBusy. Safe to repeat."""
         with self._lock:
             self._closed = True
             executors, self._executors = self._executors, [None] * self.slots
@@ -200,7 +237,7 @@ class ProgramWorkers:
     def _take(self) -> int:
         with self._lock:
             if self._closed:
-                raise ChecksBusy("the server is stopping: no program checks now")
+                raise ChecksBusy(STOPPING)
             if not self._free:
                 raise ChecksBusy(
                     f"busy: {self.slots} program checks are running; try again when one has ended"
@@ -210,7 +247,7 @@ class ProgramWorkers:
     def _executor(self, slot: int) -> ProcessPoolExecutor:
         with self._lock:
             if self._closed:
-                raise ChecksBusy("the server is stopping: no program checks now")
+                raise ChecksBusy(STOPPING)
             executor = self._executors[slot]
             if executor is not None and not _alive(executor):  # its worker died while idle
                 self._executors[slot] = None
