@@ -69,10 +69,9 @@ def check_exposure(settings: Settings) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import uvicorn
-
     from app.config import ConfigError, load_settings
     from app.server import create_app
+    from app.server.serving import serve
 
     try:
         settings = load_settings(args.config, **_overrides(args))
@@ -93,8 +92,9 @@ def run(args: argparse.Namespace) -> int:
             f"deltadash: 3D scene on http://{scene_host(server.host)}:{server.viser_port}/",
             flush=True,
         )
-    uvicorn.run(
-        create_app(settings, config_path=pathlib.Path(args.config) if args.config else None),
+    app = create_app(settings, config_path=pathlib.Path(args.config) if args.config else None)
+    serve(  # uvicorn, its check workers killed as the stop begins (app/server/serving.py)
+        app,
         host=server.host,
         port=server.http_port,
         log_level="info",

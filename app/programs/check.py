@@ -111,6 +111,40 @@ def _decimated(length: int, count: int) -> np.ndarray:
     return np.unique(np.linspace(0, length - 1, count).round()).astype(int)
 
 
+def run_samples(duration_s: float, period_s: float) -> int:
+    """Loop periods a run of a program lasting ``duration_s`` [s] logs, as the run
+    manager counts them (``PlannedRun.samples``: no approach or stop when the program
+    starts where the robot is and ends at rest) against ``runs.max_samples``."""
+    return math.ceil((duration_s + period_s) / period_s)
+
+
+def _too_long(path: ProgramPath, period_s: float, cap: int, name: str) -> str:
+    return (
+        f"the program lasts {path.duration_s:.0f} s, over {name} = "
+        f"{cap} loop periods ({cap * period_s:.0f} s)"
+    )
+
+
+def _line_at(path: ProgramPath, t_s: float) -> int:
+    """The program line in execution at ``t_s`` [s] (0 for a program with no segment)."""
+    if not path.segments:
+        return 0
+    return int(path.line_at(np.array([min(t_s, path.duration_s)]))[0])
+
+
+RUN_DURATION = "run_duration"  # the violation kind of a program longer than a run may be
+
+
+def run_violation(path: ProgramPath, period_s: float, cap: int) -> Violation:
+    """A program too long for a run (``cap`` = ``runs.max_samples`` loop periods): the line
+    in execution, the time and the point where a run's log would be full. Its message is
+    the reason POST /api/programs/run gives (422 ``line N: <message>``)."""
+    t_s = min(cap * period_s, path.duration_s)
+    point = path.evaluate(np.array([t_s]), (0,))[0][0]
+    message = _too_long(path, period_s, cap, "runs.max_samples") + ": too long to run"
+    return Violation(_line_at(path, t_s), RUN_DURATION, message, t_s, tuple(point.tolist()))
+
+
 def check_program(
     text: str,
     settings: Settings,
@@ -119,7 +153,7 @@ def check_program(
     start_m: Any = None,
     work_offset_m: Any = None,
     near: Any = None,
-    max_samples: tuple[int, str] | None = None,
+    for_run: bool = False,
 ) -> CheckedProgram:
     """Parse, plan and verify ``text`` with ``settings``' robot and limits.
 
@@ -129,13 +163,17 @@ def check_program(
         work_offset_m: the G54 origin (3,) [m] (default ``programs.work_offset_m``).
         near: the joints the loop is at (3,) [rad] (default: the knee-out branch at the
             start).
-        max_samples: a lower cap on the loop periods than ``programs.max_samples`` and the
-            setting's name, e.g. ``(runs.max_samples, "runs.max_samples")`` for a program
-            about to run: refused after planning, before the costly checks.
+        for_run: the program is about to run (POST /api/programs/run): one longer than a
+            run may be (``runs.max_samples``) is refused after planning, before the costly
+            checks. Without it such a program is checked all the same (up to
+            ``programs.max_samples``) and the report has a ``run_duration`` violation with
+            the same words, so a check never passes what a run refuses.
 
     Raises:
         ProgramError: a program that cannot be read or planned (its line and word), or
-            one over ``programs.max_lines`` or ``programs.max_samples``.
+            one over ``programs.max_lines`` or ``programs.max_samples`` (or, ``for_run``,
+            over ``runs.max_samples``: line N is the line in execution when a run's log
+            would be full).
     """
     programs = settings.programs
     gate = gate or CommandContext.from_settings(settings).gate
@@ -157,17 +195,15 @@ def check_program(
     limits = plan_limits(settings)
     path = plan_program(program.segments, limits)
     period_s = limits.period_s
-    cap, name = (programs.max_samples, "programs.max_samples")
-    if max_samples is not None and max_samples[0] < cap:
-        cap, name = max_samples
+    cap = programs.max_samples  # bounds the check's time and memory
     if path.duration_s / period_s > cap:
-        last = program.segments[-1].line if program.segments else 0
-        raise ProgramError(
-            last,
-            "",
-            f"the program lasts {path.duration_s:.0f} s, over {name} = "
-            f"{cap} loop periods ({cap * period_s:.0f} s)",
-        )
+        reason = _too_long(path, period_s, cap, "programs.max_samples")
+        raise ProgramError(_line_at(path, cap * period_s), "", reason)
+    beyond_run = None  # a run's log holds runs.max_samples: POST /api/programs/run refuses more
+    if run_samples(path.duration_s, period_s) > settings.runs.max_samples:
+        beyond_run = run_violation(path, period_s, settings.runs.max_samples)
+        if for_run:  # refused before the costly checks, in the words of the check's violation
+            raise ProgramError(beyond_run.line, "", beyond_run.message)
     if path.segments:
         times = path.sample_times(period_s)
         points, velocity, acceleration = path.evaluate(times, (0, 1, 2))
@@ -187,12 +223,15 @@ def check_program(
         near_joints,
         period_s,
     )
+    violations = list(result.violations)
+    if beyond_run is not None:
+        violations = sorted([*violations, beyond_run], key=lambda v: v.t_s)
     drawn = _decimated(len(points), programs.path_points)
     report = ProgramReport(
-        ok=not result.violations,
+        ok=not violations,
         duration_s=path.duration_s,
         length_m=path.length_m,
-        violations=result.violations,
+        violations=violations,
         path_m=points[drawn].tolist(),
         path_lines=[int(line) if line > 0 else None for line in lines[drawn]],
         peak_joint_speed_rad_s=_finite(result.peak_joint_speed_rad_s),

@@ -16,7 +16,9 @@ gate's workspace projection once, when it starts. When every slot is busy anothe
 refused at once (:class:`ChecksBusy`, nothing is queued). A job that takes longer than
 ``timeout_s`` has its worker killed (:class:`WorkerTimeout`); a worker that dies (killed,
 out of memory) ends its job with :class:`WorkerCrashed`; either way the slot starts a new
-worker for its next job.
+worker for its next job. :meth:`ProgramWorkers.close` (the server stopping: at the start of
+its shutdown, so a check in flight does not hold it) kills every worker: their jobs end at
+once with :class:`ChecksStopped`, later ones are refused (:class:`ChecksBusy`).
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ import os
 import signal
 import threading
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import CancelledError as FutureCancelled
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -62,13 +65,22 @@ class WorkerTimeout(WorkerError):
     """The job took longer than the bound: its worker was killed."""
 
 
+class ChecksStopped(WorkerCrashed):
+    """:meth:`ProgramWorkers.close` (the server stopping) killed the job's worker, or came
+    between the job's slot and its start: the job was abandoned."""
+
+
+STOPPING = "the server is stopping: no program checks now"
+
+
 @dataclass(frozen=True)
 class CheckJob:
     """What a check needs, all picklable: the arguments of :func:`check_program`.
 
     text: the program; settings: the robot and limits; gate: the limits in force (the
     controller's); start_m, work_offset_m (3,) [m] and near (3,) [rad] or None (the
-    settings' defaults); max_samples: a lower cap and its setting's name, or None.
+    settings' defaults); for_run: the program is about to run (refused beyond
+    runs.max_samples before the costly checks).
     """
 
     text: str
@@ -77,7 +89,7 @@ class CheckJob:
     start_m: np.ndarray | None = None
     work_offset_m: tuple[float, float, float] | None = None
     near: np.ndarray | None = None
-    max_samples: tuple[int, str] | None = None
+    for_run: bool = False
 
 
 def run_check(job: CheckJob) -> CheckedProgram:
@@ -89,7 +101,7 @@ def run_check(job: CheckJob) -> CheckedProgram:
         start_m=job.start_m,
         work_offset_m=job.work_offset_m,
         near=job.near,
-        max_samples=job.max_samples,
+        for_run=job.for_run,
     )
 
 
@@ -162,23 +174,22 @@ class ProgramWorkers:
         their own)."""
         slot = self._take()
         try:
-            executor = self._executor(slot)
+            future = self._submit(slot, function, args)
             try:
-                try:
-                    future = executor.submit(function, *args)
-                except BrokenProcessPool:  # broken before this job: a fresh worker takes it
-                    self._discard(slot)
-                    future = self._executor(slot).submit(function, *args)
                 return future.result(timeout=self.timeout_s)
             except FutureTimeout:
                 self._discard(slot)
+                if self._closed:
+                    raise self._stopped() from None
                 raise WorkerTimeout(
                     f"the program's check took longer than {self.timeout_s:g} s "
                     "(programs.check_timeout_s): its worker was stopped; a shorter program "
                     "checks faster"
                 ) from None
-            except BrokenProcessPool:
+            except (BrokenProcessPool, FutureCancelled):  # cancelled: close() before it ran
                 self._discard(slot)
+                if self._closed:
+                    raise self._stopped() from None
                 raise WorkerCrashed(
                     "the worker process checking the program ended before answering "
                     "(killed, or out of memory); the next check starts a new one"
@@ -187,8 +198,35 @@ class ProgramWorkers:
             with self._lock:
                 self._free.append(slot)
 
+    def _submit(self, slot: int, function: Callable[..., T], args: tuple) -> Future[T]:
+        """The job in ``slot``'s worker; ChecksStopped when :meth:`close` came first (the
+        executor it shut down refuses new jobs with a bare RuntimeError)."""
+        try:
+            try:
+                return self._executor(slot).submit(function, *args)
+            except BrokenProcessPool:  # broken before this job: a fresh worker takes it
+                self._discard(slot)
+                return self._executor(slot).submit(function, *args)
+        except RuntimeError as exc:  # ChecksBusy, BrokenProcessPool and shutdown's alike
+            if self._closed:
+                raise self._stopped() from None
+            if isinstance(exc, BrokenProcessPool):
+                raise WorkerCrashed(
+                    "the worker process for the program's check could not start; "
+                    "the next check tries a new one"
+                ) from None
+            raise
+
+    @staticmethod
+    def _stopped() -> ChecksStopped:
+        return ChecksStopped(
+            "the server is stopping: the program's check was abandoned (its worker "
+            "stopped); check again once the server is back"
+        )
+
     def close(self) -> None:
-        """Kill every worker (a check running is abandoned); later jobs are ChecksBusy."""
+        """Kill every worker: a job running ends with ChecksStopped (its caller answers at
+        once, it does not wait for the job); later jobs are ChecksBusy. Safe to repeat."""
         with self._lock:
             self._closed = True
             executors, self._executors = self._executors, [None] * self.slots
@@ -199,7 +237,7 @@ class ProgramWorkers:
     def _take(self) -> int:
         with self._lock:
             if self._closed:
-                raise ChecksBusy("the server is stopping: no program checks now")
+                raise ChecksBusy(STOPPING)
             if not self._free:
                 raise ChecksBusy(
                     f"busy: {self.slots} program checks are running; try again when one has ended"
@@ -209,7 +247,7 @@ class ProgramWorkers:
     def _executor(self, slot: int) -> ProcessPoolExecutor:
         with self._lock:
             if self._closed:
-                raise ChecksBusy("the server is stopping: no program checks now")
+                raise ChecksBusy(STOPPING)
             executor = self._executors[slot]
             if executor is not None and not _alive(executor):  # its worker died while idle
                 self._executors[slot] = None

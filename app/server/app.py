@@ -3,7 +3,10 @@
 Startup opens the configured backend (simulator, emulator or real servos) and starts the
 controller's thread (and makes the pool of program-check worker processes, which start on
 the first check); shutdown kills those workers, stops motion, relaxes the servos per
-config and closes the bus. Errors map to HTTP codes in one place, app/server/errors.py.
+config and closes the bus. The workers are killed first of all, as the stop begins
+(``begin_shutdown``, called by app/server/serving.py before uvicorn waits for the
+requests in flight), so a check in flight never holds the server. Errors map to HTTP
+codes in one place, app/server/errors.py.
 """
 
 from __future__ import annotations
@@ -62,6 +65,17 @@ def _start_estop_listener(settings: Settings, controller: Controller) -> EstopLi
     except OSError as exc:
         log.warning("e-stop listener not started on port %s: %s", server.estop_port, exc)
         return None
+
+
+def begin_shutdown(app: FastAPI) -> None:
+    """The first step of stopping, before the server waits for the requests in flight
+    (app/server/serving.py): kill the program-check workers, so a check in flight (up to
+    programs.check_timeout_s) answers 503 now instead of holding the stop, and no new one
+    starts. Blocks for milliseconds; safe before startup or twice (the lifespan's end
+    closes them again)."""
+    workers = getattr(app.state, "program_workers", None)
+    if workers is not None:
+        workers.close()
 
 
 def create_app(

@@ -116,10 +116,19 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_middleware(BugsAre500)
 
 
+STOPPING = "the server is stopping: the request was not completed; try again once it is back"
+STOPPING_RETRY_S = 5  # Retry-After of a request the stopping server abandoned
+
+
 class BugsAre500:
     """ASGI middleware: an exception no handler took is logged with its traceback and
     answered 500 with a generic body (Starlette's own last resort would re-raise it to the
-    server, which logs it a second time, and answer in plain text)."""
+    server, which logs it a second time, and answer in plain text).
+
+    A request still waiting when the server stops for good (a second Ctrl-C: uvicorn stops
+    waiting for requests in flight and the event loop cancels their tasks) is no bug:
+    answered 503 with Retry-After (uvicorn's own answer to the cancellation would be a
+    500), then the cancellation goes on."""
 
     def __init__(self, app: ASGIApp) -> None:
         self.app = app
@@ -137,6 +146,14 @@ class BugsAre500:
 
         try:
             await self.app(scope, receive, tracked_send)
+        except asyncio.CancelledError:
+            if not started:
+                log.warning(
+                    "%s %s abandoned: the server is stopping", scope["method"], scope["path"]
+                )
+                headers = {"Retry-After": str(STOPPING_RETRY_S)}
+                await JSONResponse({"detail": STOPPING}, 503, headers)(scope, receive, send)
+            raise
         except Exception:
             log.exception("%s %s failed (a bug)", scope["method"], scope["path"])
             if started:  # too late for a status code; let the server close the connection

@@ -156,3 +156,45 @@ def test_a_torque_no_servo_can_give_is_said_in_words_not_inf(settings):
     assert torque, report.violations
     assert all("inf" not in v.message for v in report.violations)
     assert any("gives none" in v.message for v in torque)
+
+
+def _dwell_program(dwell_s: float) -> str:
+    """A move to (0, 0, -220) mm (line 2), a dwell of ``dwell_s`` (line 3), a move (line 4)."""
+    return f"G21 G90\nG1 F1200 X0 Y0 Z-220\nG4 P{dwell_s:g}\nX5\nM2"
+
+
+def test_a_program_longer_than_a_run_may_be_fails_its_check_as_the_run_refuses_it():
+    """A check never says ok to what POST /api/programs/run refuses: a program longer than
+    runs.max_samples (a run's log) gets a run_duration violation at the line in execution
+    when the log would be full, in the words the run's refusal uses (an attacker's trial
+    had a 922 s program pass its check, then the run refuse it)."""
+    settings = load_settings(runs={"max_samples": 2000})  # 10 s at 200 Hz
+    text = _dwell_program(15.0)
+    report = check_program(text, settings).report
+    assert not report.ok
+    [violation] = report.violations  # nothing else is wrong with it
+    assert (violation.line, violation.kind) == (3, "run_duration")  # dwelling at 10 s
+    assert "runs.max_samples = 2000" in violation.message and "(10 s)" in violation.message
+    assert violation.t_s == pytest.approx(2000 * report.period_s)
+    np.testing.assert_allclose(violation.point_m, [0.0, 0.0, -0.22], atol=1e-12)
+    with pytest.raises(ProgramError) as refused:  # what the run's check says, unchecked
+        check_program(text, settings, for_run=True)
+    assert (refused.value.line, refused.value.word) == (violation.line, "")
+    assert str(refused.value) == f"line {violation.line}: {violation.message}"
+    assert check_program(text, load_settings()).report.ok  # within the default 750 s
+
+
+# the moves take 1.33 s: the program lasts the run limit (10 s) with a dwell of 8.67 s
+@pytest.mark.parametrize("dwell_s", [8.0, 8.66, 8.665, 8.67, 8.675, 9.0])
+def test_the_check_refuses_a_run_exactly_when_the_run_manager_would(dwell_s):
+    """Around the limit: a run_duration violation iff the run manager's own count of the
+    run's loop periods (approach, program, stop; PlannedRun.samples) is over the limit."""
+    from app.runs.trajectories import plan_sinusoid
+
+    settings = load_settings(runs={"max_samples": 2000})
+    checked = check_program(_dwell_program(dwell_s), settings)
+    report = checked.report
+    plan = plan_sinusoid(checked.path, np.asarray(report.start_m))
+    over = plan.samples(report.period_s) > settings.runs.max_samples
+    assert ("run_duration" in {v.kind for v in report.violations}) == over
+    assert report.ok == (not over)

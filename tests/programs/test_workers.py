@@ -24,6 +24,7 @@ from app.programs.errors import ProgramError
 from app.programs.workers import (
     CheckJob,
     ChecksBusy,
+    ChecksStopped,
     ProgramWorkers,
     WorkerCrashed,
     WorkerTimeout,
@@ -177,7 +178,30 @@ def test_beyond_the_slots_a_job_is_refused_at_once_and_close_kills_the_workers(s
             pool.check(CheckJob(GOOD, settings))
     finally:
         pool.close()
-    assert isinstance(job.result(), WorkerCrashed)
+    # the job in flight ends at once, saying why (the server stopping, not a crash)
+    stopped = job.result()
+    assert isinstance(stopped, ChecksStopped), stopped
+    assert str(stopped).startswith("the server is stopping")
     wait_for(lambda: not alive(pid), "the worker killed by close", START_S)
     with pytest.raises(ChecksBusy, match="stopping"):
         pool.check(CheckJob(GOOD, settings))
+
+
+class ClosedBeforeSubmit(ProgramWorkers):
+    """A pool whose close() (the server stopping) lands between a job's slot and its
+    submit: the executor the job was handed is shut down when the job reaches it."""
+
+    def _executor(self, slot: int):
+        executor = super()._executor(slot)
+        self.close()
+        return executor
+
+
+def test_a_stop_between_a_jobs_slot_and_its_start_is_said_as_such(settings):
+    """A race of the server's shutdown with a request (an attacker's double Ctrl-C): the
+    shut-down executor's bare RuntimeError would have been a 500; it is the stopping
+    server's WorkerError (a 503 with Retry-After), and the slot is free again."""
+    pool = ClosedBeforeSubmit(settings, slots=1, timeout_s=START_S)
+    with pytest.raises(ChecksStopped, match="the server is stopping"):
+        pool.call(os.getpid)
+    assert pool._free == [0]

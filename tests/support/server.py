@@ -93,9 +93,10 @@ class Server:
 
 
 @contextmanager
-def serve(folder: Path, scene: bool = False, **env: str) -> Iterator[Server]:
+def serve(folder: Path, scene: bool = False, preamble: str = "", **env: str) -> Iterator[Server]:
     """`deltadash serve` on free ports with runs under ``folder``, the 3D scene on if
-    ``scene``; extra DELTADASH_* ``env``."""
+    ``scene``; extra DELTADASH_* ``env``; ``preamble``: Python run in the server's process
+    before it starts (e.g. tests.support.slow_checks.PREAMBLE)."""
     port = free_port()
     env = {
         **os.environ,
@@ -106,7 +107,8 @@ def serve(folder: Path, scene: bool = False, **env: str) -> Iterator[Server]:
         **env,
     }
     log = folder / "serve.log"
-    command = [sys.executable, "-c", "import sys; from app.cli import main; sys.exit(main())"]
+    code = f"{preamble}\nimport sys; from app.cli import main; sys.exit(main())"
+    command = [sys.executable, "-c", code]
     with log.open("wb") as out:
         process = subprocess.Popen([*command, "serve"], env=env, stdout=out, stderr=out)
     served = Server(f"http://127.0.0.1:{port}", process, log)

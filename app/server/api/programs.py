@@ -83,7 +83,10 @@ class RunProgramRequest(ProgramRequest):
 
 class ViolationOut(BaseModel):
     line: int = Field(description="program line (1-based)")
-    kind: str = Field(description="workspace, ceiling, ik, joint_limit, joint_speed, ...")
+    kind: str = Field(
+        description="workspace, ceiling, ik, joint_limit, joint_speed, ..., run_duration "
+        "(longer than a run may be: runs.max_samples; /run refuses it in the same words)"
+    )
     message: str
     t_s: float = Field(description="first offending sample, from the program's start [s]")
     point_m: list[float] = Field(description="its point in the base frame [m]")
@@ -235,7 +238,7 @@ def _job(
         work_offset_m=body.work_offset_m,
         near=near,
         # a run's log holds at most runs.max_samples: say so before the costly checks
-        max_samples=(settings.runs.max_samples, "runs.max_samples") if from_robot else None,
+        for_run=from_robot,
     )
     return job, notes
 

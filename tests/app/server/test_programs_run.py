@@ -225,13 +225,23 @@ def test_with_torque_off_a_run_is_refused_as_such_before_any_check(fresh, monkey
     assert response.json()["detail"].startswith("torque is off")
 
 
-def test_a_program_too_long_for_a_run_is_refused_naming_the_run_limit(fresh):
+def test_a_program_too_long_for_a_run_fails_its_check_as_the_run_refuses_it(fresh):
+    """The check says in advance what the run refuses: a program over runs.max_samples
+    (checkable up to programs.max_samples) has a run_duration violation, and the run's
+    422 gives the same line and words (an attacker's trial had a check pass a 922 s
+    program that the run then refused)."""
     ok_json(fresh.post("/api/torque", json={"enabled": True}))
     limit_s = fresh.app.state.settings.runs.max_samples * 0.005
     long_dwell = f"G4 P{limit_s + 10:.0f}\nM2"  # checkable (programs.max_samples), not runnable
+    report = ok_json(fresh.post("/api/programs/check", json={"gcode": long_dwell}))
+    assert report["ok"] is False
+    [violation] = report["violations"]
+    assert (violation["line"], violation["kind"]) == (1, "run_duration")
+    assert "runs.max_samples" in violation["message"]
+    assert violation["t_s"] == pytest.approx(limit_s)
     response = fresh.post("/api/programs/run", json={"gcode": long_dwell})
     assert response.status_code == 422, response.text
-    assert "runs.max_samples" in response.json()["detail"]
+    assert response.json()["detail"] == f"line 1: {violation['message']}"
 
 
 def test_a_robot_that_moved_during_the_check_does_not_run_it(fresh, monkeypatch):
