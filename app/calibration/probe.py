@@ -36,6 +36,7 @@ platform's z equals the plate's height, with trigger noise).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -371,3 +372,46 @@ def simulate_touches(
             ) from None
         out[k] = nominal.ik([x, y, z_nom]).joints
     return out
+
+
+Touch = Callable[[np.ndarray, float, int], np.ndarray]
+"""touch(xy (N, 2) [m], plate_z [m], seed) -> the joints (N, 3) [rad] the controller reads
+at each touch of the plate."""
+
+
+def twin_probe(
+    true_robot: PerLegRotaryDelta | None,
+    nominal: PerLegRotaryDelta,
+    offsets_in_use: Callable[[], np.ndarray],
+    noise_m: float = PROBE_NOISE_M,
+) -> Touch:
+    """The twin's probe: touches computed from its true model (``simulate_touches``).
+
+    true_robot: the twin's true geometry ([hardware.sim], ``SimSettings.true_robot``);
+    None for the exact twin (the nominal one). offsets_in_use: the joint offsets the
+    controller applies now [rad] (3,): it reads q = raw + a while the mechanism turns by
+    raw + o_true, so the true model in the controller's terms has offsets o_true - a.
+    """
+    truth = true_robot if true_robot is not None else nominal
+
+    def touch(xy: np.ndarray, plate_z: float, seed: int) -> np.ndarray:
+        applied = np.asarray(offsets_in_use(), dtype=float)
+        offsets = np.array(truth.joint_offsets_rad) - applied
+        here = truth.with_values(joint_offsets_rad=tuple(float(v) for v in offsets))
+        return simulate_touches(here, nominal, xy, plate_z, noise_m, seed)
+
+    return touch
+
+
+def write_touches(path: Any, joints: np.ndarray, plate_z: np.ndarray, holdout: int) -> None:
+    """The touches as CSV: q0_rad, q1_rad, q2_rad, plate_z_m, set (fit | holdout, the last
+    ``holdout`` rows held out)."""
+    import csv
+
+    n = len(joints)
+    with open(path, "w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["q0_rad", "q1_rad", "q2_rad", "plate_z_m", "set"])
+        for k in range(n):
+            kind = "holdout" if k >= n - holdout else "fit"
+            writer.writerow([*map(repr, map(float, joints[k])), repr(float(plate_z[k])), kind])
