@@ -301,7 +301,7 @@ class CalibrationManager:
 
     def _execute_probe(self, run: CalibrationRun) -> None:
         try:
-            assert self.probe is not None and run.probe_xy is not None and run.plate_z_m
+            assert self.probe is not None and run.probe_xy is not None and run.plate_z_m is not None
             run.state = "moving"
             joints = self.probe(run.probe_xy, run.plate_z_m, 0)
             run.joints = list(joints)
