@@ -162,3 +162,50 @@ def test_bad_input_names_the_field() -> None:
     q[0, 1] = np.nan
     with pytest.raises(CalibrationError, match="finite"):
         probe_fit(NOMINAL, q, z, held)
+
+
+def test_one_plate_cannot_see_the_robot_scaled_with_the_plate_moved() -> None:
+    """By hand: scaling every length of the robot (L, l and R - r) by 1 + s scales every
+    FK point by 1 + s, so every touch of a plate at z0 moves by the same s z0: exactly what
+    the plate's height does. Heights on one plate cannot see it; a second plate, at
+    another height, moves by another s z, so two plates can."""
+    q, _, _ = touches(NOMINAL, noise_m=0.0)
+    model = ProbeModel(NOMINAL, "geometry", plate_free=True)
+    jac = model.jacobian(model.initial, q)
+    scale = np.linalg.norm(jac, axis=0)
+    _, sigma, vt = np.linalg.svd(jac / scale)
+    assert sigma[-1] < 1e-12 * sigma[0] < sigma[-2], sigma / sigma[0]  # exactly one
+    found = vt[-1] / scale
+    s = 1e-3
+    rbar = np.subtract(NOMINAL.R, NOMINAL.r)
+    by_hand = np.concatenate([np.zeros(3), s * np.array(NOMINAL.L), s * np.array(NOMINAL.l)])
+    by_hand = np.concatenate([by_hand, s * rbar, [s * PLATE_M]])
+    cosine = abs(found @ by_hand) / (np.linalg.norm(found) * np.linalg.norm(by_hand))
+    assert cosine > 1 - 1e-9, cosine
+    report = model.observability(model.initial, q)
+    assert {"L[0]", "l[0]", "R[0]", "plate_z"} <= set(report.unobservable)
+    two, _, _ = touches(NOMINAL, heights=(-0.2, -0.3), noise_m=0.0)
+    sigma2 = np.linalg.svd(model.jacobian(model.initial, two) / scale, compute_uv=False)
+    assert sigma2[-1] > 1e-5 * sigma2[0], sigma2 / sigma2[0]
+
+
+def test_the_stated_standard_deviation_is_the_scatter_of_fits() -> None:
+    """The report's sd of the weak direction (one plate, plate height free, 0.1 mm of
+    noise) against the scatter of that direction over fits of 16 noise draws."""
+    noise = 1e-4
+    truth = WRONG_OFFSETS
+    model = ProbeModel(NOMINAL, "offsets", plate_free=True)
+    q0, z0, held = touches(truth, noise_m=0.0)
+    report = model.observability(model.initial, q0[:-held], noise_m=noise)
+    stated = float(report.combinations[0].split("(sd ")[1].split()[0])
+    jac = model.jacobian(model.initial, q0[:-held]) * model.typical
+    direction = np.linalg.svd(jac)[2][-1]
+    true_x = np.concatenate([OFFSETS, [0.0]]) / model.typical
+    seen = []
+    for seed in range(16):
+        q, z, held = touches(truth, noise_m=noise, seed=100 + seed)
+        result = probe_fit(NOMINAL, q, z, held, "offsets", plate_free=True, noise_m=noise)
+        x = np.concatenate([result.robot.joint_offsets_rad, [result.plate_error_m]])
+        seen.append(float((x / model.typical - true_x) @ direction))
+    scatter = float(np.sqrt(np.mean(np.square(seen))))
+    assert 0.55 * stated < scatter < 1.6 * stated, (scatter, stated)
