@@ -87,6 +87,7 @@ class Constraints(NamedTuple):
     top: float | None
     total: int  # how many constraints
     radial: np.ndarray = _U
+    legs: tuple = ()  # per leg: (cos, sin, Rbar, L, tube, lemon) as floats (``_with_legs``)
 
     @property
     def centres(self) -> np.ndarray:
@@ -95,12 +96,7 @@ class Constraints(NamedTuple):
 
     def leg(self, leg: int) -> tuple[float, float, float, float, float, float]:
         """(cos, sin of its base direction, Rbar, L, tube, lemon) of one leg, as floats."""
-
-        def pick(value: Any) -> float:
-            return float(value[leg]) if np.ndim(value) else float(value)
-
-        cos, sin = float(self.radial[leg][0]), float(self.radial[leg][1])
-        return cos, sin, pick(self.Rbar), pick(self.L), pick(self.tube), pick(self.lemon)
+        return self.legs[leg]
 
     def values(self, points: np.ndarray) -> np.ndarray:
         """c_k at points (N, 3): shape (N, total) [m]."""
@@ -238,8 +234,27 @@ class Constraints(NamedTuple):
         return value, gr * cos - ga * sin, gr * sin + ga * cos, gz
 
 
+def _with_legs(cons: Constraints) -> Constraints:
+    """``cons`` with its per-leg floats precomputed (the per-query solves read them)."""
+
+    def pick(value: Any, leg: int) -> float:
+        return float(value[leg]) if np.ndim(value) else float(value)
+
+    legs = tuple(
+        (
+            float(cons.radial[i][0]),
+            float(cons.radial[i][1]),
+            *(pick(getattr(cons, n), i) for n in ("Rbar", "L", "tube", "lemon")),
+        )
+        for i in range(3)
+    )
+    return cons._replace(legs=legs)
+
+
+@functools.lru_cache(maxsize=64)
 def constraints(robot: Any, margin: float, z_max: float | None) -> Constraints:
-    """The tightened constraints of ``robot`` with ``margin`` [m] and ceiling ``z_max`` [m]."""
+    """The tightened constraints of ``robot`` with ``margin`` [m] and ceiling ``z_max`` [m]
+    (cached: shared, never to be changed)."""
     top = None if z_max is None else float(z_max) - EPS
     ceiling = top is not None
     if hasattr(robot, "L"):  # rotary: per leg (equal for a symmetric robot)
@@ -250,21 +265,23 @@ def constraints(robot: Any, margin: float, z_max: float | None) -> Constraints:
             c, s = np.cos(np.asarray(angles, float)), np.sin(np.asarray(angles, float))
             zero = np.zeros(3)
             radial, axes = np.column_stack([c, s, zero]), np.column_stack([-s, c, zero])
-        return Constraints(
-            "rotary",
-            legs["R"] - legs["r"],
-            axes,
-            legs["L"].copy(),
-            legs["l"] - margin - EPS,
-            legs["l"] + margin + EPS,
-            top,
-            6 + ceiling,
-            radial,
+        return _with_legs(
+            Constraints(
+                "rotary",
+                legs["R"] - legs["r"],
+                axes,
+                legs["L"].copy(),
+                legs["l"] - margin - EPS,
+                legs["l"] + margin + EPS,
+                top,
+                6 + ceiling,
+                radial,
+            )
         )
     Rbar = float(robot.R - robot.r)
     tube, lemon = float(robot.l - margin - EPS), float(robot.l + margin + EPS)
     rails = np.array([robot._rail(i) for i in range(3)])
-    return Constraints("linear", Rbar, rails, 0.0, tube, lemon, top, 3 + ceiling)
+    return _with_legs(Constraints("linear", Rbar, rails, 0.0, tube, lemon, top, 3 + ceiling))
 
 
 class Boundary(NamedTuple):
