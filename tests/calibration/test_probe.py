@@ -209,3 +209,25 @@ def test_the_stated_standard_deviation_is_the_scatter_of_fits() -> None:
         seen.append(float((x / model.typical - true_x) @ direction))
     scatter = float(np.sqrt(np.mean(np.square(seen))))
     assert 0.55 * stated < scatter < 1.6 * stated, (scatter, stated)
+
+
+class _Idle:
+    """A controller that may move (what ``start`` checks before planning)."""
+
+    robot = THESIS_DELTA
+
+    def snapshot(self):
+        from types import SimpleNamespace
+
+        return SimpleNamespace(estopped=False, faults=(), torque=True)
+
+
+def test_a_backend_without_a_probe_refuses_probe_runs_naming_the_source(tmp_path) -> None:
+    from app.calibration.procedure import CalibrationManager
+
+    manager = CalibrationManager(_Idle(), tmp_path)  # type: ignore[arg-type]
+    with pytest.raises(CalibrationError, match="source: this backend has no probe"):
+        manager.start(20, "offsets", source="probe", plate_z_m=PLATE_M)
+    with pytest.raises(CalibrationError, match="source"):
+        manager.start(20, "offsets", source="laser")
+    assert not list(tmp_path.iterdir())  # nothing planned, no run folder
