@@ -314,40 +314,57 @@ class Identification:
             ShapeError: for malformed joints; InvalidGeometryError for a bad ``params``.
         """
         jac = self.jacobian(params, joints)
-        rows = jac.reshape(-1, jac.shape[-1])
-        rows = rows[np.isfinite(rows).all(axis=1)]
-        norms = np.linalg.norm(rows, axis=0)
-        scale = np.where(norms > 0.0, norms, 1.0)
-        scaled = rows / scale
-        _, sigma, vt = np.linalg.svd(scaled, full_matrices=True)
-        n_params = scaled.shape[1]
-        sigma_full = np.zeros(n_params)
-        sigma_full[: len(sigma)] = sigma
-        top = sigma_full[0] if n_params else 0.0
-        weak = sigma_full <= tolerance * top
-        names = self.names
-        involved: set[int] = set()
-        combos = []
-        for k in np.flatnonzero(weak):
-            v = vt[k]
-            big = np.flatnonzero(np.abs(v) >= 0.1 * np.abs(v).max())
-            involved.update(big.tolist())
-            combos.append(" ".join(f"{v[j]:+.2f} {names[j]}" for j in big))
-        kept = ~weak
-        inv_sigma2 = np.zeros(n_params)
-        inv_sigma2[kept] = 1.0 / sigma_full[kept] ** 2
-        cov_scaled = (vt.T * inv_sigma2) @ vt
-        covariance = cov_scaled / np.outer(scale, scale)
-        with np.errstate(divide="ignore"):
-            condition = float(top / sigma_full[-1]) if n_params else 1.0
-        return Observability(
-            names=names,
-            singular_values=sigma_full,
-            condition_number=condition,
-            unobservable=tuple(names[j] for j in sorted(involved)),
-            combinations=tuple(combos),
-            covariance_per_m2=covariance,
-        )
+        return observability_of(jac.reshape(-1, jac.shape[-1]), self.names, tolerance)
+
+
+def observability_of(rows: Any, names: Sequence[str], tolerance: float = 1e-6) -> Observability:
+    """``Observability`` of a stacked Jacobian ``rows`` (M, P) of parameters ``names`` (P).
+
+    Rows with a non-finite entry are dropped; columns are scaled to unit norm, so radians
+    and metres compare; a direction whose singular value is below ``tolerance`` times the
+    largest is unobservable, and its parameters (components over 0.1 of the direction's
+    largest) are listed. Any measurement model may use it (the 3D one above, the z-only
+    touches of a probe).
+
+    Raises:
+        ShapeError: when ``rows`` is not (M, len(names)).
+    """
+    rows = np.asarray(rows, dtype=float)
+    names = tuple(names)
+    if rows.ndim != 2 or rows.shape[1] != len(names):
+        raise ShapeError(f"rows: expected shape (M, {len(names)}), got {rows.shape}")
+    rows = rows[np.isfinite(rows).all(axis=1)]
+    norms = np.linalg.norm(rows, axis=0)
+    scale = np.where(norms > 0.0, norms, 1.0)
+    scaled = rows / scale
+    _, sigma, vt = np.linalg.svd(scaled, full_matrices=True)
+    n_params = scaled.shape[1]
+    sigma_full = np.zeros(n_params)
+    sigma_full[: len(sigma)] = sigma
+    top = sigma_full[0] if n_params else 0.0
+    weak = sigma_full <= tolerance * top
+    involved: set[int] = set()
+    combos = []
+    for k in np.flatnonzero(weak):
+        v = vt[k]
+        big = np.flatnonzero(np.abs(v) >= 0.1 * np.abs(v).max())
+        involved.update(big.tolist())
+        combos.append(" ".join(f"{v[j]:+.2f} {names[j]}" for j in big))
+    kept = ~weak
+    inv_sigma2 = np.zeros(n_params)
+    inv_sigma2[kept] = 1.0 / sigma_full[kept] ** 2
+    cov_scaled = (vt.T * inv_sigma2) @ vt
+    covariance = cov_scaled / np.outer(scale, scale)
+    with np.errstate(divide="ignore"):
+        condition = float(top / sigma_full[-1]) if n_params else 1.0
+    return Observability(
+        names=names,
+        singular_values=sigma_full,
+        condition_number=condition,
+        unobservable=tuple(names[j] for j in sorted(involved)),
+        combinations=tuple(combos),
+        covariance_per_m2=covariance,
+    )
 
 
 def _joints(joints: Any) -> np.ndarray:

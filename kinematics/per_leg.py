@@ -189,15 +189,3 @@ class PerLegRotaryDelta(DeltaKinematics):
         nearest = np.hypot(rho - L, along_axis)
         farthest = np.hypot(rho + L, along_axis)
         return np.maximum(nearest - l, l - farthest)
-
-    def project(self, point: Any, margin: float = 0.0, z_max: float | None = None) -> Any:
-        """Not available yet for per-leg geometry (kinematics.projection assumes equal legs).
-
-        Raises:
-            NotImplementedError: always; project with ``nominal()`` and check with
-            ``reachable`` meanwhile.
-        """
-        raise NotImplementedError(
-            "project: the nearest-point search assumes equal legs; use nominal().project "
-            "and check the answer with reachable()"
-        )

@@ -50,7 +50,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ._xp import LEG_COS, LEG_SIN
+from ._xp import LEG_ANGLES_RAD, LEG_COS, LEG_SIN
 
 EPS = 1e-9
 """Constraints are solved this much tighter [m], so a boundary answer is strictly inside."""
@@ -73,22 +73,30 @@ class Constraints(NamedTuple):
     kind: "rotary" or "linear"; Rbar: R - r [m]; axes (3, 3): motor axes or rail
     directions; L: upper link [m] (0 for linear); tube: l - margin - EPS [m]; lemon:
     l + margin + EPS [m]; top: z_max - EPS [m] or None; total: how many. Order of k:
-    tubes (or cylinders) 0-2, lemons 3-5 (rotary only), then the ceiling.
+    tubes (or cylinders) 0-2, lemons 3-5 (rotary only), then the ceiling. A rotary
+    robot's Rbar, L, tube and lemon are per leg, shape (3,), and ``radial`` (3, 3) holds
+    each leg's base direction (a per-leg robot, kinematics/per_leg.py, has its own).
     """
 
     kind: str
-    Rbar: float
+    Rbar: Any
     axes: np.ndarray
-    L: float
-    tube: float
-    lemon: float
+    L: Any
+    tube: Any
+    lemon: Any
     top: float | None
     total: int  # how many constraints
+    radial: np.ndarray = _U
+    legs: tuple = ()  # per leg: (cos, sin, Rbar, L, tube, lemon) as floats (``_with_legs``)
 
     @property
     def centres(self) -> np.ndarray:
         """Knee-circle centres or rail points, shape (3, 3) [m]."""
-        return self.Rbar * _U
+        return np.asarray(self.Rbar, dtype=float).reshape(-1, 1) * self.radial
+
+    def leg(self, leg: int) -> tuple[float, float, float, float, float, float]:
+        """(cos, sin of its base direction, Rbar, L, tube, lemon) of one leg, as floats."""
+        return self.legs[leg]
 
     def values(self, points: np.ndarray) -> np.ndarray:
         """c_k at points (N, 3): shape (N, total) [m]."""
@@ -106,8 +114,8 @@ class Constraints(NamedTuple):
         grads: list[np.ndarray] = []
         with np.errstate(all="ignore"):
             if self.kind == "rotary":
-                x = p @ _U.T - self.Rbar
-                y = p @ _A.T
+                x = p @ self.radial.T - self.Rbar
+                y = p @ self.axes.T
                 z = np.broadcast_to(p[:, 2:3], x.shape)
                 rho = np.hypot(x, z)
                 near = np.hypot(rho - self.L, y)
@@ -118,10 +126,10 @@ class Constraints(NamedTuple):
                     rho1 = np.where(safe, rho, 1.0)
                     e = np.where(
                         safe[..., None],
-                        (x[..., None] * _U + z[..., None] * _Z) / rho1[..., None],
-                        _U,
+                        (x[..., None] * self.radial + z[..., None] * _Z) / rho1[..., None],
+                        self.radial,
                     )
-                    ya = y[..., None] * _A
+                    ya = y[..., None] * self.axes
                     grads += [
                         ((rho - self.L)[..., None] * e + ya) / near[..., None],
                         -((rho + self.L)[..., None] * e + ya) / far[..., None],
@@ -153,21 +161,21 @@ class Constraints(NamedTuple):
         if self.top is not None:
             out.append((abs(gz - self.top), (gx, gy, self.top)))
         for leg in range(3):
-            cos, sin = LEG_COS[leg], LEG_SIN[leg]
+            cos, sin, Rbar, L, leg_tube, lemon = self.leg(leg)
             knees: list[tuple[tuple[float, float, float], tuple[float, ...]]] = []
             if self.kind == "linear":
                 ax, ay, az = (float(v) for v in self.axes[leg])
-                fx, fy = self.Rbar * cos, self.Rbar * sin
+                fx, fy = Rbar * cos, Rbar * sin
                 along = (gx - fx) * ax + (gy - fy) * ay + gz * az
-                knees.append(((fx + along * ax, fy + along * ay, along * az), (self.tube,)))
+                knees.append(((fx + along * ax, fy + along * ay, along * az), (leg_tube,)))
             else:
-                radial = cos * gx + sin * gy - self.Rbar
+                radial = cos * gx + sin * gy - Rbar
                 rho = math.hypot(radial, gz)
                 er, ez = (radial / rho, gz / rho) if rho > 0.0 else (1.0, 0.0)
-                for side, tube in ((1.0, (self.tube,)), (-1.0, ())):
-                    reach = self.Rbar + side * self.L * er
-                    knee = (reach * cos, reach * sin, side * self.L * ez)
-                    knees.append((knee, (*tube, self.lemon, -self.lemon)))
+                for side, tube in ((1.0, (leg_tube,)), (-1.0, ())):
+                    reach = Rbar + side * L * er
+                    knee = (reach * cos, reach * sin, side * L * ez)
+                    knees.append((knee, (*tube, lemon, -lemon)))
             for (kx, ky, kz), radii in knees:
                 vx, vy, vz = gx - kx, gy - ky, gz - kz
                 length = math.sqrt(vx * vx + vy * vy + vz * vz)
@@ -187,57 +195,93 @@ class Constraints(NamedTuple):
         """c_k at one point, on Python floats."""
         if k == self.total - 1 and self.top is not None:
             return z - self.top
-        leg = k % 3
-        cos, sin = LEG_COS[leg], LEG_SIN[leg]
+        cos, sin, Rbar, L, tube, lemon = self.leg(k % 3)
         if self.kind == "linear":
-            ax, ay, az = self.axes[leg]
-            wx, wy = x - self.Rbar * cos, y - self.Rbar * sin
+            ax, ay, az = self.axes[k % 3]
+            wx, wy = x - Rbar * cos, y - Rbar * sin
             along = wx * ax + wy * ay + z * az
-            return math.sqrt(max(wx * wx + wy * wy + z * z - along * along, 0.0)) - self.tube
-        rho = math.hypot(cos * x + sin * y - self.Rbar, z)
+            return math.sqrt(max(wx * wx + wy * wy + z * z - along * along, 0.0)) - tube
+        rho = math.hypot(cos * x + sin * y - Rbar, z)
         if k < 3:
-            return math.hypot(rho - self.L, cos * y - sin * x) - self.tube
-        return self.lemon - math.hypot(rho + self.L, cos * y - sin * x)
+            return math.hypot(rho - L, cos * y - sin * x) - tube
+        return lemon - math.hypot(rho + L, cos * y - sin * x)
 
     def scalar(self, k: int, x: float, y: float, z: float) -> tuple[float, float, float, float]:
         """(c_k, grad c_k) at one point, on Python floats (the per-query Newton solves)."""
         if k == self.total - 1 and self.top is not None:
             return z - self.top, 0.0, 0.0, 1.0
-        leg = k % 3
-        cos, sin = LEG_COS[leg], LEG_SIN[leg]
+        cos, sin, Rbar, L, tube, lemon = self.leg(k % 3)
         if self.kind == "linear":
-            ax, ay, az = self.axes[leg]
-            wx, wy = x - self.Rbar * cos, y - self.Rbar * sin
+            ax, ay, az = self.axes[k % 3]
+            wx, wy = x - Rbar * cos, y - Rbar * sin
             along = wx * ax + wy * ay + z * az
             px, py, pz = wx - along * ax, wy - along * ay, z - along * az
             dist = math.sqrt(px * px + py * py + pz * pz)
-            return dist - self.tube, px / dist, py / dist, pz / dist
-        radial = cos * x + sin * y - self.Rbar
+            return dist - tube, px / dist, py / dist, pz / dist
+        radial = cos * x + sin * y - Rbar
         axial = -sin * x + cos * y
         rho = math.hypot(radial, z)
         er, ez = (radial / rho, z / rho) if rho > 0.0 else (1.0, 0.0)
         if k < 3:
-            shifted, value_sign = rho - self.L, 1.0
+            shifted, value_sign = rho - L, 1.0
         else:
-            shifted, value_sign = rho + self.L, -1.0
+            shifted, value_sign = rho + L, -1.0
         dist = math.hypot(shifted, axial)
-        value = dist - self.tube if k < 3 else self.lemon - dist
+        value = dist - tube if k < 3 else lemon - dist
         gr = value_sign * shifted * er / dist
         ga = value_sign * axial / dist
         gz = value_sign * shifted * ez / dist
         return value, gr * cos - ga * sin, gr * sin + ga * cos, gz
 
 
+def _with_legs(cons: Constraints) -> Constraints:
+    """``cons`` with its per-leg floats precomputed (the per-query solves read them)."""
+
+    def pick(value: Any, leg: int) -> float:
+        return float(value[leg]) if np.ndim(value) else float(value)
+
+    legs = tuple(
+        (
+            float(cons.radial[i][0]),
+            float(cons.radial[i][1]),
+            *(pick(getattr(cons, n), i) for n in ("Rbar", "L", "tube", "lemon")),
+        )
+        for i in range(3)
+    )
+    return cons._replace(legs=legs)
+
+
+@functools.lru_cache(maxsize=64)
 def constraints(robot: Any, margin: float, z_max: float | None) -> Constraints:
-    """The tightened constraints of ``robot`` with ``margin`` [m] and ceiling ``z_max`` [m]."""
+    """The tightened constraints of ``robot`` with ``margin`` [m] and ceiling ``z_max`` [m]
+    (cached: shared, never to be changed)."""
     top = None if z_max is None else float(z_max) - EPS
+    ceiling = top is not None
+    if hasattr(robot, "L"):  # rotary: per leg (equal for a symmetric robot)
+        legs = {n: np.broadcast_to(np.asarray(getattr(robot, n), float), (3,)) for n in "LlRr"}
+        angles = getattr(robot, "angles_rad", None)
+        radial, axes = _U, _A
+        if angles is not None and tuple(angles) != LEG_ANGLES_RAD:
+            c, s = np.cos(np.asarray(angles, float)), np.sin(np.asarray(angles, float))
+            zero = np.zeros(3)
+            radial, axes = np.column_stack([c, s, zero]), np.column_stack([-s, c, zero])
+        return _with_legs(
+            Constraints(
+                "rotary",
+                legs["R"] - legs["r"],
+                axes,
+                legs["L"].copy(),
+                legs["l"] - margin - EPS,
+                legs["l"] + margin + EPS,
+                top,
+                6 + ceiling,
+                radial,
+            )
+        )
     Rbar = float(robot.R - robot.r)
     tube, lemon = float(robot.l - margin - EPS), float(robot.l + margin + EPS)
-    ceiling = top is not None
-    if hasattr(robot, "L"):
-        return Constraints("rotary", Rbar, _A, float(robot.L), tube, lemon, top, 6 + ceiling)
     rails = np.array([robot._rail(i) for i in range(3)])
-    return Constraints("linear", Rbar, rails, 0.0, tube, lemon, top, 3 + ceiling)
+    return _with_legs(Constraints("linear", Rbar, rails, 0.0, tube, lemon, top, 3 + ceiling))
 
 
 class Boundary(NamedTuple):
@@ -272,7 +316,7 @@ class Boundary(NamedTuple):
 def boundary(robot: Any, margin: float, z_max: float | None) -> Boundary:
     """Edges and vertices of the admissible set (cached: tens to hundreds of ms at first)."""
     cons = constraints(robot, margin, z_max)
-    starts, pairs, cell = _edge_starts(cons, min(_CELL, 0.05 * robot.l))
+    starts, pairs, cell = _edge_starts(cons, min(_CELL, 0.05 * float(np.min(robot.l))))
     edges, pairs = _onto_edges(cons, *_thin(starts, pairs, 0.25 * cell))
     edges, pairs = _thin(edges, pairs, 0.25 * cell)
     vertices = _vertices(cons, edges, pairs, cell)
@@ -335,10 +379,10 @@ def _surfaces(cons: Constraints, cell: float) -> list[tuple[int, np.ndarray, boo
     """Each leg surface on a grid: (constraint, points (N1, N2, 3), wraps in N2, cell [m])."""
     out = []
     if cons.kind == "rotary":
-        L = cons.L
         for k in range(6):
             leg, sign = k % 3, (1.0 if k < 3 else -1.0)
-            radius = cons.tube if k < 3 else cons.lemon
+            _, _, _, L, tube, lemon = cons.leg(leg)
+            radius = tube if k < 3 else lemon
             if radius <= 0.0:
                 continue
             cos_end = -sign * L / radius  # the surface ends where it meets the motor axis
@@ -348,12 +392,12 @@ def _surfaces(cons: Constraints, cell: float) -> list[tuple[int, np.ndarray, boo
             (n1, n2), diagonal = _grid_shape(2.0 * math.pi * reach, 2.0 * span * radius, cell)
             psi = np.linspace(0.0, 2.0 * math.pi, n1, endpoint=False)
             phi = np.linspace(-span, span, n2, endpoint=not wraps)
-            e = np.cos(psi)[:, None] * _U[leg] + np.sin(psi)[:, None] * _Z
+            e = np.cos(psi)[:, None] * cons.radial[leg] + np.sin(psi)[:, None] * _Z
             ring = sign * L + radius * np.cos(phi)
             points = (
                 cons.centres[leg]
                 + ring[None, :, None] * e[:, None, :]
-                + (radius * np.sin(phi))[None, :, None] * _A[leg]
+                + (radius * np.sin(phi))[None, :, None] * cons.axes[leg]
             )
             out.append((k, points, wraps, diagonal))
     elif cons.tube > 0.0:
@@ -419,18 +463,21 @@ def _edge_starts(cons: Constraints, cell: float) -> tuple[np.ndarray, np.ndarray
                 t = (a_vals[cross] / (a_vals[cross] - b_vals[cross]))[:, None]
                 found.append(a_pts[cross] + t * (b_pts[cross] - a_pts[cross]))
                 pairs.append(np.tile([k, other], (len(t), 1)))
-    if cons.kind == "rotary":  # a tube meets its own lemon on two circles about the motor axis
-        rho = (cons.lemon**2 - cons.tube**2) / (4.0 * cons.L)
-        along_sq = cons.tube**2 - (rho - cons.L) ** 2
+    # a rotary tube meets its own lemon on two circles about the motor axis
+    for leg in range(3) if cons.kind == "rotary" else ():
+        _, _, _, L, tube, lemon = cons.leg(leg)
+        rho = (lemon**2 - tube**2) / (4.0 * L)
+        along_sq = tube**2 - (rho - L) ** 2
         if along_sq > 0.0:
             count = max(8, math.ceil(2.0 * math.pi * rho / cell))
             psi = np.linspace(0.0, 2.0 * math.pi, count, endpoint=False)
             widest = max(widest, 2.0 * math.pi * rho / count)
-            for leg in range(3):
-                e = np.cos(psi)[:, None] * _U[leg] + np.sin(psi)[:, None] * _Z
-                for sign in (1.0, -1.0):
-                    found.append(cons.centres[leg] + rho * e + sign * math.sqrt(along_sq) * _A[leg])
-                    pairs.append(np.tile([leg, leg + 3], (count, 1)))
+            e = np.cos(psi)[:, None] * cons.radial[leg] + np.sin(psi)[:, None] * _Z
+            for sign in (1.0, -1.0):
+                found.append(
+                    cons.centres[leg] + rho * e + sign * math.sqrt(along_sq) * cons.axes[leg]
+                )
+                pairs.append(np.tile([leg, leg + 3], (count, 1)))
     if not found:
         return np.zeros((0, 3)), np.zeros((0, 2), dtype=int), widest
     return np.concatenate(found), np.concatenate(pairs).astype(int), widest

@@ -61,7 +61,8 @@ def reachable(robot: Any, points: Any, margin: float = 0.0) -> np.ndarray:
 @functools.lru_cache(maxsize=64)
 def _anchor(robot: Any, z_max: float | None) -> tuple[np.ndarray, float]:
     """Deepest point on the z axis below ``z_max``: a start that is inside if anything is."""
-    depth = robot.l + getattr(robot, "L", 0.0) + robot.R
+    # per-leg robots (kinematics/per_leg.py) have three of each: the longest reach counts
+    depth = float(np.max(robot.l) + np.max(getattr(robot, "L", 0.0)) + np.max(robot.R))
     top = -1e-6 if z_max is None else min(z_max, -1e-6)
     z = np.linspace(top - 2.0 * depth, top, 801)
     candidates = np.stack([np.zeros_like(z), np.zeros_like(z), z], axis=-1)

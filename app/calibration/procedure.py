@@ -14,6 +14,12 @@ The measurement is pluggable: ``measure(snapshot)`` returns the platform in the
 measurement frame [m] (3,), NaN when there is none; the default is the snapshot's
 ``external_m`` (the twin's motion capture).
 
+A probe run (``source="probe"``, app/calibration/probe.py) instead touches a flat plate at
+``plate_z_m`` at points spread over it and fits what z-only heights can observe. Its
+touches come from ``probe(xy, plate_z, seed)``: on the twin, computed from its true model
+(``probe.twin_probe``; the arm is not moved); a backend without one refuses probe runs.
+It writes ``touches.csv`` in place of ``pairs.csv``.
+
 States: planned -> moving -> fitting -> done | refused (the fit is worse than the current
 model on the held-out poses: never applied) | failed (a fault, e-stop, torque off, no
 measurement); done -> applied.
@@ -36,6 +42,15 @@ import numpy as np
 
 from app.calibration.fit import CalibrationError, FitResult, Plan, fit, plan
 from app.calibration.pairs import write_pairs
+from app.calibration.probe import (
+    MIN_TOUCHES,
+    ProbeModel,
+    ProbeResult,
+    Touch,
+    probe_fit,
+    probe_points,
+    write_touches,
+)
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
 from app.control.state import Snapshot
@@ -77,6 +92,10 @@ class CalibrationRun:
     result: FitResult | None = None
     joints: list[np.ndarray] = field(default_factory=list)
     measured: list[np.ndarray] = field(default_factory=list)
+    source: str = "motion"
+    plate_z_m: float | None = None
+    fit_plate_z: bool = False
+    probe_xy: np.ndarray | None = field(default=None, repr=False)  # (poses, 2) [m]
 
     def view(self) -> dict[str, Any]:
         """The API's body (GET /api/calibration/{run_id}); SI units; NaN -> None."""
@@ -104,6 +123,14 @@ class CalibrationRun:
                 else None
             ),
             "files": sorted(p.name for p in self.folder.glob("*") if p.is_file()),
+            "source": self.source,
+            "plate_z_m": self.plate_z_m,
+            "plate_error_m": (
+                result.plate_error_m
+                if isinstance(result, ProbeResult) and result.plate_free
+                else None
+            ),
+            "unobservable_combinations": list(obs.combinations),
         }
         return body
 
@@ -122,9 +149,10 @@ class CalibrationManager:
         busy: Callable[[], str | None] = lambda: None,
         config_path: Path | None = None,
         measure: Measure = external,
+        probe: Touch | None = None,
     ) -> None:
         self.controller, self.folder, self.busy = controller, Path(folder), busy
-        self.config_path, self.measure = config_path, measure
+        self.config_path, self.measure, self.probe = config_path, measure, probe
         self._runs: dict[str, CalibrationRun] = {}
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -151,11 +179,23 @@ class CalibrationManager:
     def get(self, run_id: str) -> CalibrationRun | None:
         return self._runs.get(run_id)
 
-    def start(self, poses: int, parameters: str) -> CalibrationRun:
-        """Plan and start a run (returns at once; the thread moves the arm).
+    def start(
+        self,
+        poses: int,
+        parameters: str,
+        source: str = "motion",
+        plate_z_m: float | None = None,
+        fit_plate_z: bool = False,
+    ) -> CalibrationRun:
+        """Plan and start a run (returns at once; the thread moves the arm, or probes).
+
+        source: "motion" (external measurement of the platform) or "probe" (touches of a
+        flat plate at ``plate_z_m`` [m], base frame; ``fit_plate_z``: fit an error of that
+        height too).
 
         Raises:
-            CalibrationError: poses or parameters that cannot be planned (422).
+            CalibrationError: poses, parameters, source or plate that cannot be planned,
+                or a probe run on a backend without a probe (422).
             MotionRefused: the robot may not move now, or a run is in progress (409).
         """
         with self._lock:
@@ -165,11 +205,23 @@ class CalibrationManager:
                 raise MotionRefused(other)
             snap = self.controller.snapshot()
             _require_motion(snap)
-            chosen = plan(self.nominal(), poses, parameters, allowed=self._allowed)
+            xy = None
+            if source == "motion":
+                chosen = plan(self.nominal(), poses, parameters, allowed=self._allowed)
+            elif source == "probe":
+                chosen, xy = self._plan_probe(poses, parameters, plate_z_m, fit_plate_z)
+            else:
+                raise CalibrationError(f"source: {source!r} is not 'motion' or 'probe'")
             run_id = "cal-" + time.strftime("%Y%m%d-%H%M%S") + "-" + uuid.uuid4().hex[:4]
             folder = self.folder / run_id
             folder.mkdir(parents=True, exist_ok=True)
             run = CalibrationRun(run_id, parameters, poses, chosen, folder)
+            run.source, run.plate_z_m, run.fit_plate_z, run.probe_xy = (
+                source,
+                plate_z_m,
+                fit_plate_z,
+                xy,
+            )
             self._runs[run_id] = run
             self._stop.clear()
             self._thread = threading.Thread(
@@ -177,6 +229,40 @@ class CalibrationManager:
             )
             self._thread.start()
             return run
+
+    def _plan_probe(
+        self, poses: int, parameters: str, plate_z_m: float | None, fit_plate_z: bool
+    ) -> tuple[Plan, np.ndarray]:
+        """Probe points over the plate (fit ones, then every fourth held out), the joints
+        the nominal model would touch them with, and what those touches can tell."""
+        if self.probe is None:
+            raise CalibrationError(
+                "source: this backend has no probe (the simulated robot has one); use "
+                "'motion' with an external measurement"
+            )
+        if plate_z_m is None or not math.isfinite(plate_z_m):
+            raise CalibrationError("plate_z_m: a probe run needs the plate's height [m]")
+        nominal = self.nominal()
+        model = ProbeModel(nominal, parameters, fit_plate_z)
+        xy = probe_points(nominal, plate_z_m, poses)
+        held = np.arange(poses) % 4 == 3  # every fourth, spread over the plate
+        need = max(MIN_TOUCHES, 2 * len(model.names))
+        if poses - held.sum() < need or held.sum() < 1:
+            raise CalibrationError(
+                f"poses: {poses} touches are too few to fit {len(model.names)} parameters "
+                f"from heights (at least {math.ceil(need * 4 / 3)})"
+            )
+        xy = np.vstack([xy[~held], xy[held]])
+        joints = nominal.ik(np.column_stack([xy, np.full(poses, plate_z_m)])).joints
+        allowed = self._allowed(joints)
+        if not allowed.all():
+            raise CalibrationError(
+                f"plate_z_m: {int((~allowed).sum())} of {poses} touch points at "
+                f"{plate_z_m} m are outside the joint limits or the safe workspace"
+            )
+        n_held = int(held.sum())
+        fit_joints, holdout_joints = joints[: poses - n_held], joints[poses - n_held :]
+        return Plan(fit_joints, holdout_joints, model.observability(model.initial, fit_joints)), xy
 
     def close(self) -> None:
         self._stop.set()
@@ -186,6 +272,10 @@ class CalibrationManager:
     # ---- the run's thread ----
     def _execute(self, run: CalibrationRun) -> None:
         try:
+            if run.source == "probe":
+                self._execute_probe(run)
+                self._save(run)
+                return
             run.state = "moving"
             for q in run.plan.joints:
                 joints, measured = self._visit(q)
@@ -201,19 +291,39 @@ class CalibrationManager:
             from app.calibration.report import write_report  # matplotlib: only when needed
 
             write_report(run.folder / "report.png", result, f"calibration {run.run_id}")
-            run.state = "done" if result.better else "refused"
-            if not result.better:
-                run.error = (
-                    f"the fit is worse on the held-out poses than the current model "
-                    f"({result.holdout_rmse_m * 1e3:.3f} mm vs "
-                    f"{result.holdout_before_m * 1e3:.3f} mm): it is not offered"
-                )
+            _judge(run, result)
         except (Stopped, CalibrationError, GoalRejected, MotionRefused) as exc:
             run.state, run.error = "failed", str(exc)
         except Exception as exc:  # a bug ends the run, saying so, never the server
             log.exception("calibration run %s failed", run.run_id)
             run.state, run.error = "failed", f"internal error: {exc!r}"
         self._save(run)
+
+    def _execute_probe(self, run: CalibrationRun) -> None:
+        try:
+            assert self.probe is not None and run.probe_xy is not None and run.plate_z_m is not None
+            run.state = "moving"
+            joints = self.probe(run.probe_xy, run.plate_z_m, 0)
+            run.joints = list(joints)
+            run.pose = len(joints)
+            run.state = "fitting"
+            holdout = len(run.plan.holdout_joints)
+            plate = np.full(len(joints), run.plate_z_m)
+            write_touches(run.folder / "touches.csv", joints, plate, holdout)
+            result = probe_fit(
+                self.nominal(), joints, plate, holdout, run.parameters, run.fit_plate_z
+            )
+            run.result = result
+            from app.calibration.report import write_report  # matplotlib: only when needed
+
+            title = f"probe calibration {run.run_id} (plate at z = {run.plate_z_m * 1e3:.1f} mm)"
+            write_report(run.folder / "report.png", result, title)
+            _judge(run, result)
+        except (Stopped, CalibrationError, GoalRejected, MotionRefused) as exc:
+            run.state, run.error = "failed", str(exc)
+        except Exception as exc:  # a bug ends the run, saying so, never the server
+            log.exception("calibration run %s failed", run.run_id)
+            run.state, run.error = "failed", f"internal error: {exc!r}"
 
     def _save(self, run: CalibrationRun) -> None:
         (run.folder / "result.json").write_text(json.dumps(run.view(), indent=1))
@@ -307,6 +417,17 @@ class CalibrationManager:
         run.state = "applied"
         self._save(run)
         return {"run_id": run_id, "joint_offsets_rad": in_use, "config_written": written}
+
+
+def _judge(run: CalibrationRun, result: FitResult) -> None:
+    """done when the fit beats the current model on the held-out data, else refused."""
+    run.state = "done" if result.better else "refused"
+    if not result.better:
+        run.error = (
+            f"the fit is worse on the held-out poses than the current model "
+            f"({result.holdout_rmse_m * 1e3:.3f} mm vs "
+            f"{result.holdout_before_m * 1e3:.3f} mm): it is not offered"
+        )
 
 
 def offsets_into_zero_ticks(

@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from app.calibration.fit import FitResult  # noqa: E402
+from app.calibration.probe import ProbeResult  # noqa: E402
 
 
 def write_report(path: str | Path, result: FitResult, title: str) -> None:
@@ -38,7 +39,8 @@ def write_report(path: str | Path, result: FitResult, title: str) -> None:
     )
     axis.axvspan(first_held + 0.5, n + 0.5, color="0.9", zorder=0, label="held-out poses")
     axis.set_xlabel("pose")
-    axis.set_ylabel("|FK - measured| [mm]")
+    probe = isinstance(result, ProbeResult)  # heights only
+    axis.set_ylabel("|FK z - plate z| at the touch [mm]" if probe else "|FK - measured| [mm]")
     axis.set_title(title)
     axis.legend(loc="upper right", fontsize=8)
     figure.tight_layout()

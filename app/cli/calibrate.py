@@ -6,6 +6,11 @@ moves and the progress while it does, then the fit. Offline (--from-csv FILE): f
 of joint values and external measurements (columns q0_rad, q1_rad, q2_rad, x_m, y_m, z_m
 and an optional set = fit | holdout; a run's pairs.csv is one) on the config's robot.
 
+--probe --plate-z MM (with --url): no motion capture; the run touches a flat plate whose
+height in the base frame is MM millimetres (negative: below the base) and fits from the
+touch heights alone, saying which parameter combinations heights cannot pin
+(--fit-plate-z also fits an error of the stated height). The simulated robot has a probe.
+
 --write CONFIG saves the fitted joint offsets as new zero offsets in the config's
 [[hardware.joints]] (with --url the server's controller uses them at once too, through
 POST /api/calibration/{run_id}/apply). A fit worse than the current model on the held-out
@@ -47,6 +52,20 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
         default="offsets",
         help="offsets: joint offsets and measurement frame; geometry: also each leg's L, l, R",
     )
+    parser.add_argument(
+        "--probe",
+        action="store_true",
+        help="touch a flat plate at --plate-z instead of measuring the platform (z only)",
+    )
+    parser.add_argument(
+        "--plate-z",
+        type=float,
+        metavar="MM",
+        help="the plate's height in the base frame [mm] (negative), with --probe",
+    )
+    parser.add_argument(
+        "--fit-plate-z", action="store_true", help="with --probe: fit an error of --plate-z too"
+    )
     parser.add_argument("--from-csv", metavar="FILE", help="fit these pairs offline")
     parser.add_argument("--config", help="TOML config of the robot (offline fit)")
     parser.add_argument("--write", metavar="CONFIG", help="save the joint offsets to CONFIG")
@@ -62,6 +81,18 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.probe and args.from_csv:
+        print(
+            "error: --probe: touches are taken on a server (--url), not from --from-csv",
+            file=sys.stderr,
+        )
+        return 2
+    if (args.plate_z is not None or args.fit_plate_z) and not args.probe:
+        print("error: --plate-z, --fit-plate-z: only with --probe", file=sys.stderr)
+        return 2
+    if args.probe and (args.plate_z is None or not math.isfinite(args.plate_z)):
+        print("error: --plate-z: --probe needs the plate's height [mm]", file=sys.stderr)
+        return 2
     if args.from_csv:
         return _offline(args)
     return _remote(args)
@@ -73,6 +104,10 @@ def format_result(body: dict[str, Any]) -> str:
     if body.get("condition_number") is not None:
         lines.append(f"condition number: {body['condition_number']:.1f}")
     lines.append("unobservable: " + (", ".join(body.get("unobservable") or []) or "none"))
+    for combination in body.get("unobservable_combinations") or []:
+        lines.append(f"  not pinned: {combination}")
+    if body.get("plate_error_m") is not None:
+        lines.append(f"plate height error: {body['plate_error_m'] * 1e3:+.3f} mm")
     params = body.get("parameters")
     if params:
         offsets = ", ".join(f"{math.degrees(v):+.3f}" for v in params["joint_offsets_rad"])
@@ -180,13 +215,20 @@ def _remote(args: argparse.Namespace) -> int:
         headers = cli_run._take_control(url, args.token, args.take_over)
         try:
             cli_run._http(f"{url}/api/torque", "POST", {"enabled": True}, headers)
-            request = {"poses": args.poses, "parameters": args.parameters}
+            request: dict[str, Any] = {"poses": args.poses, "parameters": args.parameters}
+            if args.probe:
+                request |= {
+                    "source": "probe",
+                    "plate_z_m": args.plate_z * 1e-3,
+                    "fit_plate_z": bool(args.fit_plate_z),
+                }
             run_id = cli_run._http(f"{url}/api/calibration/run", "POST", request, headers)["run_id"]
             body = cli_run._http(f"{url}/api/calibration/{run_id}", headers=headers)
+            condition = body["condition_number"]
             print(
                 f"calibration {run_id}: {body['progress']['poses']} poses "
                 f"({body['holdout_poses']} held out), condition number "
-                f"{body['condition_number']:.1f}, unobservable: "
+                f"{'inf' if condition is None else f'{condition:.1f}'}, unobservable: "
                 f"{', '.join(body['unobservable']) or 'none'}",
                 file=sys.stderr,
             )

@@ -23,6 +23,7 @@ from fastapi import Depends, FastAPI
 from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 
+from app.calibration.probe import Touch, twin_probe
 from app.calibration.procedure import CalibrationManager
 from app.config import Settings
 from app.control.authority import Authority
@@ -48,6 +49,7 @@ from app.server.estop import EstopFirst, EstopListener
 from app.server.limits import RequestLimits
 from app.static_files import static_dir
 from app.world.service import WorldService
+from kinematics import PerLegRotaryDelta, RotaryDelta
 
 log = logging.getLogger(__name__)
 GIL_SWITCH_S = 2.5e-4
@@ -76,6 +78,16 @@ def begin_shutdown(app: FastAPI) -> None:
     workers = getattr(app.state, "program_workers", None)
     if workers is not None:
         workers.close()
+
+
+def _twin_probe(settings: Settings, controller: Controller) -> Touch | None:
+    """The simulated robot's probe (touches from its true model), None on real hardware."""
+    robot = controller.robot
+    if settings.hardware.backend != "sim" or not isinstance(robot, RotaryDelta):
+        return None
+    true_robot = settings.hardware.sim.true_robot(robot)
+    nominal = PerLegRotaryDelta.from_symmetric(robot)
+    return twin_probe(true_robot, nominal, lambda: controller.joint_offsets_rad)
 
 
 def create_app(
@@ -111,6 +123,7 @@ def create_app(
                 settings.runs.folder_path / "calibration",
                 busy=app.state.runs.busy,
                 config_path=config_path,
+                probe=_twin_probe(settings, controller),
             )
             controller.pose_status = app.state.world.tracker.status
             runs = lambda: app.state.runs  # noqa: E731

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import asyncio
+import math
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, HTTPException
 from fastapi.responses import FileResponse
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from app.calibration.fit import CalibrationError
 from app.calibration.procedure import CalibrationManager, CalibrationRun
@@ -17,7 +18,12 @@ from app.server.errors import CONTROL, INVALID, NOT_FOUND
 
 router = APIRouter(tags=["calibration"])
 MAX_POSES = 300
-FILES = {"report.png": "image/png", "pairs.csv": "text/csv", "result.json": "application/json"}
+FILES = {
+    "report.png": "image/png",
+    "pairs.csv": "text/csv",
+    "touches.csv": "text/csv",
+    "result.json": "application/json",
+}
 
 
 class CalibrationRequest(BaseModel):
@@ -30,6 +36,32 @@ class CalibrationRequest(BaseModel):
         description="offsets: joint offsets and the measurement frame; geometry: also each "
         "leg's L, l and R",
     )
+    source: Literal["motion", "probe"] = Field(
+        "motion",
+        description="motion: the platform measured from outside (motion capture); probe: "
+        "touches of a flat plate at plate_z_m, heights only (what they cannot observe is "
+        "reported)",
+    )
+    plate_z_m: float | None = Field(
+        None,
+        description="probe: the plate's height in the base frame [m] (z up, below the base)",
+    )
+    fit_plate_z: bool = Field(
+        False, description="probe: also fit an error of the plate's stated height"
+    )
+
+    @model_validator(mode="after")
+    def _probe_fields(self) -> CalibrationRequest:
+        if self.source == "probe":
+            if self.plate_z_m is None:
+                raise ValueError("plate_z_m: a probe run needs the plate's height [m]")
+            if not math.isfinite(self.plate_z_m) or not -2.0 < self.plate_z_m < 0.0:
+                raise ValueError(
+                    f"plate_z_m: {self.plate_z_m} m is not below the base (z < 0, in metres)"
+                )
+        elif self.plate_z_m is not None or self.fit_plate_z:
+            raise ValueError("plate_z_m, fit_plate_z: only for source 'probe'")
+        return self
 
 
 class CalibrationStarted(BaseModel):
@@ -80,6 +112,14 @@ class CalibrationOut(BaseModel):
     holdout_poses: int
     measurement_frame: Frame | None
     files: list[str]
+    source: str = Field("motion", description="motion or probe")
+    plate_z_m: float | None = Field(None, description="probe: the plate's stated height [m]")
+    plate_error_m: float | None = Field(
+        None, description="probe with fit_plate_z: the fitted error of the plate's height [m]"
+    )
+    unobservable_combinations: list[str] = Field(
+        [], description="the directions the data cannot pin, parameter by parameter"
+    )
 
 
 class CalibrationApplied(BaseModel):
@@ -103,7 +143,14 @@ async def start_calibration(
     measuring at rest, and fit. 409 when the robot may not move (torque off, e-stop, a
     fault, another run); 422 naming the field for bad input."""
     try:
-        run = await asyncio.to_thread(calibration.start, body.poses, body.parameters)
+        run = await asyncio.to_thread(
+            calibration.start,
+            body.poses,
+            body.parameters,
+            body.source,
+            body.plate_z_m,
+            body.fit_plate_z,
+        )
     except CalibrationError as exc:
         raise HTTPException(422, str(exc)) from None
     return {"run_id": run.run_id}
@@ -140,7 +187,8 @@ async def apply_calibration(
     responses={**NOT_FOUND, **INVALID},
 )
 def get_calibration_file(run_id: str, name: str, calibration: CalibrationDep) -> FileResponse:
-    """A run's file: report.png (residuals before and after), pairs.csv, result.json."""
+    """A run's file: report.png (residuals before and after), pairs.csv (touches.csv for
+    a probe run), result.json."""
     run = _run(calibration, run_id)
     path = run.folder / name
     if name not in FILES or not path.is_file():
