@@ -83,7 +83,7 @@ class CommandContext:
             settings.safety.estop_action,
             jog.hold_timeout_s,
             settings.safety.torque_on_limit_slack_rad,
-            _wrist_path_limits(settings),
+            wrist_path_limits(settings),
         )
 
 
@@ -95,7 +95,7 @@ def _wrist_limits(settings: Settings, period_s: float) -> tuple[float | None, fl
     return wrist.min_angle_rad, wrist.max_angle_rad, wrist.max_speed_rad_s * period_s
 
 
-def _wrist_path_limits(settings: Settings) -> Limits | None:
+def wrist_path_limits(settings: Settings) -> Limits | None:
     """The wrist's limits as a move's fourth axis: its speed limit [rad/s], with the jog's
     ratios of acceleration and jerk to speed (the same time scales as the tip's path);
     None without a wrist."""

@@ -68,7 +68,8 @@ class CheckJob:
 
     text: the program; settings: the robot and limits; gate: the limits in force (the
     controller's); start_m, work_offset_m (3,) [m] and near (3,) [rad] or None (the
-    settings' defaults); max_samples: a lower cap and its setting's name, or None.
+    settings' defaults); max_samples: a lower cap and its setting's name, or None;
+    start_phi_rad: the wrist's angle at the start [rad] (0 without a wrist).
     """
 
     text: str
@@ -78,6 +79,7 @@ class CheckJob:
     work_offset_m: tuple[float, float, float] | None = None
     near: np.ndarray | None = None
     max_samples: tuple[int, str] | None = None
+    start_phi_rad: float = 0.0
 
 
 def run_check(job: CheckJob) -> CheckedProgram:
@@ -90,6 +92,7 @@ def run_check(job: CheckJob) -> CheckedProgram:
         work_offset_m=job.work_offset_m,
         near=job.near,
         max_samples=job.max_samples,
+        start_phi_rad=job.start_phi_rad,
     )
 
 
