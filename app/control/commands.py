@@ -186,12 +186,17 @@ def start_phi(state: LoopState) -> float:
 
 
 def begin_motion(state: LoopState, source: GoalSource) -> None:
-    """Make ``source`` the active one; the first after a stop says where it starts from."""
+    """Make ``source`` the active one; the first after a stop says where it starts from.
+
+    A wrist turning towards a move's target (the goal ahead of the angle the tip's goals
+    are at) stops where the move had taken it: the new motion starts from there."""
     if state.resync:
         state.notice = "starting from the measured position"
         state.resync = False
     else:
         state.notice = None
+    if state.phi_goal_rad is not None and isinstance(state.source, MoveSource):
+        state.phi_goal_rad = state.phi_rad
     state.source = source
 
 

@@ -25,7 +25,9 @@ class Setpoint:
     loop holds, ``LoopState.phi_rad``).
 
     goal_m: the nominal goal this tick (a test run's trajectory point, when feed-forward
-    commands a point ahead of it); phase: the run's phase for logs (approach, timed, stop).
+    commands a point ahead of it); goal_phi_rad: the wrist's, likewise (None: ``phi_rad``;
+    a move's target while the wrist turns towards it along the path); phase: the run's
+    phase for logs (approach, timed, stop).
     """
 
     point_m: np.ndarray | None = None
@@ -33,6 +35,7 @@ class Setpoint:
     phi_rad: float | None = None
     finished: bool = False
     goal_m: np.ndarray | None = None
+    goal_phi_rad: float | None = None
     phase: str = ""
     extra: dict | None = None  # mode-specific values for logs (e.g. world-frame positions)
     warning: str | None = None  # shown in status; with no point/joints the robot holds
@@ -206,6 +209,7 @@ class MoveSource:
             axes.append(wrist.limits)
         inp = _ruckig_input(start, axes)
         inp.target_position = target.tolist()
+        self._target = target
         if duration_s is not None:
             inp.minimum_duration = duration_s
         self._trajectory = _plan(inp)
@@ -218,12 +222,15 @@ class MoveSource:
     def next(self, dt_s: float) -> Setpoint:
         self._t = min(self._t + dt_s, self.duration_s)
         position, _, _ = self._trajectory.at_time(self._t)
-        value = np.array(position)
         done = self._t >= self.duration_s
-        phi = float(value[3]) if self.wrist is not None else None
+        # at the end exactly the target (ruckig's last sample may differ by a rounding)
+        value = self._target.copy() if done else np.array(position)
+        phi = goal = None
+        if self.wrist is not None:
+            phi, goal = float(value[3]), self.wrist.target_rad
         if self.joint_space:
-            return Setpoint(joints_rad=value[:3], phi_rad=phi, finished=done)
-        return Setpoint(point_m=value[:3], phi_rad=phi, finished=done)
+            return Setpoint(joints_rad=value[:3], phi_rad=phi, goal_phi_rad=goal, finished=done)
+        return Setpoint(point_m=value[:3], phi_rad=phi, goal_phi_rad=goal, finished=done)
 
 
 def _plan(inp: InputParameter):

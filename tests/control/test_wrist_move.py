@@ -132,3 +132,25 @@ def test_without_a_wrist_a_move_plans_three_axes_and_leaves_phi_alone() -> None:
     goals = _run(control, fake)
     assert goals.shape[1] == 3
     np.testing.assert_allclose(control.robot.fk(goals[-1]).points, HOME_M + [0.01, 0, 0], atol=1e-9)
+
+
+def test_the_goal_shown_is_the_move_s_target_and_a_jog_stops_the_turn_where_it_is() -> None:
+    control, fake = _loop(phi0=0.0)
+    tip = control.state.point_m.copy()
+    commands.move(control.state, control.ctx, tip + [0.0, 0.01, 0.0], None, False, 1.5)
+    for _ in range(20):
+        control.step()
+    snap = control.snapshot()
+    assert snap.phi_goal_rad == 1.5  # as goal_m is the move's target, not the path's point
+    assert 0.0 < snap.phi_commanded_rad < 1.0
+    # a jog replaces the move: the wrist stays where the move had taken it, and the tip's
+    # goals are at that angle (not turning on towards 1.5 while the legs assume otherwise)
+    commands.jog_by(control.state, control.ctx, np.array([0.001, 0.0, 0.0]))
+    start = len(fake.calls)
+    for _ in range(200):  # a jog stays the source: well past its 1 mm
+        control.step()
+    goals = np.array([call[1] for call in fake.calls[start:] if call[0] == "write_goal"])
+    turned = control.snapshot().phi_commanded_rad
+    assert np.ptp(goals[:, 3]) <= 1e-12 and turned < 1.0
+    assert control.state.phi_rad == pytest.approx(turned, abs=1e-12)
+    np.testing.assert_allclose(_tips(control, goals)[-1], control.state.goal_m, atol=1e-9)
