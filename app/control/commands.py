@@ -21,7 +21,7 @@ from app.config import Settings
 from app.control.errors import GoalRejected, MotionRefused
 from app.control.gate import Gate
 from app.control.loop_state import LoopState
-from app.control.sources import GoalSource, JogSource, Limits, MoveSource
+from app.control.sources import GoalSource, JogSource, Limits, MoveSource, WristAxis
 from app.control.state import Fault
 from hardware.bus import ServoBus
 from hardware.errors import BusError
@@ -40,7 +40,9 @@ class CommandContext:
     estop_action: "hold" (hold position with torque on) or "release" (torque off);
     hold_timeout_s: a held jog stops this long after its last heartbeat [s];
     torque_on_slack_rad: how far past a joint limit a relaxed arm may rest and still be
-        taken back inside by torque on [rad].
+        taken back inside by torque on [rad];
+    wrist_limits: the wrist's limits as a move's fourth axis [rad/s, rad/s^2, rad/s^3]
+        (None: no wrist).
     """
 
     robot: RotaryDelta | LinearDelta
@@ -52,6 +54,7 @@ class CommandContext:
     estop_action: Literal["hold", "release"]
     hold_timeout_s: float = 0.15
     torque_on_slack_rad: float = 0.2
+    wrist_limits: Limits | None = None
 
     @classmethod
     def from_settings(cls, settings: Settings) -> CommandContext:
@@ -80,6 +83,7 @@ class CommandContext:
             settings.safety.estop_action,
             jog.hold_timeout_s,
             settings.safety.torque_on_limit_slack_rad,
+            wrist_path_limits(settings),
         )
 
 
@@ -89,6 +93,21 @@ def _wrist_limits(settings: Settings, period_s: float) -> tuple[float | None, fl
     if not wrist.enabled:
         return None, None, 0.0
     return wrist.min_angle_rad, wrist.max_angle_rad, wrist.max_speed_rad_s * period_s
+
+
+def wrist_path_limits(settings: Settings) -> Limits | None:
+    """The wrist's limits as a move's fourth axis: its speed limit [rad/s], with the jog's
+    ratios of acceleration and jerk to speed (the same time scales as the tip's path);
+    None without a wrist."""
+    wrist, jog = settings.wrist, settings.jog
+    if not wrist.enabled:
+        return None
+    speed = wrist.max_speed_rad_s
+    return Limits(
+        speed,
+        speed * jog.max_acceleration_m_s2 / jog.max_velocity_m_s,
+        speed * jog.max_jerk_m_s3 / jog.max_velocity_m_s,
+    )
 
 
 # ---- safety helpers (the tick uses them too) ----
@@ -155,13 +174,29 @@ def start_joints(state: LoopState) -> np.ndarray:
     return state.reference_rad
 
 
+def start_phi(state: LoopState) -> float:
+    """The wrist angle a path starts from [rad]: the goal last written (the wrist holds it,
+    and its next goal steps from it: app/control/wrist.py ``next_phi``), else (none since
+    torque on) the one read, else the one the loop holds the tool at."""
+    if state.phi_commanded_rad is not None:
+        return state.phi_commanded_rad
+    if state.wrist is not None and math.isfinite(state.wrist.position_rad):
+        return float(state.wrist.position_rad)
+    return state.phi_rad
+
+
 def begin_motion(state: LoopState, source: GoalSource) -> None:
-    """Make ``source`` the active one; the first after a stop says where it starts from."""
+    """Make ``source`` the active one; the first after a stop says where it starts from.
+
+    A wrist turning towards a move's target (the goal ahead of the angle the tip's goals
+    are at) stops where the move had taken it: the new motion starts from there."""
     if state.resync:
         state.notice = "starting from the measured position"
         state.resync = False
     else:
         state.notice = None
+    if state.phi_goal_rad is not None and isinstance(state.source, MoveSource):
+        state.phi_goal_rad = state.phi_rad
     state.source = source
 
 
@@ -263,7 +298,13 @@ def move(
     phi_rad: float = 0.0,
 ) -> dict:
     """Smooth move to ``target``: joint angles [rad] if ``joint_space``, else a tip [m] at
-    wrist angle ``phi_rad`` [rad] (already gated)."""
+    wrist angle ``phi_rad`` [rad] (already gated).
+
+    With a wrist, phi is the path's fourth axis (`WristAxis`, within the wrist's speed
+    limit): it turns from where it is to ``phi_rad`` along the same trajectory as the
+    three others, arriving with them; the tick takes each setpoint's phi as the wrist's
+    goal and the tip's angle. Without one, phi stays ``phi_rad`` (0).
+    """
     require_motion(state)
     if joint_space:
         speed = ctx.joint_speed_rad_s
@@ -272,9 +313,13 @@ def move(
         goal = ctx.gate.tip(ctx.robot.fk(target).points, phi_rad)
     else:
         limits, start, goal = ctx.jog_limits, start_point(state), target
-    source = MoveSource(start, target, limits, duration_s, joint_space=joint_space)
+    wrist = None
+    if ctx.wrist_limits is not None and ctx.gate.wrist_min_rad is not None:
+        wrist = WristAxis(start_phi(state), phi_rad, ctx.wrist_limits)
+    source = MoveSource(start, target, limits, duration_s, joint_space, wrist)
     begin_motion(state, source)
-    _hold_tool_at(state, ctx, phi_rad)
+    if wrist is None:
+        _hold_tool_at(state, ctx, phi_rad)
     state.goal_m = goal
     return {"duration_s": source.duration_s}
 

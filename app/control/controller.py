@@ -417,17 +417,21 @@ class Controller:
             state.source = None
 
     def _follow(self, setpoint: Setpoint) -> None:
+        phi: float | None = None
         if setpoint.phi_rad is not None:
             try:  # a wrist goal beyond its limits is refused: nothing of this tick is written
                 phi = self.gate.check_phi(setpoint.phi_rad)
             except GoalRejected as exc:
                 self.state.warning = f"holding: {exc}"
                 return
-            # the wrist turns there, and the tip's goals stay at it once the source ends
-            self.state.phi_goal_rad = self.state.phi_rad = phi
+            # the wrist turns there this tick, and the tip's goals stay at it once the
+            # source ends; its goal shown is the nominal one (a move's target)
+            self.state.phi_rad = phi
+            goal = setpoint.goal_phi_rad
+            self.state.phi_goal_rad = phi if goal is None else goal
         if (joints := self._setpoint_joints(setpoint)) is None:
             return
-        self._write(joints)
+        self._write(joints, phi)
         if setpoint.finished and not np.array_equal(self.state.commanded_rad, joints):
             self.state.settle_rad = joints  # the speed limit kept the last step short
         self._check_following()
@@ -482,11 +486,14 @@ class Controller:
             self.state.warning = f"holding: {exc}"  # the path crossed a limit: stay put
             return None
 
-    def _write(self, joints: np.ndarray) -> None:
+    def _write(self, joints: np.ndarray, phi_rad: float | None = None) -> None:
+        """Write the legs' ``joints`` (3,) [rad] within the step limit, and a wrist's goal
+        towards ``phi_rad`` [rad] (None: towards ``state.phi_goal_rad``)."""
         state = self.state
         joints = self.gate.limit_step(joints, state.reference_rad)
         if self.wrist is not None:  # the wrist's goal goes out in the same sync write
-            self.wrist.phi_rad = next_phi(state, self.wrist, self.gate.wrist_max_step_rad)
+            step = self.gate.wrist_max_step_rad
+            self.wrist.phi_rad = next_phi(state, self.wrist, step, phi_rad)
         servo_goal = joints
         if self.gravity is not None:
             offset = self.gravity.offset_rad(joints)

@@ -8,6 +8,7 @@ Cartesian or joint space. Test trajectories and hold-in-world plug in the same w
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -24,7 +25,9 @@ class Setpoint:
     loop holds, ``LoopState.phi_rad``).
 
     goal_m: the nominal goal this tick (a test run's trajectory point, when feed-forward
-    commands a point ahead of it); phase: the run's phase for logs (approach, timed, stop).
+    commands a point ahead of it); goal_phi_rad: the wrist's, likewise (None: ``phi_rad``;
+    a move's target while the wrist turns towards it along the path); phase: the run's
+    phase for logs (approach, timed, stop).
     """
 
     point_m: np.ndarray | None = None
@@ -32,11 +35,11 @@ class Setpoint:
     phi_rad: float | None = None
     finished: bool = False
     goal_m: np.ndarray | None = None
+    goal_phi_rad: float | None = None
     phase: str = ""
     extra: dict | None = None  # mode-specific values for logs (e.g. world-frame positions)
     warning: str | None = None  # shown in status; with no point/joints the robot holds
     fault: str | None = None  # stop and fault with this reason
-    phi_rad: float | None = None  # the wrist's goal [rad] (None: keep it; needs a [wrist])
 
 
 class GoalSource(Protocol):
@@ -90,16 +93,28 @@ class Limits:
     jerk: float
 
 
-def _ruckig_input(start: np.ndarray, limits: Limits) -> InputParameter:
-    inp = InputParameter(3)
+def _ruckig_input(start: np.ndarray, limits: Sequence[Limits]) -> InputParameter:
+    """At rest at ``start`` (n,), targeting it, with one `Limits` per axis (n of them)."""
+    n = len(start)
+    inp = InputParameter(n)
     inp.current_position = start.tolist()
-    inp.current_velocity = [0.0, 0.0, 0.0]
-    inp.current_acceleration = [0.0, 0.0, 0.0]
+    inp.current_velocity = [0.0] * n
+    inp.current_acceleration = [0.0] * n
     inp.target_position = start.tolist()
-    inp.max_velocity = [limits.velocity] * 3
-    inp.max_acceleration = [limits.acceleration] * 3
-    inp.max_jerk = [limits.jerk] * 3
+    inp.max_velocity = [a.velocity for a in limits]
+    inp.max_acceleration = [a.acceleration for a in limits]
+    inp.max_jerk = [a.jerk for a in limits]
     return inp
+
+
+@dataclass(frozen=True)
+class WristAxis:
+    """The wrist as a move's fourth coordinated axis: from ``start_rad`` to ``target_rad``
+    [rad] within ``limits`` (its speed limit [rad/s], acceleration, jerk)."""
+
+    start_rad: float
+    target_rad: float
+    limits: Limits
 
 
 class JogSource:
@@ -115,7 +130,7 @@ class JogSource:
     def __init__(self, start_m: np.ndarray, limits: Limits, dt_s: float) -> None:
         self._otg = Ruckig(3, dt_s)
         self._limits = limits
-        self._inp = _ruckig_input(np.asarray(start_m, dtype=np.float64), limits)
+        self._inp = _ruckig_input(np.asarray(start_m, dtype=np.float64), [limits] * 3)
         self._out = OutputParameter(3)
 
     @property
@@ -164,7 +179,14 @@ class JogSource:
 
 
 class MoveSource:
-    """One smooth point-to-point move (thesis ch. 5.2), Cartesian or in joint space."""
+    """One smooth point-to-point move (thesis ch. 5.2), Cartesian or in joint space.
+
+    start, target: the tip [m] or the joints [rad], shape (3,), each axis within
+    ``limits``; with a ``wrist`` the wrist angle phi is a fourth axis of the same
+    time-synchronized ruckig trajectory, so the three and phi set off and arrive together
+    (each setpoint then carries its ``phi_rad``). Raises GoalRejected when ruckig finds no
+    path.
+    """
 
     def __init__(
         self,
@@ -173,11 +195,21 @@ class MoveSource:
         limits: Limits,
         duration_s: float | None,
         joint_space: bool,
+        wrist: WristAxis | None = None,
     ) -> None:
         self.name = "move-joints" if joint_space else "move"
         self.joint_space = joint_space
-        inp = _ruckig_input(np.asarray(start, dtype=np.float64), limits)
-        inp.target_position = np.asarray(target, dtype=np.float64).tolist()
+        self.wrist = wrist
+        start = np.asarray(start, dtype=np.float64)
+        target = np.asarray(target, dtype=np.float64)
+        axes = [limits] * 3
+        if wrist is not None:
+            start = np.append(start, wrist.start_rad)
+            target = np.append(target, wrist.target_rad)
+            axes.append(wrist.limits)
+        inp = _ruckig_input(start, axes)
+        inp.target_position = target.tolist()
+        self._target = target
         if duration_s is not None:
             inp.minimum_duration = duration_s
         self._trajectory = _plan(inp)
@@ -190,18 +222,23 @@ class MoveSource:
     def next(self, dt_s: float) -> Setpoint:
         self._t = min(self._t + dt_s, self.duration_s)
         position, _, _ = self._trajectory.at_time(self._t)
-        value = np.array(position)
         done = self._t >= self.duration_s
+        # at the end exactly the target (ruckig's last sample may differ by a rounding)
+        value = self._target.copy() if done else np.array(position)
+        phi = goal = None
+        if self.wrist is not None:
+            phi, goal = float(value[3]), self.wrist.target_rad
         if self.joint_space:
-            return Setpoint(joints_rad=value, finished=done)
-        return Setpoint(point_m=value, finished=done)
+            return Setpoint(joints_rad=value[:3], phi_rad=phi, goal_phi_rad=goal, finished=done)
+        return Setpoint(point_m=value[:3], phi_rad=phi, goal_phi_rad=goal, finished=done)
 
 
 def _plan(inp: InputParameter):
     from ruckig import Trajectory
 
-    trajectory = Trajectory(3)
-    result = Ruckig(3).calculate(inp, trajectory)
+    n = inp.degrees_of_freedom
+    trajectory = Trajectory(n)
+    result = Ruckig(n).calculate(inp, trajectory)
     if result not in (Result.Working, Result.Finished):
         raise GoalRejected(f"no smooth path to the target ({result})")
     return trajectory

@@ -131,14 +131,16 @@ def turn_to(state: LoopState, phi_rad: float) -> float:
     return state.phi_goal_rad
 
 
-def next_phi(state: LoopState, wrist: WristBus, max_step_rad: float) -> float | None:
-    """The wrist goal to write this tick [rad]: towards ``state.phi_goal_rad`` by at most
-    ``max_step_rad`` from the last one written (or from where it is); None when nothing
-    is known yet (no goal written, nothing read)."""
+def next_phi(
+    state: LoopState, wrist: WristBus, max_step_rad: float, goal_rad: float | None = None
+) -> float | None:
+    """The wrist goal to write this tick [rad]: towards ``goal_rad`` (None:
+    ``state.phi_goal_rad``) by at most ``max_step_rad`` from the last one written (or from
+    where it is); None when nothing is known yet (no goal written, nothing read)."""
     current = wrist.phi_rad
     if current is None:
         current = wrist.reading.position_rad if wrist.reading is not None else None
-    goal = state.phi_goal_rad
+    goal = state.phi_goal_rad if goal_rad is None else goal_rad
     if current is None or goal is None:
         return current
     if abs(goal - current) <= max_step_rad:

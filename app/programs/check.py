@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from app.config import Settings
-from app.control.commands import CommandContext
+from app.control.commands import CommandContext, wrist_path_limits
 from app.control.gate import Gate
 from app.programs.errors import ProgramError
 from app.programs.modal import interpret
@@ -76,6 +76,8 @@ def _finite(value: float | None) -> float | None:
 
 def plan_limits(settings: Settings) -> PlanLimits:
     jog, programs = settings.jog, settings.programs
+    wrist = wrist_path_limits(settings)  # as a move's: its speed, the jog's time scales
+    turn = () if wrist is None else (wrist.velocity, wrist.acceleration, wrist.jerk)
     return PlanLimits(
         jog.max_velocity_m_s,
         jog.max_acceleration_m_s2,
@@ -84,6 +86,7 @@ def plan_limits(settings: Settings) -> PlanLimits:
         programs.max_jerk_m_s3,
         programs.chord_tolerance_m,
         1.0 / settings.loop.rate_hz,
+        *turn,
     )
 
 
@@ -154,6 +157,7 @@ def check_program(
     work_offset_m: Any = None,
     near: Any = None,
     for_run: bool = False,
+    start_phi_rad: float = 0.0,
 ) -> CheckedProgram:
     """Parse, plan and verify ``text`` with ``settings``' robot and limits.
 
@@ -168,6 +172,8 @@ def check_program(
             checks. Without it such a program is checked all the same (up to
             ``programs.max_samples``) and the report has a ``run_duration`` violation with
             the same words, so a check never passes what a run refuses.
+        start_phi_rad: the wrist's angle at the start [rad] (with a wrist: A words turn
+            it from there, within the gate's wrist limits; without one A is refused).
 
     Raises:
         ProgramError: a program that cannot be read or planned (its line and word), or
@@ -191,7 +197,13 @@ def check_program(
             "",
             f"the program has {line_count} lines, over programs.max_lines = {programs.max_lines}",
         )
-    program = interpret(tokenize(text), start, offset)
+    wrist = None
+    if gate.wrist_min_rad is not None and gate.wrist_max_rad is not None:
+        wrist = (gate.wrist_min_rad, gate.wrist_max_rad)
+    start_phi = float(start_phi_rad)
+    if not math.isfinite(start_phi):
+        raise ProgramError(0, "", "start_phi_rad: expected a finite number [rad]")
+    program = interpret(tokenize(text), start, offset, start_phi, wrist)
     limits = plan_limits(settings)
     path = plan_program(program.segments, limits)
     period_s = limits.period_s
@@ -207,10 +219,12 @@ def check_program(
     if path.segments:
         times = path.sample_times(period_s)
         points, velocity, acceleration = path.evaluate(times, (0, 1, 2))
+        wrist_motion = tuple(path.wrist(times, (0, 1, 2)))
         lines = path.line_at(times)
     else:  # nothing moves: the tool stays where it is
         times, lines = np.zeros(1), np.zeros(1, dtype=int)
         points, velocity, acceleration = start[None, :], np.zeros((1, 3)), np.zeros((1, 3))
+        wrist_motion = (np.full(1, start_phi), np.zeros(1), np.zeros(1))
     near_joints = np.full(3, np.nan) if near is None else np.asarray(near, dtype=np.float64)
     result: Verification = verify_path(
         gate,
@@ -222,6 +236,7 @@ def check_program(
         acceleration,
         near_joints,
         period_s,
+        wrist_motion if wrist is not None else None,
     )
     violations = list(result.violations)
     if beyond_run is not None:

@@ -11,7 +11,9 @@ comparable with the run's own per-line figures (``stats.program.lines``).
 
 The twin is the server's simulated robot (``backend = "sim"``) with this config's design
 and calibrations; it predicts what the model knows (servo lag, gravity, the links'
-inertia), not a real robot's friction or backlash.
+inertia), not a real robot's friction or backlash. A program that turns the wrist (A
+words) plays its legs at the planned phi, the wrist taken to follow its plan exactly (the
+twin here has the three legs; the tip is measured at the planned phi).
 
 The physics costs about a millisecond of CPU per loop tick, so the dry run is capped:
 a program that lasts more than ``[programs] dry_run_max_s`` is refused (DryRunRefused).
@@ -129,10 +131,12 @@ def dry_run(checked: CheckedProgram, settings: Settings, *, feedforward: bool = 
     ahead = np.minimum(times + lead, path.duration_s)
     commanded = path.evaluate(ahead, (0,))[0] if lead else goals
     lines = path.line_at(times)
+    phi_goal, phi_ahead = path.phi_at(times), path.phi_at(ahead)  # the wrist's plan [rad]
     start = path.evaluate(np.zeros(1), (0,))[0][0]
-    reference = robot.ik(gate.platform(start)).joints  # the path is the tool tip's
+    phi0 = float(path.phi_at(np.zeros(1))[0])
+    reference = robot.ik(gate.platform(start, phi0)).joints  # the path is the tool tip's
     try:
-        reference = gate.solve(start, reference)
+        reference = gate.solve(start, reference, phi0)
     except GoalRejected as exc:
         raise DryRunRefused(f"start_m: the program's start cannot be held: {exc}") from exc
     bus.connect()
@@ -142,10 +146,11 @@ def dry_run(checked: CheckedProgram, settings: Settings, *, feedforward: bool = 
         bus.advance(SETTLE_S)
         errors = np.empty((len(times), 3))
         for k in range(len(times)):
-            measured = gate.tip(robot.fk(bus.read_state().position_rad).points)
+            measured = gate.tip(robot.fk(bus.read_state().position_rad).points, phi_goal[k])
             errors[k] = goals[k] - measured
+            phi = float(phi_ahead[k])
             try:  # as the loop: a point the gate refuses is not followed (the robot holds)
-                joints = gate.solve(gate.clamp_point(commanded[k]), reference)
+                joints = gate.solve(gate.clamp_point(commanded[k], phi), reference, phi)
             except GoalRejected:
                 joints = None
             if joints is not None:

@@ -8,8 +8,13 @@ F is kept as written and read in the units in force when a move uses it.
 
 Programs are in millimetres (inches under G20) in the base frame shifted by the work
 offset: base = work_offset_m + program * unit. Out of this module everything is SI.
-Every word outside the subset is refused with its line, never ignored; A (the wrist) is
-refused until a wrist axis is configured.
+Every word outside the subset is refused with its line, never ignored.
+
+A is the wrist's angle phi in degrees (a rotary axis, as LinuxCNC's A; the 2012 paper's
+fourth axis, theta_4 = phi about the base's z): absolute under G90, added under G91,
+unaffected by G20/G21 and by the work offset (A0 is the wrist's zero). It moves with the
+line's X, Y, Z, linearly along the segment, and must stay within the wrist's limits.
+Without a wrist axis A is refused.
 """
 
 from __future__ import annotations
@@ -37,7 +42,7 @@ _SUPPORTED_G = {
 }  # fmt: skip
 _SUPPORTED_M = {0, 2, 30}
 _VALUE_LETTERS = set("XYZIJKRFP")
-_WRIST = "the wrist axis is not configured (A needs a 4th axis; a separate issue adds it)"
+_WRIST = "the wrist axis is not configured (A needs [wrist] enabled = true)"
 
 
 @dataclass
@@ -54,6 +59,8 @@ class ModalState:
     feed: float | None = None  # as written, units per minute
     blend_m: float | None = None  # None: G61 exact stop
     ended: bool = False
+    phi_rad: float = 0.0  # the wrist's angle [rad]
+    wrist: tuple[float, float] | None = None  # its limits [rad]; None: no wrist, A refused
 
 
 @dataclass
@@ -72,14 +79,17 @@ def _g_code(word: Word, line: int) -> int:
     return code
 
 
-def _collect(line: Line) -> tuple[dict[str, int], dict[str, Word], Word | None]:
-    """Split a line into G codes by modal group, value words by letter and its M word."""
+def _collect(
+    line: Line, wrist: bool = False
+) -> tuple[dict[str, int], dict[str, Word], Word | None]:
+    """Split a line into G codes by modal group, value words by letter and its M word;
+    A only with a ``wrist``."""
     groups: dict[str, int] = {}
     values: dict[str, Word] = {}
     m_word: Word | None = None
     seen_n = False
     for word in line.words:
-        if word.letter == "A":
+        if word.letter == "A" and not wrist:
             raise ProgramError(line.number, word.text, _WRIST)
         if word.letter == "N":
             if seen_n:
@@ -103,7 +113,7 @@ def _collect(line: Line) -> tuple[dict[str, int], dict[str, Word], Word | None]:
             if m_word is not None:
                 raise ProgramError(line.number, word.text, "a second M code on one line")
             m_word = word
-        elif word.letter in _VALUE_LETTERS:
+        elif word.letter in _VALUE_LETTERS or word.letter == "A":
             if word.letter in values:
                 raise ProgramError(line.number, word.text, f"a second {word.letter} on one line")
             values[word.letter] = word
@@ -149,12 +159,37 @@ def _target(state: ModalState, values: dict[str, Word]) -> np.ndarray:
     return target
 
 
+def _target_phi(state: ModalState, values: dict[str, Word], n: int) -> float:
+    """The wrist's angle [rad] at the end of the line's move: A [deg] absolute (G90) or
+    added (G91); ProgramError naming A when it is outside the wrist's limits."""
+    word = values.get("A")
+    if word is None or state.wrist is None:
+        return state.phi_rad
+    value = math.radians(word.value)
+    phi = value if state.absolute else state.phi_rad + value
+    low, high = state.wrist
+    if not low <= phi <= high:
+        raise ProgramError(
+            n,
+            word.text,
+            f"the wrist would be at {math.degrees(phi):.2f} deg, outside its limits "
+            f"[{math.degrees(low):.1f}, {math.degrees(high):.1f}] deg",
+        )
+    return phi
+
+
 def _vec(a: np.ndarray) -> tuple[float, float, float]:
     return (float(a[0]), float(a[1]), float(a[2]))
 
 
 def _arc(
-    state: ModalState, values: dict[str, Word], code: int, end: np.ndarray, n: int, word: str
+    state: ModalState,
+    values: dict[str, Word],
+    code: int,
+    end: np.ndarray,
+    n: int,
+    word: str,
+    phi_end: float,
 ) -> Segment:
     a, b, c = PLANE_AXES[state.plane]
     start = state.position_m
@@ -212,6 +247,8 @@ def _arc(
         sweep_rad=sweep,
         feed_m_s=_feed(state, n, word),
         blend_m=state.blend_m,
+        phi_start_rad=state.phi_rad,
+        phi_end_rad=phi_end,
     )
 
 
@@ -257,52 +294,78 @@ def step(state: ModalState, line: Line, program: Program) -> None:
         ProgramError: naming the line and word (see module).
     """
     n = line.number
-    groups, values, m_word = _collect(line)
+    groups, values, m_word = _collect(line, state.wrist is not None)
     _apply_modes(state, groups, values, n)
     if "motion" in groups:
         state.motion = groups["motion"]
-    axes = [values[k] for k in "XYZ" if k in values]
+    axes = [values[k] for k in "XYZA" if k in values]
     _check_usage(groups, values, state.motion if axes or "motion" in groups else None, n)
     if "dwell" in groups:
         if axes:
             raise ProgramError(n, axes[0].text, "G4 takes P (seconds), not axis words")
         if "P" not in values or values["P"].value < 0:
             raise ProgramError(n, "G4", "a dwell needs P, its time in seconds (>= 0)")
-        pos = _vec(state.position_m)
-        program.segments.append(Segment(n, "dwell", pos, pos, dwell_s=values["P"].value))
+        pos, phi = _vec(state.position_m), state.phi_rad
+        program.segments.append(
+            Segment(
+                n, "dwell", pos, pos, dwell_s=values["P"].value, phi_start_rad=phi, phi_end_rad=phi
+            )
+        )
     elif axes or "motion" in groups:
         if state.motion is None:
             raise ProgramError(n, axes[0].text, "axis words without a motion mode (G0 to G3)")
         if axes or state.motion in (20, 30):
             word = f"G{state.motion // 10}"
             end = _target(state, values)
+            phi_end = _target_phi(state, values, n)
+            wrist = {"phi_start_rad": state.phi_rad, "phi_end_rad": phi_end}
             segment: Segment | None = None
+            travels = np.linalg.norm(end - state.position_m) > 0
             if state.motion in (20, 30):
-                segment = _arc(state, values, state.motion, end, n, word)
-            elif np.linalg.norm(end - state.position_m) > 0:
+                segment = _arc(state, values, state.motion, end, n, word, phi_end)
+            elif travels or phi_end != state.phi_rad:
                 start = _vec(state.position_m)
                 if state.motion == 0:
-                    segment = Segment(n, "rapid", start, _vec(end), blend_m=state.blend_m)
+                    segment = Segment(n, "rapid", start, _vec(end), blend_m=state.blend_m, **wrist)
                 else:
                     feed = _feed(state, n, word)
+                    # the wrist alone: F in degrees per minute (LinuxCNC, a rotary axis alone)
+                    turn = None if travels else math.radians(state.feed or 0.0) / 60.0
                     segment = Segment(
-                        n, "linear", start, _vec(end), feed_m_s=feed, blend_m=state.blend_m
+                        n,
+                        "linear",
+                        start,
+                        _vec(end),
+                        feed_m_s=feed,
+                        blend_m=state.blend_m,
+                        feed_rad_s=turn,
+                        **wrist,
                     )
             if segment is not None:
                 program.segments.append(segment)
-            state.position_m = end
+            state.position_m, state.phi_rad = end, phi_end
     if m_word is not None:
         if m_word.value == 0:
-            pos = _vec(state.position_m)
-            program.segments.append(Segment(n, "pause", pos, pos))
+            pos, phi = _vec(state.position_m), state.phi_rad
+            program.segments.append(
+                Segment(n, "pause", pos, pos, phi_start_rad=phi, phi_end_rad=phi)
+            )
             program.notes.append(f"line {n}: M0 pauses the program (the check goes on)")
         else:
             state.ended = True
 
 
-def interpret(lines: list[Line], start_m, work_offset_m) -> Program:
+def interpret(
+    lines: list[Line],
+    start_m,
+    work_offset_m,
+    start_phi_rad: float = 0.0,
+    wrist: tuple[float, float] | None = None,
+) -> Program:
     """Lines of words -> the program's segments, from the tool at ``start_m`` (3,) [m]
-    with the G54 origin at ``work_offset_m`` (3,) [m], both in the base frame.
+    with the G54 origin at ``work_offset_m`` (3,) [m], both in the base frame, and the
+    wrist at ``start_phi_rad`` [rad]; ``wrist``: its limits (min, max) [rad], None when
+    there is none (A is refused then).
 
     Lines after M2 or M30 are read (a typo there is still refused) but not run.
 
@@ -310,12 +373,15 @@ def interpret(lines: list[Line], start_m, work_offset_m) -> Program:
         ProgramError: the first line that cannot be run, naming it and the word.
     """
     state = ModalState(
-        np.array(start_m, dtype=np.float64), np.array(work_offset_m, dtype=np.float64)
+        np.array(start_m, dtype=np.float64),
+        np.array(work_offset_m, dtype=np.float64),
+        phi_rad=float(start_phi_rad),
+        wrist=wrist,
     )
     program = Program(lines=len(lines))
     for line in lines:
         if state.ended:
-            _collect(line)
+            _collect(line, state.wrist is not None)
             continue
         step(state, line, program)
     return program

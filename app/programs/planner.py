@@ -26,7 +26,12 @@ Limits per segment:
 - on arcs the acceleration is shared: A / sqrt(2) along the path and v^2 / rho <= A /
   sqrt(2) across it (so |a| <= A), the jerk likewise; and the loop's chord from one
   sample to the next, kappa (v dt)^2 / 8, stays within ``chord_tolerance_m``
-  (the arc is discretised by the loop's own period, to the stated tolerance).
+  (the arc is discretised by the loop's own period, to the stated tolerance);
+- the wrist (A words): phi runs linearly in the arc length, phi = phi0 + k s with k =
+  turn / length, so its speed, acceleration and jerk are k times the path's; the path's
+  limits are lowered to the wrist's divided by k (``wrist_*``), and a turn of the wrist
+  alone runs along its angle within the wrist's limits (G1: and its F in deg/min).
+  Blends add the two turns as they add the two moves, within the larger of their peaks.
 """
 
 from __future__ import annotations
@@ -46,7 +51,9 @@ SQRT2 = math.sqrt(2.0)
 @dataclass(frozen=True)
 class PlanLimits:
     """rapid_*: jog speed [m/s], acceleration [m/s^2], jerk [m/s^3] for G0; feed_*: path
-    acceleration and jerk for G1-G3; chord_tolerance_m [m]; period_s: the loop period [s]."""
+    acceleration and jerk for G1-G3; chord_tolerance_m [m]; period_s: the loop period [s];
+    wrist_*: the wrist's speed [rad/s], acceleration [rad/s^2] and jerk [rad/s^3] (None:
+    no wrist, and a segment that turns it cannot be planned)."""
 
     rapid_speed: float
     rapid_accel: float
@@ -55,10 +62,38 @@ class PlanLimits:
     feed_jerk: float
     chord_tolerance_m: float
     period_s: float
+    wrist_speed: float | None = None
+    wrist_accel: float | None = None
+    wrist_jerk: float | None = None
+
+
+WRIST_MARGIN = 1.0 - 1e-9  # the wrist's peaks stay under its limits through rounding
 
 
 def segment_limits(segment: Segment, limits: PlanLimits) -> tuple[float, float, float]:
-    """(speed [m/s], tangential acceleration [m/s^2], jerk [m/s^3]) for one move."""
+    """(speed [m/s], tangential acceleration [m/s^2], jerk [m/s^3]) for one move, within
+    the wrist's limits when it turns (per radian for a turn of the wrist alone).
+
+    Raises:
+        ValueError: a segment that turns the wrist without wrist limits.
+    """
+    speed, accel, jerk = _path_limits(segment, limits)
+    turn = abs(segment.turn_rad)
+    if turn == 0.0:
+        return speed, accel, jerk
+    wrist = (limits.wrist_speed, limits.wrist_accel, limits.wrist_jerk)
+    if None in wrist:
+        raise ValueError(f"line {segment.line}: the segment turns the wrist, and none is set up")
+    ws, wa, wj = (float(v) * WRIST_MARGIN for v in wrist)  # type: ignore[arg-type]
+    length = segment.curve().length
+    if length <= 0.0:  # the wrist alone: along its angle
+        feed = ws if segment.kind == "rapid" else min(ws, segment.feed_rad_s or ws)
+        return feed, wa, wj
+    k = turn / length  # rad per metre
+    return min(speed, ws / k), min(accel, wa / k), min(jerk, wj / k)
+
+
+def _path_limits(segment: Segment, limits: PlanLimits) -> tuple[float, float, float]:
     if segment.kind == "rapid":
         return limits.rapid_speed, limits.rapid_accel, limits.rapid_jerk
     speed = float(segment.feed_m_s or 0.0)
@@ -84,8 +119,12 @@ class ProgramPath:
 
     A `TimedPath`: ``derivatives(t, order)`` (orders 0-3, (*,) -> (*, 3) [m/s^order]),
     ``duration_s``, ``peaks()``, ``feedforward``; plus ``line_at(t)`` (the program line
-    at each time) and ``start_s`` (each segment's start time).
+    at each time) and ``start_s`` (each segment's start time). The wrist (A words):
+    ``moves_wrist``, ``phi_at(t)``, ``wrist(t, orders)`` and ``phi_peak_speed()``, as a
+    run's fourth axis (app/runs/trajectories.py PlannedRun).
     """
+
+    phi_field = "gcode"  # what a run names when the wrist cannot follow the program
 
     segments: tuple[Segment, ...]
     profiles: tuple[Profile, ...]
@@ -111,7 +150,7 @@ class ProgramPath:
 
     @property
     def length_m(self) -> float:
-        return float(sum(p.distance for p in self.profiles))
+        return float(sum(s.curve().length for s in self.segments if s.moves))
 
     @cached_property
     def _table(self) -> dict[str, np.ndarray]:
@@ -123,6 +162,13 @@ class ProgramPath:
         for name in ("distance", "speed", "jerk", "tj", "ta", "tv"):
             table[name] = np.array([getattr(p, name) for p in self.profiles])
         table["line"] = np.array([s.line for s in self.segments])
+        table["phi_start"] = np.array([s.phi_start_rad for s in self.segments], dtype=np.float64)
+        table["phi_end"] = np.array([s.phi_end_rad for s in self.segments], dtype=np.float64)
+        distance = table["distance"]
+        turn = table["phi_end"] - table["phi_start"]
+        table["phi_per_s"] = np.divide(
+            turn, distance, out=np.zeros_like(turn), where=distance > 0
+        )  # dphi / ds along each segment's profile
         table["end"] = np.array([s.end_m for s in self.segments], dtype=np.float64)
         return table
 
@@ -177,6 +223,50 @@ class ProgramPath:
         }
         return [chain[order]() for order in orders]
 
+    @property
+    def moves_wrist(self) -> bool:
+        """Some segment turns the wrist (an A word changed phi)."""
+        return any(s.turn_rad != 0.0 for s in self.segments)
+
+    def wrist(self, t: np.ndarray, orders: tuple[int, ...]) -> list[np.ndarray]:
+        """d^k phi / dt^k for each k in ``orders`` (0-2) at times ``t`` (N,): each (N,)
+        [rad/s^k]; in a G64 overlap the turns add as the moves do."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        if not self.segments:
+            return [np.zeros(len(t)) for _ in orders]
+        k = self.index_at(t)
+        out = self._turn(k, t, orders)
+        before = k - 1
+        blending = np.flatnonzero((before >= 0) & (t < self.end_s[np.maximum(before, 0)]))
+        if blending.size:
+            previous = self._turn(before[blending], t[blending], orders)
+            corner = self._table["phi_end"][before[blending]]
+            for value, extra, order in zip(out, previous, orders, strict=True):
+                value[blending] += extra - (corner if order == 0 else 0.0)
+        return out
+
+    def _turn(self, k: np.ndarray, t: np.ndarray, orders: tuple[int, ...]) -> list[np.ndarray]:
+        """Segment ``k``'s own phi and its derivatives at times ``t`` (each (N,))."""
+        tab = {name: values[k] for name, values in self._table.items()}
+        tau = t - self.start_s[k]
+        s = evaluate(
+            tau, tab["distance"], tab["speed"], tab["jerk"], tab["tj"], tab["ta"], tab["tv"]
+        )
+        rate = tab["phi_per_s"]
+        return [tab["phi_start"] + rate * s[0] if o == 0 else rate * s[o] for o in orders]
+
+    def phi_at(self, t: np.ndarray) -> np.ndarray:
+        """The wrist angle phi [rad] at times ``t`` (*) [s], shape (*)."""
+        t = np.asarray(t, dtype=np.float64)
+        return self.wrist(t.ravel(), (0,))[0].reshape(t.shape)
+
+    def phi_peak_speed(self) -> float:
+        """Bound of |dphi/dt| [rad/s]: the largest segment's (a blend stays within it)."""
+        if not self.segments:
+            return 0.0
+        speeds = np.abs(self._table["phi_per_s"]) * self._table["speed"]
+        return float(speeds.max())
+
     def derivatives(self, t: np.ndarray, order: int) -> np.ndarray:
         """d^order p / dt^order at times ``t`` (*,), shape (*, 3) [m/s^order]."""
         t = np.asarray(t, dtype=np.float64)
@@ -189,6 +279,8 @@ class ProgramPath:
         speed = accel = jerk = 0.0
         for segment, profile in zip(self.segments, self.profiles, strict=True):
             curve = segment.curve()
+            if curve.length <= 0.0:  # dwells, pauses, turns of the wrist alone: no travel
+                continue
             v, a = profile.speed, profile.peak_acceleration
             kappa = curve.curvature
             speed = max(speed, v)
@@ -209,6 +301,8 @@ def _overlap(a: Segment, pa: Profile, b: Segment, pb: Profile) -> float:
     """How long move ``b`` may start before move ``a`` ends (0: exact stop)."""
     if not (a.moves and b.moves) or a.blend_m is None or b.blend_m is None:
         return 0.0
+    if a.curve().length <= 0.0 or b.curve().length <= 0.0:  # a turn of the wrist alone
+        return 0.0
     tolerance = min(a.blend_m, b.blend_m)
     # covering tolerance / 2 from rest in the jerk phase: J T^3 / 6 = tolerance / 2
     reach = [(3.0 * tolerance / p.jerk) ** (1.0 / 3.0) for p in (pa, pb)]
@@ -224,8 +318,7 @@ def plan_program(segments: list[Segment], limits: PlanLimits) -> ProgramPath:
     profiles: list[Profile] = []
     for segment in segments:
         if segment.moves:
-            length = segment.curve().length
-            profiles.append(rest_to_rest(length, *segment_limits(segment, limits)))
+            profiles.append(rest_to_rest(segment.distance, *segment_limits(segment, limits)))
         else:
             profiles.append(Profile(0.0, 0.0, limits.feed_jerk, 0.0, 0.0, segment.dwell_s))
     overlaps = tuple(

@@ -40,7 +40,11 @@ class Segment:
     centre in the start's plane [m]; plane: "G17", "G18" or "G19"; direction: "cw" (G2)
     or "ccw" (G3); sweep_rad: the turn, signed about the plane's normal [rad]. feed_m_s:
     the programmed feed [m/s] (None for rapids: the jog speed); dwell_s [s]; blend_m:
-    the G64 P tolerance in force [m] (None under G61, exact stop).
+    the G64 P tolerance in force [m] (None under G61, exact stop). phi_start_rad /
+    phi_end_rad: the wrist angle [rad] at the start and end (the A word, with a wrist),
+    linear in the arc length between them; a move of the wrist alone (no xyz travel)
+    runs along its turn [rad] instead, at ``feed_rad_s`` [rad/s] (G1: F read as deg/min,
+    as LinuxCNC reads it for a rotary axis alone; None: the wrist's speed limit).
     """
 
     line: int
@@ -54,10 +58,27 @@ class Segment:
     feed_m_s: float | None = None
     dwell_s: float = 0.0
     blend_m: float | None = None
+    phi_start_rad: float = 0.0
+    phi_end_rad: float = 0.0
+    feed_rad_s: float | None = None
 
     @property
     def moves(self) -> bool:
         return self.kind in ("rapid", "linear", "arc")
+
+    @property
+    def turn_rad(self) -> float:
+        """The wrist's turn over the segment [rad] (signed)."""
+        return self.phi_end_rad - self.phi_start_rad
+
+    @property
+    def distance(self) -> float:
+        """What the segment's profile runs along: its arc length [m], or for a turn of the
+        wrist alone |turn| [rad]; 0 for dwells and pauses."""
+        if not self.moves:
+            return 0.0
+        length = self.curve().length
+        return length if length > 0 else abs(self.turn_rad)
 
     def curve(self) -> Curve:
         """This segment's geometry by arc length (a point for dwells and pauses); built

@@ -17,7 +17,12 @@ offending sample (its time and point) and the worst value on that line. Checks:
 - ``torque``: the rotary Delta's inverse dynamics (thesis ch. 3.2, kinematics/dynamics.py)
   against the servo's torque-speed line tau_max(w) = stall (1 - w / no_load)
   (kinematics/sizing.py; the XM430-W210 at 12 V, the same 3.0 N m and 77 rpm as the
-  twin's servo model, hardware/sim/xm430.py), |tau| / tau_max <= ``max_torque_ratio``.
+  twin's servo model, hardware/sim/xm430.py), |tau| / tau_max <= ``max_torque_ratio``;
+- with a wrist (A words): ``wrist_limit``, phi within the wrist's limits, and
+  ``wrist_speed``, its step from one sample to the next within the gate's per-tick step
+  (``wrist.max_speed_rad_s`` times the period). The platform centre the checks see is
+  then tip - Rz(phi) d (d the tool offset), its velocity and acceleration with the
+  turning offset's terms: - phi' Rz'(phi) d and - phi'' Rz'(phi) d + phi'^2 (Rz(phi) d)_xy.
 """
 
 from __future__ import annotations
@@ -42,6 +47,8 @@ KINDS = (
     "joint_acceleration",
     "singularity",
     "torque",
+    "wrist_limit",
+    "wrist_speed",
 )
 
 
@@ -117,6 +124,48 @@ def _collect(
     return out
 
 
+def _platform(gate: Gate, points, velocity, acceleration, wrist):
+    """The platform centre's points, velocities, accelerations (N, 3) (see module)."""
+    if wrist is None:  # phi = 0: a constant shift, the same velocity and acceleration
+        return gate.platform(points), velocity, acceleration
+    phi, phid, phidd = (np.asarray(w, dtype=np.float64) for w in wrist)
+    origin = np.zeros_like(points)
+    turned = gate.tip(origin, phi)  # Rz(phi) d
+    ahead = gate.tip(origin, phi + math.pi / 2)  # Rz(phi + pi/2) d: its xy is Rz'(phi) d
+    ahead[:, 2] = 0.0
+    flat = turned.copy()
+    flat[:, 2] = 0.0
+    p = points - turned
+    pd = velocity - phid[:, None] * ahead
+    pdd = acceleration - phidd[:, None] * ahead + (phid**2)[:, None] * flat
+    return p, pd, pdd
+
+
+def _check_wrist(gate: Gate, phi: np.ndarray, period_s: float, add) -> None:
+    """The wrist's limits and per-tick step on the samples' phi (N,) [rad]."""
+    low, high = float(gate.wrist_min_rad), float(gate.wrist_max_rad)  # type: ignore[arg-type]
+    beyond = np.maximum(low - phi, phi - high)
+    add(
+        "wrist_limit",
+        beyond > 1e-12,
+        beyond,
+        lambda v, _i: (
+            f"the wrist up to {math.degrees(v):.2f} deg outside its limits "
+            f"[{math.degrees(low):.1f}, {math.degrees(high):.1f}] deg"
+        ),
+    )
+    step = np.concatenate([[0.0], np.abs(np.diff(phi))])
+    limit = gate.wrist_max_step_rad
+    add(
+        "wrist_speed",
+        step > limit + 1e-12,
+        step / period_s,
+        lambda v, _i: (
+            f"the wrist turns at up to {v:.2f} rad/s, above its limit {limit / period_s:.2f} rad/s"
+        ),
+    )
+
+
 def verify_path(
     gate: Gate,
     limits: VerifyLimits,
@@ -127,22 +176,28 @@ def verify_path(
     acceleration_m_s2: np.ndarray,
     near: np.ndarray,
     period_s: float,
+    wrist: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> Verification:
     """Check samples (N,) times [s], lines, points (N, 3) [m], velocities (N, 3) [m/s],
     accelerations (N, 3) [m/s^2] at the loop's ``period_s`` [s], the loop starting from
-    joints ``near`` (3,) [rad] (NaN: the knee-out branch at the first point).
+    joints ``near`` (3,) [rad] (NaN: the knee-out branch at the first point); ``wrist``:
+    with a wrist, phi (N,) [rad] and its first two derivatives (N,) [rad/s, rad/s^2] at
+    the samples (None: phi = 0 throughout).
 
     Returns every violation (see module); raises nothing for a bad path.
     """
     robot = gate.robot
-    # the program moves the tool tip (phi = 0): the checks are on the platform centre it
-    # implies, a constant shift (same velocity and acceleration); violations name the tip
-    p, pd, pdd = gate.platform(points_m), velocity_m_s, acceleration_m_s2
+    # the program moves the tool tip: the checks are on the platform centre it implies
+    # (see module); violations name the tip
+    p, pd, pdd = _platform(gate, points_m, velocity_m_s, acceleration_m_s2, wrist)
     mm = 1e3
     found: list[Violation] = []
 
     def add(kind, bad, value, message):
         found.extend(_collect(kind, bad, value, lines, times_s, points_m, message))
+
+    if wrist is not None and gate.wrist_min_rad is not None and gate.wrist_max_rad is not None:
+        _check_wrist(gate, np.asarray(wrist[0], dtype=np.float64), period_s, add)
 
     inside = np.asarray(robot.reachable(p, margin=gate.margin_m), dtype=bool)
     add(

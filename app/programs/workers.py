@@ -81,6 +81,7 @@ class CheckJob:
     controller's); start_m, work_offset_m (3,) [m] and near (3,) [rad] or None (the
     settings' defaults); for_run: the program is about to run (refused beyond
     runs.max_samples before the costly checks).
+    start_phi_rad: the wrist's angle at the start [rad] (0 without a wrist).
     """
 
     text: str
@@ -90,6 +91,7 @@ class CheckJob:
     work_offset_m: tuple[float, float, float] | None = None
     near: np.ndarray | None = None
     for_run: bool = False
+    start_phi_rad: float = 0.0
 
 
 def run_check(job: CheckJob) -> CheckedProgram:
@@ -102,6 +104,7 @@ def run_check(job: CheckJob) -> CheckedProgram:
         work_offset_m=job.work_offset_m,
         near=job.near,
         for_run=job.for_run,
+        start_phi_rad=job.start_phi_rad,
     )
 
 

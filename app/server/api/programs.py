@@ -23,6 +23,7 @@ program line); a failing check is a 422 with the violations and nothing moves.
 from __future__ import annotations
 
 import asyncio
+import math
 from dataclasses import replace
 from typing import Any
 
@@ -84,8 +85,9 @@ class RunProgramRequest(ProgramRequest):
 class ViolationOut(BaseModel):
     line: int = Field(description="program line (1-based)")
     kind: str = Field(
-        description="workspace, ceiling, ik, joint_limit, joint_speed, ..., run_duration "
-        "(longer than a run may be: runs.max_samples; /run refuses it in the same words)"
+        description="workspace, ceiling, ik, joint_limit, joint_speed, ...; wrist_limit and "
+        "wrist_speed with a wrist; run_duration (longer than a run may be: runs.max_samples; "
+        "/run refuses it in the same words)"
     )
     message: str
     t_s: float = Field(description="first offending sample, from the program's start [s]")
@@ -178,6 +180,18 @@ def _start(controller) -> tuple[np.ndarray | None, np.ndarray | None]:
     return point, (joints if np.isfinite(joints).all() else None)
 
 
+def _start_phi(controller) -> float:
+    """The wrist's angle a program starts from [rad], by the rule of :func:`_start`: the
+    one commanded while the robot holds, else the one read, else the one the loop holds
+    the tool at (0 without a wrist)."""
+    snap = controller.snapshot()
+    holding = snap.torque and not snap.estopped and not snap.faults
+    for phi in (snap.phi_commanded_rad if holding else math.nan, snap.phi_measured_rad):
+        if math.isfinite(phi):
+            return float(phi)
+    return float(snap.phi_rad)
+
+
 @router.post(
     "/check",
     response_model=ProgramReportOut,
@@ -239,6 +253,7 @@ def _job(
         near=near,
         # a run's log holds at most runs.max_samples: say so before the costly checks
         for_run=from_robot,
+        start_phi_rad=_start_phi(controller),
     )
     return job, notes
 
