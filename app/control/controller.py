@@ -26,7 +26,7 @@ import numpy as np
 from app.config import Settings
 from app.control import commands, held_jog
 from app.control.commands import CommandContext, record_fault
-from app.control.errors import GoalRejected
+from app.control.errors import GoalRejected, MotionRefused
 from app.control.gravity import GravityOffset, gravity_offset
 from app.control.joint_offsets import OffsetBus, set_offsets
 from app.control.loop_state import LoopState
@@ -35,7 +35,7 @@ from app.control.sources import GoalSource, Setpoint
 from app.control.state import Fault, Snapshot
 from app.control.timing import TickClock, TimingRecorder
 from app.control.wrist import WristBus, next_phi, turn_to
-from hardware.bus import ServoBus, SimulatedBus
+from hardware.bus import PositionGains, ServoBus, SimulatedBus
 from hardware.errors import BusError
 
 log = logging.getLogger(__name__)
@@ -91,6 +91,8 @@ class Controller:
             )
         # joint positions read and goals written through calibration's joint offsets
         self.joint_bus = OffsetBus(self.servos)
+        # the position gains the servos use, per leg servo id (the factory's until tuned)
+        self._gains: dict[int, PositionGains] = {sid: PositionGains() for sid in self.servo_ids}
         self.backend_description = backend_description or backend
         self.timing = TimingRecorder(settings.loop.rate_hz)
         self.state = LoopState.initial(settings.safety, self.period_s)
@@ -290,6 +292,37 @@ class Controller:
         """Joint offsets [rad] (3,) from calibration, added to every joint read from now on
         (app/control/joint_offsets.py); refused while a motion runs."""
         return self.submit(lambda: set_offsets(self.state, self.robot, self.joint_bus, offsets_rad))
+
+    def set_gains(self, gains: dict[int, PositionGains]) -> Future:
+        """Position gains per leg servo id (app/tuning), written to the servos in the
+        control thread; refused while a motion runs (MotionRefused in the Future) and for
+        ids that are not the legs' (ValueError, at once). The Future holds the gains now in
+        use (`gains`)."""
+        unknown = sorted(set(gains) - set(self.servo_ids))
+        missing = [sid for sid in self.servo_ids if sid not in gains]
+        if unknown or missing:
+            raise ValueError(
+                f"gains: servo ids {unknown or missing} are not the legs' {list(self.servo_ids)}"
+            )
+        ordered = [gains[sid] for sid in self.servo_ids]
+
+        def write() -> dict[int, PositionGains]:
+            if self.state.source is not None:
+                raise MotionRefused(
+                    f"a {self.state.source.name} is running: gains change only while the arm rests"
+                )
+            self.servos.set_gains(ordered)
+            self._gains = dict(zip(self.servo_ids, ordered, strict=True))
+            self.state.notice = "position gains changed"
+            return self.gains
+
+        return self.submit(write)
+
+    @property
+    def gains(self) -> dict[int, PositionGains]:
+        """The position gains in use per leg servo id: the factory's (PositionGains())
+        until `set_gains` writes others."""
+        return dict(self._gains)
 
     @property
     def joint_offsets_rad(self) -> np.ndarray:
