@@ -185,6 +185,13 @@ class ServoBus(Protocol):
         ServoStatusError (a gain out of range).
         """
 
+    def read_gains(self) -> list[PositionGains]:
+        """Each joint's position PID and feed-forward gains as its servo holds them, in
+        joint order.
+
+        Raises NotConnectedError, CommError, ServoStatusError.
+        """
+
     def reboot(self, ids: Sequence[int] | None = None) -> None:
         """Reboot servos (default all joints) to clear a latched hardware error; returns
         once they answer again (with torque off), so nothing reaches a servo still booting.

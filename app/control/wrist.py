@@ -109,6 +109,10 @@ class WristBus:
         else:
             self.bus.set_gains([*gains, self.wrist_gains])
 
+    def read_gains(self) -> list[PositionGains]:
+        """The legs' gains (the wrist's is the last of the bus's)."""
+        return self.bus.read_gains()[:-1]
+
     def reboot(self, ids: Sequence[int] | None = None) -> None:
         self.bus.reboot(ids)
         self.phi_rad = None  # a reboot leaves torque off

@@ -223,6 +223,19 @@ class DynamixelBus:
         self._write_all(Reg.FEEDFORWARD_1ST_GAIN, [g.feedforward_1st for g in each])
         self._write_all(Reg.FEEDFORWARD_2ND_GAIN, [g.feedforward_2nd for g in each])
 
+    def read_gains(self) -> list[PositionGains]:
+        read = self.link.read
+        return [
+            PositionGains(
+                p=read(i, Reg.POSITION_P_GAIN),
+                i=read(i, Reg.POSITION_I_GAIN),
+                d=read(i, Reg.POSITION_D_GAIN),
+                feedforward_1st=read(i, Reg.FEEDFORWARD_1ST_GAIN),
+                feedforward_2nd=read(i, Reg.FEEDFORWARD_2ND_GAIN),
+            )
+            for i in self.ids
+        ]
+
     def reboot(self, ids: Sequence[int] | None = None) -> None:
         """Reboot servos (default all joints); returns once each answers pings again.
 

@@ -171,6 +171,9 @@ class ProcessSimBus:
     def set_gains(self, gains: PositionGains | Sequence[PositionGains]) -> None:
         self._call("set_gains", gains)
 
+    def read_gains(self) -> list[PositionGains]:
+        return self._call("read_gains")
+
     def reboot(self, ids: Sequence[int] | None = None) -> None:
         self._call("reboot", ids)
 

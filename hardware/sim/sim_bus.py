@@ -198,6 +198,15 @@ class SimBus:
                 feedforward_2nd=[g.feedforward_2nd for g in each],
             )
 
+    def read_gains(self) -> list[PositionGains]:
+        with self._transaction("read POSITION_GAINS"):
+            return [
+                PositionGains(
+                    c.position_p, c.position_i, c.position_d, c.feedforward_1st, c.feedforward_2nd
+                )
+                for c in self.commands
+            ]
+
     def reboot(self, ids: Sequence[int] | None = None) -> None:
         targets = set(self.ids if ids is None else ids)
         with self._transaction("reboot"):

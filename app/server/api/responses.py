@@ -176,6 +176,10 @@ class StatusOut(_Out):
     bus: BusStatusOut
     pose: PoseInputStatus | None
     phase: str = Field(description="a run's phase (approach, timed, stop); empty otherwise")
+    gains: dict[str, dict[str, int]] = Field(
+        description="the position gains in use per leg servo id, register units: p, i, d, "
+        "ff1, ff2 (POST /api/tuning/{run_id}/apply changes them)"
+    )
 
 
 class TelemetryLoop(_Out):

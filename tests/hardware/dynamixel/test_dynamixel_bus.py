@@ -164,6 +164,7 @@ def test_gains(bus: DynamixelBus, emulator: ServoEmulator) -> None:
     bus.set_gains(each)
     for k, i in enumerate(IDS):
         assert [emulator.servo(i).table.get(r) for r in items] == [1000 + k, k, 2 * k, 3 * k, 0]
+    assert bus.read_gains() == each  # read back from the servos' registers
     with pytest.raises(ValueError, match="joints"):
         bus.set_gains(each[:-1])
 

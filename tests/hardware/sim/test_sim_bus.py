@@ -70,6 +70,7 @@ def test_gains_and_profile_reach_the_servo_models(bus: SimBus) -> None:
         (701, 1),
         (702, 2),
     ]
+    assert bus.read_gains() == [PositionGains(p=700 + k, feedforward_2nd=k) for k in range(3)]
     with pytest.raises(ValueError, match="joints"):
         bus.set_gains([PositionGains()] * 4)
 
