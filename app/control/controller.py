@@ -11,6 +11,7 @@ never touch the bus: they are queued and run at the start of the next tick, in t
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import logging
 import math
 import threading
@@ -27,7 +28,7 @@ from app.config import Settings
 from app.control import commands, held_jog
 from app.control.commands import CommandContext, record_fault
 from app.control.errors import GoalRejected, MotionRefused
-from app.control.gravity import GravityOffset, gravity_offset
+from app.control.gravity import GravityOffset, gravity_offset, loop_stiffness_nm_rad
 from app.control.joint_offsets import OffsetBus, set_offsets
 from app.control.loop_state import LoopState
 from app.control.safety import servo_faults
@@ -313,6 +314,9 @@ class Controller:
                 )
             self.servos.set_gains(ordered)
             self._gains = dict(zip(self.servo_ids, ordered, strict=True))
+            if self.gravity is not None:  # the sag depends on the loop's stiffness
+                stiffness = loop_stiffness_nm_rad(ordered)
+                self.gravity = dataclasses.replace(self.gravity, stiffness_nm_rad=stiffness)
             self.state.notice = "position gains changed"
             return self.gains
 
