@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             if args.revert:
                 body = cli_run._http(f"{url}/api/tuning/revert", "POST", None, headers)
-                _print_gains("reverted", body["gains"])
+                _print_gains("reverted", body)
             else:
                 code = _tune(url, headers, args)
         finally:
@@ -133,10 +133,12 @@ def run(args: argparse.Namespace) -> int:
     return code
 
 
-def _print_gains(what: str, gains: dict[str, dict[str, int]]) -> None:
+def _print_gains(what: str, body: dict[str, Any]) -> None:
     print(f"{what}: the servos now use")
-    for sid, g in sorted(gains.items(), key=lambda kv: int(kv[0])):
+    for sid, g in sorted(body["gains"].items(), key=lambda kv: int(kv[0])):
         print(f"  servo {sid}: {_gains(g)}")
+    if body.get("config_written"):
+        print(f"the server wrote {body['config_written']}", file=sys.stderr)
 
 
 def _tune(url: str, headers: dict[str, str], args: argparse.Namespace) -> int:
@@ -160,5 +162,5 @@ def _tune(url: str, headers: dict[str, str], args: argparse.Namespace) -> int:
     code = 0 if body["state"] == "done" else 1
     if code == 0 and args.apply:
         applied = cli_run._http(f"{url}/api/tuning/{run_id}/apply", "POST", None, headers)
-        _print_gains("applied", applied["gains"])
+        _print_gains("applied", applied)
     return code

@@ -119,7 +119,14 @@ class Controller:
 
     # ---- lifecycle ----
     def start(self) -> None:
-        """Read the robot once (so status is meaningful at once) and start ticking."""
+        """Write the config's position gains, when a leg has some (the others get the
+        factory's), read the robot once (so status is meaningful at once) and start
+        ticking."""
+        legs = self.settings.hardware.joints
+        if any(j.gains is not None for j in legs):
+            self._use_gains(
+                [j.gains.position_gains() if j.gains else PositionGains() for j in legs]
+            )
         self._read()
         self._publish()
         self._thread = threading.Thread(target=self._run, name="deltadash-control", daemon=True)
@@ -312,15 +319,20 @@ class Controller:
                 raise MotionRefused(
                     f"a {self.state.source.name} is running: gains change only while the arm rests"
                 )
-            self.servos.set_gains(ordered)
-            self._gains = dict(zip(self.servo_ids, ordered, strict=True))
-            if self.gravity is not None:  # the sag depends on the loop's stiffness
-                stiffness = loop_stiffness_nm_rad(ordered)
-                self.gravity = dataclasses.replace(self.gravity, stiffness_nm_rad=stiffness)
+            self._use_gains(ordered)
             self.state.notice = "position gains changed"
             return self.gains
 
         return self.submit(write)
+
+    def _use_gains(self, ordered: list[PositionGains]) -> None:
+        """Write the legs' gains (joint order) and use them (the gravity offset's stiffness
+        depends on them); the control thread's, or start's before it runs."""
+        self.servos.set_gains(ordered)
+        self._gains = dict(zip(self.servo_ids, ordered, strict=True))
+        if self.gravity is not None:  # the sag depends on the loop's stiffness
+            stiffness = loop_stiffness_nm_rad(ordered)
+            self.gravity = dataclasses.replace(self.gravity, stiffness_nm_rad=stiffness)
 
     @property
     def gains(self) -> dict[int, PositionGains]:

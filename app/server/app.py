@@ -113,6 +113,7 @@ def create_app(
                 app.state.runs,
                 settings.runs.folder_path / "tuning",
                 busy=lambda: app.state.runs.busy() or _calibration_busy(app),
+                config_path=config_path,
             )
             controller.pose_status = app.state.world.tracker.status
             runs = lambda: app.state.runs  # noqa: E731

@@ -6,7 +6,9 @@ runs' start point, records a step run and a chirp run through the run manager (t
 joint's model from them (`identify.identify`, the Bode plot in ``bode.png``), and suggests
 gains for the target (`gains.suggest`, checked by `gains.predict` against the gains now in
 use). Applying writes the suggested gains of the tuned joints to the servos through the
-controller (the others keep theirs) and keeps the previous ones for `revert`.
+controller (the others keep theirs), into the config file's joint records when the server
+runs from one (written to the servos when it starts), and keeps the previous ones for
+`revert`.
 
 The model is identified under the gains in use when the run starts: it is a P-only loop's
 (`gains.Plant.of`), so a run is refused while tuned gains are in use (revert first).
@@ -23,13 +25,17 @@ import logging
 import math
 import threading
 import time
+import tomllib
 import uuid
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 from app.calibration.procedure import Stopped, _require_motion
+from app.config import Settings
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
 from app.runs.logs import read_csv_rows
@@ -38,6 +44,7 @@ from app.runs.paths import ChirpParams, StepParams
 from app.tuning.gains import Plant, Suggestion, Target, TuningError, predict, suggest
 from app.tuning.identify import JOINTS, IdentificationError, JointFit, identify
 from hardware.bus import PositionGains
+from hardware.calibration import SECTION, save
 
 log = logging.getLogger(__name__)
 START_M = (0.0, 0.0, -0.24)  # where both runs start (the runs' default offset) [m]
@@ -127,8 +134,10 @@ class TuningManager:
         runs: RunManager,
         folder: Path,
         busy: Callable[[], str | None] = lambda: None,
+        config_path: Path | None = None,
     ) -> None:
         self.controller, self.runs, self.folder, self.busy = controller, runs, Path(folder), busy
+        self.config_path = config_path
         self._runs: dict[str, TuningRun] = {}
         self._previous: list[dict[int, PositionGains]] = []  # what apply replaced, last on top
         self._thread: threading.Thread | None = None
@@ -263,8 +272,10 @@ class TuningManager:
             in_use = self.controller.set_gains(wanted).result(timeout=5.0)
             self._previous.append(before)
             run.state = "applied"
+            written = self._write_config(in_use)
         self._save(run)
-        return {"run_id": run_id, "gains": {str(k): gains_out(g) for k, g in in_use.items()}}
+        gains = {str(k): gains_out(g) for k, g in in_use.items()}
+        return {"run_id": run_id, "gains": gains, "config_written": written}
 
     def revert(self) -> dict[str, Any]:
         """The gains in use before the last apply, back on the servos.
@@ -275,4 +286,37 @@ class TuningManager:
                 raise MotionRefused("no applied tuning to revert")
             in_use = self.controller.set_gains(self._previous[-1]).result(timeout=5.0)
             self._previous.pop()
-        return {"gains": {str(k): gains_out(g) for k, g in in_use.items()}}
+            written = self._write_config(in_use)
+        gains = {str(k): gains_out(g) for k, g in in_use.items()}
+        return {"gains": gains, "config_written": written}
+
+    def _write_config(self, gains: dict[int, PositionGains]) -> str | None:
+        """The gains into the config file's joint records, when the server runs from one
+        (the server then writes them to the servos when it starts); its path, or None."""
+        if self.config_path is None:
+            return None
+        save_gains(self.config_path, self.controller.settings, gains)
+        return str(self.config_path)
+
+
+def save_gains(path: Path, settings: Settings, gains: dict[int, PositionGains]) -> None:
+    """Write `gains` (per leg servo id) as each ``[[hardware.joints]]`` record's ``gains``
+    in the TOML file `path`, keeping everything else; joint records the file lacks are
+    written from `settings` (the calibration in use) first."""
+    if not path.exists() or not _has_joint_records(path):
+        save(path, [joint.calibration() for joint in settings.hardware.joints])
+    with open(path, "rb") as file:
+        config = tomllib.load(file)
+    for record in config[SECTION]["joints"]:
+        sid = record.get("servo_id")
+        if sid in gains:
+            record["gains"] = gains_out(gains[sid])
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with open(tmp, "wb") as file:
+        tomli_w.dump(config, file)
+    tmp.replace(path)  # atomic, as hardware/calibration.py's save
+
+
+def _has_joint_records(path: Path) -> bool:
+    with open(path, "rb") as file:
+        return bool(tomllib.load(file).get(SECTION, {}).get("joints"))

@@ -82,6 +82,7 @@ class TuningOut(BaseModel):
 
 class GainsOut(BaseModel):
     gains: dict[str, ServoGains] = Field(description="the gains now in use, per servo id")
+    config_written: str | None = Field(description="the config file written, if one is in use")
 
 
 class TuningApplied(GainsOut):

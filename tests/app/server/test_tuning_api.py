@@ -187,3 +187,40 @@ def test_a_run_on_the_twin_identifies_suggests_applies_and_reverts(tmp_path):
             assert gains_out(gains) == body["suggested"][sid], sid
         ok_json(twin.post("/api/tuning/revert"))
         assert bus.read_gains() == [PositionGains()] * 3
+
+
+def test_apply_writes_the_config_and_a_server_started_from_it_uses_the_gains(tmp_path):
+    from app.config import load_settings
+    from hardware.calibration import load, save
+
+    config = tmp_path / "robot.toml"
+    config.write_text("[server]\nhttp_port = 8123\n")  # other sections must survive
+    with make_client(tmp_path / "first", config_path=config) as first:
+        take_lease(first)
+        torque_on(first)
+        run = _done_run(first)
+        applied = ok_json(first.post(f"/api/tuning/{run.run_id}/apply"))
+        assert applied["config_written"] == str(config)
+        expected = applied["gains"]
+    settings = load_settings(config)
+    assert settings.server.http_port == 8123
+    written = {str(j.servo_id): j.gains.model_dump() for j in settings.hardware.joints}
+    assert written == expected
+    # the calibration's own reader and writer leave the gains alone
+    calibrations = load(config)
+    save(config, calibrations)
+    assert load_settings(config).hardware.joints == settings.hardware.joints
+
+    joints = [j.model_dump() for j in settings.hardware.joints]
+    with make_client(tmp_path / "second", hardware={"joints": joints}) as second:
+        assert ok_json(second.get("/api/status"))["gains"] == expected
+        for sid in run.servo_ids:
+            assert _registers(second, sid) == expected[str(sid)], sid
+
+
+def test_config_gains_out_of_the_registers_range_are_refused_naming_the_field():
+    from app.config import ConfigError, load_settings
+
+    joints = [{"servo_id": i, "gains": {"p": 20000}} for i in (1, 2, 3)]
+    with pytest.raises(ConfigError, match=r"hardware\.joints\.0\.gains\.p: .* 16383"):
+        load_settings(hardware={"joints": joints})
