@@ -224,3 +224,23 @@ def test_config_gains_out_of_the_registers_range_are_refused_naming_the_field():
     joints = [{"servo_id": i, "gains": {"p": 20000}} for i in (1, 2, 3)]
     with pytest.raises(ConfigError, match=r"hardware\.joints\.0\.gains\.p: .* 16383"):
         load_settings(hardware={"joints": joints})
+
+
+def test_gains_do_not_change_while_a_motion_runs(client):
+    take_lease(client)
+    torque_on(client)
+    run = _done_run(client, joints=(1, 2, 3))
+    ok_json(client.post("/api/move", json={"position_m": [0.0, 0.0, -0.26], "duration_s": 60}))
+    wait_for(
+        lambda: ok_json(client.get("/api/status"))["mode"] != "idle",
+        "the move to start",
+        seen=lambda: ok_json(client.get("/api/status"))["mode"],
+    )
+    answer = client.post(f"/api/tuning/{run.run_id}/apply")
+    assert answer.status_code == 409 and "rests" in answer.text, answer.text
+    ids = run.servo_ids
+    assert all(_registers(client, sid) == FACTORY for sid in ids)
+    assert ok_json(client.get("/api/status"))["gains"] == {str(i): FACTORY for i in ids}
+    assert run.state == "done"  # still offered
+    ok_json(client.post("/api/estop"))  # ends the move
+    ok_json(client.post("/api/reset"))
