@@ -350,7 +350,7 @@ class RunOut(_Out):
     run_id: str
     kind: str = Field(description="sinusoid | chirp | step | waypoints | hold | program")
     params: dict[str, Any]
-    conditions: dict[str, Any] = Field(description="robot, backend, loop rate, joints")
+    conditions: dict[str, Any] = Field(description="robot, backend, loop rate, joints, gains")
     state: str = Field(
         description="running | done | aborted | interrupted (the server stopped during the "
         "run: its stats are from the ticks logged until then)"
