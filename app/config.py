@@ -59,6 +59,7 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
+from hardware.bus import PositionGains
 from hardware.calibration import JointCalibration
 from kinematics import DeltaError, LinearDelta, PerLegRotaryDelta, RotaryDelta, Tool
 
@@ -98,6 +99,19 @@ class RobotSettings(_Section):
         return RotaryDelta(L=self.L, l=self.l, R=self.R, r=self.r)
 
 
+class GainSettings(_Section):
+    """A servo's position gains in the XM430's register units (docs/tuning.md)."""
+
+    p: int = Field(800, ge=0, le=16383, description="Position P Gain (KpP = p / 128)")
+    i: int = Field(0, ge=0, le=16383, description="Position I Gain (KiP = i / 65536)")
+    d: int = Field(0, ge=0, le=16383, description="Position D Gain (KdP = d / 16)")
+    ff1: int = Field(0, ge=0, le=16383, description="Feedforward 1st Gain (velocity, / 4)")
+    ff2: int = Field(0, ge=0, le=16383, description="Feedforward 2nd Gain (acceleration, / 4)")
+
+    def position_gains(self) -> PositionGains:
+        return PositionGains(self.p, self.i, self.d, self.ff1, self.ff2)
+
+
 class JointSettings(_Section):
     """Calibration of one joint (see hardware/calibration.py and docs/hardware.md)."""
 
@@ -107,6 +121,11 @@ class JointSettings(_Section):
     min_angle_rad: float = Field(-0.6, description="lowest joint angle [rad] (link up)")
     max_angle_rad: float = Field(
         1.65, description="highest joint angle [rad] (link down; hanging relaxed is ~1.55)"
+    )
+    gains: GainSettings | None = Field(
+        None,
+        description="a leg's position gains, written to its servo when the server starts "
+        "(POST /api/tuning/{run_id}/apply writes them here); none: the servo's own",
     )
 
     def calibration(self) -> JointCalibration:

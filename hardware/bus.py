@@ -94,6 +94,17 @@ class PositionGains:
     feedforward_2nd: int = 0
 
 
+def per_joint(gains: PositionGains | Sequence[PositionGains], n: int) -> list[PositionGains]:
+    """`gains` as one PositionGains per joint (n of them): a single set repeated, or a
+    sequence checked to hold n. Raises ValueError on a sequence of another length."""
+    if isinstance(gains, PositionGains):
+        return [gains] * n
+    listed = list(gains)
+    if len(listed) != n:
+        raise ValueError(f"gains for {len(listed)} joints: the bus has {n}")
+    return listed
+
+
 @dataclass(frozen=True)
 class BusStats:
     """Counters since connect: transactions, failed tries, retries, and give-ups; and
@@ -166,10 +177,19 @@ class ServoBus(Protocol):
         ServoStatusError.
         """
 
-    def set_gains(self, gains: PositionGains) -> None:
-        """Position PID and feed-forward gains on all joints.
+    def set_gains(self, gains: PositionGains | Sequence[PositionGains]) -> None:
+        """Position PID and feed-forward gains: one set for all joints, or one per joint in
+        joint order (`per_joint`).
 
-        Raises NotConnectedError, CommError, ServoStatusError (a gain out of range).
+        Raises ValueError (a sequence of the wrong length); NotConnectedError, CommError,
+        ServoStatusError (a gain out of range).
+        """
+
+    def read_gains(self) -> list[PositionGains]:
+        """Each joint's position PID and feed-forward gains as its servo holds them, in
+        joint order.
+
+        Raises NotConnectedError, CommError, ServoStatusError.
         """
 
     def reboot(self, ids: Sequence[int] | None = None) -> None:

@@ -25,6 +25,7 @@ from hardware.encoder import RAD_PER_TICK, TICKS_PER_REV
 from hardware.errors import CalibrationError
 
 SECTION = "hardware"
+OTHER_KEYS = frozenset({"gains"})  # keys of a joint record that are not its calibration
 
 
 @dataclass(frozen=True)
@@ -144,20 +145,26 @@ def from_config(config: Mapping[str, Any]) -> tuple[JointCalibration, ...]:
     joints = config.get(SECTION, {}).get("joints")
     if not joints:
         raise CalibrationError(f"no [[{SECTION}.joints]] records in the config")
-    try:
-        return tuple(JointCalibration(**joint) for joint in joints)
+    try:  # a joint's position gains (the app's tuning) are no part of its calibration
+        return tuple(
+            JointCalibration(**{k: v for k, v in joint.items() if k not in OTHER_KEYS})
+            for joint in joints
+        )
     except TypeError as exc:
         raise CalibrationError(f"bad [[{SECTION}.joints]] record: {exc}") from exc
 
 
 def save(path: str | Path, calibrations: Sequence[JointCalibration]) -> None:
-    """Write the joint records into `path`, keeping every other section of the file."""
+    """Write the joint records into `path`, keeping every other section of the file and
+    each record's other keys (a servo's ``gains``), matched by servo id."""
     path = Path(path)
     config: dict[str, Any] = {}
     if path.exists():
         with open(path, "rb") as file:
             config = tomllib.load(file)
-    config.setdefault(SECTION, {})["joints"] = [asdict(cal) for cal in calibrations]
+    section = config.setdefault(SECTION, {})
+    before = {j.get("servo_id"): j for j in section.get("joints", []) if isinstance(j, dict)}
+    section["joints"] = [{**before.get(cal.servo_id, {}), **asdict(cal)} for cal in calibrations]
     tmp = path.with_suffix(path.suffix + ".tmp")
     with open(tmp, "wb") as file:
         tomli_w.dump(config, file)

@@ -179,6 +179,10 @@ class CalibrationManager:
     def get(self, run_id: str) -> CalibrationRun | None:
         return self._runs.get(run_id)
 
+    def running(self) -> bool:
+        """A run's thread is moving the arm or fitting."""
+        return self._thread is not None and self._thread.is_alive()
+
     def start(
         self,
         poses: int,

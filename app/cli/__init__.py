@@ -2,7 +2,7 @@
 
 ``serve`` (serve.py), ``run`` (run.py), ``runs`` (runs.py), ``design`` (design/), ``home``
 (home.py), ``ik`` and ``fk`` (kinematics.py); ``emulate`` (emulate.py); ``gcode``
-(gcode.py); ``calibrate`` (calibrate.py).
+(gcode.py); ``calibrate`` (calibrate.py); ``tune`` (tune.py).
 
 Building the parser imports no heavy library (fastapi, uvicorn, mujoco, matplotlib, scipy,
 viser, pydantic): each handler imports what it needs, so ``deltadash --help``, ``ik`` and
@@ -15,7 +15,7 @@ import argparse
 import os
 import sys
 
-from app.cli import calibrate, design, emulate, gcode, home, kinematics, run, runs, serve
+from app.cli import calibrate, design, emulate, gcode, home, kinematics, run, runs, serve, tune
 from kinematics import DeltaError
 
 DESCRIPTION = """\
@@ -54,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     emulate.add_parser(commands)
     gcode.add_parser(commands)
     calibrate.add_parser(commands)
+    tune.add_parser(commands)
     kinematics.add_parsers(commands)
     return parser
 

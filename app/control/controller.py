@@ -11,6 +11,7 @@ never touch the bus: they are queued and run at the start of the next tick, in t
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import logging
 import math
 import threading
@@ -26,8 +27,8 @@ import numpy as np
 from app.config import Settings
 from app.control import commands, held_jog
 from app.control.commands import CommandContext, record_fault
-from app.control.errors import GoalRejected
-from app.control.gravity import GravityOffset, gravity_offset
+from app.control.errors import GoalRejected, MotionRefused
+from app.control.gravity import GravityOffset, gravity_offset, loop_stiffness_nm_rad
 from app.control.joint_offsets import OffsetBus, set_offsets
 from app.control.loop_state import LoopState
 from app.control.safety import servo_faults
@@ -35,7 +36,7 @@ from app.control.sources import GoalSource, Setpoint
 from app.control.state import Fault, Snapshot
 from app.control.timing import TickClock, TimingRecorder
 from app.control.wrist import WristBus, next_phi, turn_to
-from hardware.bus import ServoBus, SimulatedBus
+from hardware.bus import PositionGains, ServoBus, SimulatedBus
 from hardware.errors import BusError
 
 log = logging.getLogger(__name__)
@@ -91,6 +92,8 @@ class Controller:
             )
         # joint positions read and goals written through calibration's joint offsets
         self.joint_bus = OffsetBus(self.servos)
+        # the position gains the servos use, per leg servo id (the factory's until tuned)
+        self._gains: dict[int, PositionGains] = {sid: PositionGains() for sid in self.servo_ids}
         self.backend_description = backend_description or backend
         self.timing = TimingRecorder(settings.loop.rate_hz)
         self.state = LoopState.initial(settings.safety, self.period_s)
@@ -116,7 +119,14 @@ class Controller:
 
     # ---- lifecycle ----
     def start(self) -> None:
-        """Read the robot once (so status is meaningful at once) and start ticking."""
+        """Write the config's position gains, when a leg has some (the others get the
+        factory's), read the robot once (so status is meaningful at once) and start
+        ticking."""
+        legs = self.settings.hardware.joints
+        if any(j.gains is not None for j in legs):
+            self._use_gains(
+                [j.gains.position_gains() if j.gains else PositionGains() for j in legs]
+            )
         self._read()
         self._publish()
         self._thread = threading.Thread(target=self._run, name="deltadash-control", daemon=True)
@@ -290,6 +300,45 @@ class Controller:
         """Joint offsets [rad] (3,) from calibration, added to every joint read from now on
         (app/control/joint_offsets.py); refused while a motion runs."""
         return self.submit(lambda: set_offsets(self.state, self.robot, self.joint_bus, offsets_rad))
+
+    def set_gains(self, gains: dict[int, PositionGains]) -> Future:
+        """Position gains per leg servo id (app/tuning), written to the servos in the
+        control thread; refused while a motion runs (MotionRefused in the Future) and for
+        ids that are not the legs' (ValueError, at once). The Future holds the gains now in
+        use (`gains`)."""
+        unknown = sorted(set(gains) - set(self.servo_ids))
+        missing = [sid for sid in self.servo_ids if sid not in gains]
+        if unknown or missing:
+            raise ValueError(
+                f"gains: servo ids {unknown or missing} are not the legs' {list(self.servo_ids)}"
+            )
+        ordered = [gains[sid] for sid in self.servo_ids]
+
+        def write() -> dict[int, PositionGains]:
+            if self.state.source is not None:
+                raise MotionRefused(
+                    f"a {self.state.source.name} is running: gains change only while the arm rests"
+                )
+            self._use_gains(ordered)
+            self.state.notice = "position gains changed"
+            return self.gains
+
+        return self.submit(write)
+
+    def _use_gains(self, ordered: list[PositionGains]) -> None:
+        """Write the legs' gains (joint order) and use them (the gravity offset's stiffness
+        depends on them); the control thread's, or start's before it runs."""
+        self.servos.set_gains(ordered)
+        self._gains = dict(zip(self.servo_ids, ordered, strict=True))
+        if self.gravity is not None:  # the sag depends on the loop's stiffness
+            stiffness = loop_stiffness_nm_rad(ordered)
+            self.gravity = dataclasses.replace(self.gravity, stiffness_nm_rad=stiffness)
+
+    @property
+    def gains(self) -> dict[int, PositionGains]:
+        """The position gains in use per leg servo id: the factory's (PositionGains())
+        until `set_gains` writes others."""
+        return dict(self._gains)
 
     @property
     def joint_offsets_rad(self) -> np.ndarray:

@@ -19,6 +19,7 @@ order (the sag is ~10 mrad, over which tau_g barely changes). Friction (the twin
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,15 +58,17 @@ class GravityOffset:
     """The goal offset that cancels each joint's sag under gravity.
 
     robot: the rotary Delta; mass: its mass model (payload included); stiffness_nm_rad:
-    each joint's position-loop stiffness [N m/rad] (`position_stiffness_nm_rad`).
+    each joint's position-loop stiffness [N m/rad] (`position_stiffness_nm_rad`): one for
+    all, or one per joint (3,); inf where the loop needs no offset (`loop_stiffness_nm_rad`).
     """
 
     robot: RotaryDelta
     mass: MassModel = THESIS_MASS
-    stiffness_nm_rad: float = position_stiffness_nm_rad()
+    stiffness_nm_rad: float | np.ndarray = position_stiffness_nm_rad()
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.stiffness_nm_rad) and self.stiffness_nm_rad > 0):
+        k = np.asarray(self.stiffness_nm_rad, dtype=float)
+        if k.shape not in ((), (3,)) or np.isnan(k).any() or not (k > 0).all():
             raise ValueError(f"stiffness_nm_rad = {self.stiffness_nm_rad!r}: must be > 0")
 
     def holding_torques_nm(self, joints_rad: np.ndarray) -> np.ndarray:
@@ -79,6 +82,13 @@ class GravityOffset:
         """The predicted sag tau_g / k [rad] at `joints_rad` [rad], shape (3,): added to the
         goal it puts the arm at rest on the goal. NaN where the pose has no kinematics."""
         return self.holding_torques_nm(joints_rad) / self.stiffness_nm_rad
+
+
+def loop_stiffness_nm_rad(gains: Sequence[PositionGains]) -> np.ndarray:
+    """Per joint (N,) [N m/rad], the stiffness the offset divides by under `gains` (N):
+    the P loop's (`position_stiffness_nm_rad`), or inf where the loop has an integral (it
+    removes the sag itself, so an offset would become the error at rest)."""
+    return np.array([math.inf if g.i > 0 else position_stiffness_nm_rad(g.p) for g in gains])
 
 
 def gravity_offset(

@@ -36,6 +36,7 @@ class WristBus:
 
     def __init__(self, bus: ServoBus, servo_id: int) -> None:
         self.bus = bus
+        self.wrist_gains = PositionGains()
         self.servo_id = servo_id
         self.phi_rad: float | None = None
         self.reading: WristReading | None = None
@@ -99,8 +100,18 @@ class WristBus:
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
         self.bus.set_profile(velocity_rad_s, acceleration_rad_s2)
 
-    def set_gains(self, gains: PositionGains) -> None:
-        self.bus.set_gains(gains)
+    def set_gains(self, gains: PositionGains | Sequence[PositionGains]) -> None:
+        """One set for every servo (the wrist's too), or one per leg: the wrist then keeps
+        the gains it was last given (the factory's until then)."""
+        if isinstance(gains, PositionGains):
+            self.wrist_gains = gains
+            self.bus.set_gains(gains)
+        else:
+            self.bus.set_gains([*gains, self.wrist_gains])
+
+    def read_gains(self) -> list[PositionGains]:
+        """The legs' gains (the wrist's is the last of the bus's)."""
+        return self.bus.read_gains()[:-1]
 
     def reboot(self, ids: Sequence[int] | None = None) -> None:
         self.bus.reboot(ids)

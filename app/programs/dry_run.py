@@ -31,7 +31,6 @@ from app.config import Settings
 from app.control.commands import CommandContext
 from app.control.errors import GoalRejected
 from app.programs.check import CheckedProgram
-from hardware.calibration import JointCalibration
 from hardware.sim import SimBus, SimBusConfig, TwinConfig
 from kinematics import RotaryDelta
 
@@ -88,7 +87,7 @@ def _bus(settings: Settings) -> SimBus:
     robot = settings.robot.build()
     if not isinstance(robot, RotaryDelta):
         raise DryRunRefused("robot.type: the twin models rotary Deltas only")
-    joints = tuple(JointCalibration(**j.model_dump()) for j in settings.hardware.joints)
+    joints = tuple(j.calibration() for j in settings.hardware.joints)
     twin = TwinConfig(robot=robot, joints=joints)
     return SimBus(SimBusConfig(twin=twin, realtime=False, torque_on_at_start=True))
 

@@ -270,5 +270,7 @@ class RunManager:
             "loop_rate_hz": settings.loop.rate_hz,
             "feedforward_lead_s": lead_s,
             "joints": [j.model_dump() for j in settings.hardware.joints],
+            # the position gains the servos used (register units), per leg servo id
+            "gains": {str(k): asdict(g) for k, g in self.controller.gains.items()},
         }
         return Run(run_id, kind, params, conditions, self.folder / run_id)

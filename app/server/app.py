@@ -40,6 +40,7 @@ from app.server.api import (
     robot,
     runs,
     telemetry,
+    tuning,
     workspace,
 )
 from app.server.api.deps import require_read_token
@@ -48,6 +49,7 @@ from app.server.errors import install_error_handlers
 from app.server.estop import EstopFirst, EstopListener
 from app.server.limits import RequestLimits
 from app.static_files import static_dir
+from app.tuning.procedure import TuningManager
 from app.world.service import WorldService
 from kinematics import PerLegRotaryDelta, RotaryDelta
 
@@ -90,6 +92,14 @@ def _twin_probe(settings: Settings, controller: Controller) -> Touch | None:
     return twin_probe(true_robot, nominal, lambda: controller.joint_offsets_rad)
 
 
+def _tuning_busy(app: FastAPI) -> str | None:
+    return "a tuning run is in progress" if app.state.tuning.running() else None
+
+
+def _calibration_busy(app: FastAPI) -> str | None:
+    return "a calibration run is in progress" if app.state.calibration.running() else None
+
+
 def create_app(
     settings: Settings, backend_opener: Callable = open_backend, config_path: Path | None = None
 ) -> FastAPI:
@@ -121,7 +131,14 @@ def create_app(
             app.state.calibration = CalibrationManager(
                 controller,
                 settings.runs.folder_path / "calibration",
-                busy=app.state.runs.busy,
+                busy=lambda: app.state.runs.busy() or _tuning_busy(app),
+                config_path=config_path,
+            )
+            app.state.tuning = TuningManager(
+                controller,
+                app.state.runs,
+                settings.runs.folder_path / "tuning",
+                busy=lambda: app.state.runs.busy() or _calibration_busy(app),
                 config_path=config_path,
                 probe=_twin_probe(settings, controller),
             )
@@ -136,6 +153,7 @@ def create_app(
                 if app.state.scene is not None:
                     await asyncio.to_thread(app.state.scene.stop)
                 await asyncio.to_thread(app.state.program_workers.close)
+                await asyncio.to_thread(app.state.tuning.close)
                 await asyncio.to_thread(app.state.calibration.close)
                 await asyncio.to_thread(app.state.runs.close)
                 app.state.world.close()
@@ -163,6 +181,7 @@ def create_app(
     app.include_router(workspace.router, prefix="/api", dependencies=reads)
     app.include_router(programs.router, prefix="/api", dependencies=reads)
     app.include_router(calibration.router, prefix="/api", dependencies=reads)
+    app.include_router(tuning.router, prefix="/api", dependencies=reads)
     # /api/info (the page asks it whether to prompt for the token), sinusoid check, /vendor
     app.include_router(dashboard.router)
     if (STATIC_DIR / "index.html").exists():

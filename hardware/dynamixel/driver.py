@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import dynamixel_sdk as sdk
 import numpy as np
 
-from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
+from hardware.bus import BusStats, JointState, PositionGains, ServoInfo, per_joint
 from hardware.calibration import JointCalibration, goal_ticks
 from hardware.dynamixel.control_table import (
     MODEL_NUMBER_XM430_W210,
@@ -215,13 +215,26 @@ class DynamixelBus:
         self._write_all(Reg.PROFILE_ACCELERATION, [rad_s2_to_acceleration(acceleration_rad_s2)] * n)
         self._write_all(Reg.PROFILE_VELOCITY, [rad_s_to_velocity(velocity_rad_s)] * n)
 
-    def set_gains(self, gains: PositionGains) -> None:
-        n = len(self.ids)
-        self._write_all(Reg.POSITION_P_GAIN, [gains.p] * n)
-        self._write_all(Reg.POSITION_I_GAIN, [gains.i] * n)
-        self._write_all(Reg.POSITION_D_GAIN, [gains.d] * n)
-        self._write_all(Reg.FEEDFORWARD_1ST_GAIN, [gains.feedforward_1st] * n)
-        self._write_all(Reg.FEEDFORWARD_2ND_GAIN, [gains.feedforward_2nd] * n)
+    def set_gains(self, gains: PositionGains | Sequence[PositionGains]) -> None:
+        each = per_joint(gains, len(self.ids))
+        self._write_all(Reg.POSITION_P_GAIN, [g.p for g in each])
+        self._write_all(Reg.POSITION_I_GAIN, [g.i for g in each])
+        self._write_all(Reg.POSITION_D_GAIN, [g.d for g in each])
+        self._write_all(Reg.FEEDFORWARD_1ST_GAIN, [g.feedforward_1st for g in each])
+        self._write_all(Reg.FEEDFORWARD_2ND_GAIN, [g.feedforward_2nd for g in each])
+
+    def read_gains(self) -> list[PositionGains]:
+        read = self.link.read
+        return [
+            PositionGains(
+                p=read(i, Reg.POSITION_P_GAIN),
+                i=read(i, Reg.POSITION_I_GAIN),
+                d=read(i, Reg.POSITION_D_GAIN),
+                feedforward_1st=read(i, Reg.FEEDFORWARD_1ST_GAIN),
+                feedforward_2nd=read(i, Reg.FEEDFORWARD_2ND_GAIN),
+            )
+            for i in self.ids
+        ]
 
     def reboot(self, ids: Sequence[int] | None = None) -> None:
         """Reboot servos (default all joints); returns once each answers pings again.

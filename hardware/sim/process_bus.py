@@ -168,8 +168,11 @@ class ProcessSimBus:
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
         self._call("set_profile", velocity_rad_s, acceleration_rad_s2)
 
-    def set_gains(self, gains: PositionGains) -> None:
+    def set_gains(self, gains: PositionGains | Sequence[PositionGains]) -> None:
         self._call("set_gains", gains)
+
+    def read_gains(self) -> list[PositionGains]:
+        return self._call("read_gains")
 
     def reboot(self, ids: Sequence[int] | None = None) -> None:
         self._call("reboot", ids)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hardware.base_motion import BaseMotion
-from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
+from hardware.bus import BusStats, JointState, PositionGains, ServoInfo, per_joint
 from hardware.calibration import goal_ticks
 from hardware.dynamixel.control_table import (
     MODEL_NUMBER_XM430_W210,
@@ -187,15 +187,25 @@ class SimBus:
                 profile_acceleration_rad_s2=[acceleration] * self.n,
             )
 
-    def set_gains(self, gains: PositionGains) -> None:
+    def set_gains(self, gains: PositionGains | Sequence[PositionGains]) -> None:
+        each = per_joint(gains, self.n)
         with self._transaction("write POSITION_GAINS"):
             self._update(
-                position_p=[gains.p] * self.n,
-                position_i=[gains.i] * self.n,
-                position_d=[gains.d] * self.n,
-                feedforward_1st=[gains.feedforward_1st] * self.n,
-                feedforward_2nd=[gains.feedforward_2nd] * self.n,
+                position_p=[g.p for g in each],
+                position_i=[g.i for g in each],
+                position_d=[g.d for g in each],
+                feedforward_1st=[g.feedforward_1st for g in each],
+                feedforward_2nd=[g.feedforward_2nd for g in each],
             )
+
+    def read_gains(self) -> list[PositionGains]:
+        with self._transaction("read POSITION_GAINS"):
+            return [
+                PositionGains(
+                    c.position_p, c.position_i, c.position_d, c.feedforward_1st, c.feedforward_2nd
+                )
+                for c in self.commands
+            ]
 
     def reboot(self, ids: Sequence[int] | None = None) -> None:
         targets = set(self.ids if ids is None else ids)

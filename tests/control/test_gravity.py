@@ -133,3 +133,19 @@ def test_the_loop_writes_the_goal_plus_the_offset_and_reports_the_goal():
     expected = commanded + gravity_offset(THESIS_DELTA).offset_rad(commanded)
     np.testing.assert_allclose(written, expected, atol=1e-12)
     assert np.all(np.abs(written - commanded) > 3e-3)  # the offset is there (~5 mrad)
+
+
+def test_the_offset_follows_each_joints_gains():
+    from app.control.gravity import loop_stiffness_nm_rad
+    from hardware.bus import PositionGains
+
+    q = THESIS_DELTA.ik(np.array(POINTS[1])).joints
+    factory = gravity_offset(THESIS_DELTA)
+    gains = [PositionGains(p=1600), PositionGains(p=800), PositionGains(p=2000, i=500)]
+    tuned = GravityOffset(THESIS_DELTA, stiffness_nm_rad=loop_stiffness_nm_rad(gains))
+    # twice the P: half the sag; the same P: the same; an integral: no offset at all
+    np.testing.assert_allclose(
+        tuned.offset_rad(q), factory.offset_rad(q) * [0.5, 1.0, 0.0], rtol=1e-12
+    )
+    with pytest.raises(ValueError, match="stiffness"):
+        GravityOffset(THESIS_DELTA, stiffness_nm_rad=np.array([1.0, 0.0, 1.0]))

@@ -17,6 +17,7 @@ from app.control.controller import Controller
 from app.programs.workers import ProgramWorkers
 from app.runs.manager import RunManager
 from app.scene import Scene
+from app.tuning.procedure import TuningManager
 from app.world.service import WorldService
 
 READS = ("GET", "HEAD")
@@ -45,6 +46,10 @@ def get_program_workers(connection: HTTPConnection) -> ProgramWorkers:
 
 def get_calibration(connection: HTTPConnection) -> CalibrationManager:
     return connection.app.state.calibration
+
+
+def get_tuning(connection: HTTPConnection) -> TuningManager:
+    return connection.app.state.tuning
 
 
 def get_world(connection: HTTPConnection) -> WorldService:
@@ -131,6 +136,7 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 RunsDep = Annotated[RunManager, Depends(get_runs)]
 ProgramWorkersDep = Annotated[ProgramWorkers, Depends(get_program_workers)]
 CalibrationDep = Annotated[CalibrationManager, Depends(get_calibration)]
+TuningDep = Annotated[TuningManager, Depends(get_tuning)]
 WorldDep = Annotated[WorldService, Depends(get_world)]
 SceneDep = Annotated[Scene | None, Depends(get_scene)]
 AuthorityDep = Annotated[Authority, Depends(get_authority)]

@@ -176,6 +176,10 @@ class StatusOut(_Out):
     bus: BusStatusOut
     pose: PoseInputStatus | None
     phase: str = Field(description="a run's phase (approach, timed, stop); empty otherwise")
+    gains: dict[str, dict[str, int]] = Field(
+        description="the position gains in use per leg servo id, register units: p, i, d, "
+        "ff1, ff2 (POST /api/tuning/{run_id}/apply changes them)"
+    )
 
 
 class TelemetryLoop(_Out):
@@ -346,7 +350,7 @@ class RunOut(_Out):
     run_id: str
     kind: str = Field(description="sinusoid | chirp | step | waypoints | hold | program")
     params: dict[str, Any]
-    conditions: dict[str, Any] = Field(description="robot, backend, loop rate, joints")
+    conditions: dict[str, Any] = Field(description="robot, backend, loop rate, joints, gains")
     state: str = Field(
         description="running | done | aborted | interrupted (the server stopped during the "
         "run: its stats are from the ticks logged until then)"

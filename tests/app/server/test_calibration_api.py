@@ -82,7 +82,7 @@ def _finished(client, run_id: str) -> dict:
 
 
 def _records(joints) -> list[JointCalibration]:
-    return [JointCalibration(**joint.model_dump()) for joint in joints]
+    return [joint.calibration() for joint in joints]
 
 
 def _fk_miss_m(client, frame: MeasurementFrame) -> float:

@@ -159,6 +159,14 @@ def test_gains(bus: DynamixelBus, emulator: ServoEmulator) -> None:
         assert [emulator.servo(i).table.get(r) for r in items] == [900, 10, 20, 30, 40]
     with pytest.raises(ServoStatusError, match="data range"):
         bus.set_gains(PositionGains(p=20000))
+    # one set per joint, in joint order: each servo's registers hold its own
+    each = [PositionGains(p=1000 + k, i=k, d=2 * k, feedforward_1st=3 * k) for k in range(len(IDS))]
+    bus.set_gains(each)
+    for k, i in enumerate(IDS):
+        assert [emulator.servo(i).table.get(r) for r in items] == [1000 + k, k, 2 * k, 3 * k, 0]
+    assert bus.read_gains() == each  # read back from the servos' registers
+    with pytest.raises(ValueError, match="joints"):
+        bus.set_gains(each[:-1])
 
 
 def test_hardware_error_surfaces_by_name_and_reboot_clears_it(bus, emulator) -> None:

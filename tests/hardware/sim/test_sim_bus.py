@@ -64,6 +64,15 @@ def test_gains_and_profile_reach_the_servo_models(bus: SimBus) -> None:
     assert (cmd.position_p, cmd.position_i, cmd.position_d) == (1600, 100, 50)
     assert cmd.profile_velocity_rad_s == pytest.approx(2.0, abs=0.024)  # 0.229 rpm units
     assert bus.twin.commands[2] is cmd
+    bus.set_gains([PositionGains(p=700 + k, feedforward_2nd=k) for k in range(3)])
+    assert [(c.position_p, c.feedforward_2nd) for c in bus.commands] == [
+        (700, 0),
+        (701, 1),
+        (702, 2),
+    ]
+    assert bus.read_gains() == [PositionGains(p=700 + k, feedforward_2nd=k) for k in range(3)]
+    with pytest.raises(ValueError, match="joints"):
+        bus.set_gains([PositionGains()] * 4)
 
 
 def test_operating_mode_is_refused_while_torque_is_on(bus: SimBus) -> None:

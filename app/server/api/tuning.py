@@ -1,0 +1,148 @@
+"""Tuning resource (issue 21): identify the joints, suggest gains, apply them, revert."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Annotated, Any
+
+from fastapi import APIRouter, HTTPException
+from fastapi.responses import FileResponse
+from pydantic import BaseModel, ConfigDict, Field
+
+from app.server.api.deps import ControlClient, ControllerDep, TuningDep
+from app.server.errors import CONTROL, INVALID, NOT_FOUND
+from app.tuning.gains import Target, TuningError
+from app.tuning.procedure import TuningManager, TuningRun
+
+router = APIRouter(tags=["tuning"])
+FILES = {"bode.png": "image/png", "result.json": "application/json"}
+
+
+class TargetIn(BaseModel):
+    """What the suggested gains aim at (app/tuning/gains.py's rule)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    bandwidth_hz: Annotated[float, Field(ge=0.1, le=100.0, description="closed loop [Hz]")] = (
+        Target.bandwidth_hz
+    )
+    phase_margin_deg: Annotated[float, Field(ge=20.0, le=85.0, description="at least [deg]")] = (
+        Target.phase_margin_deg
+    )
+    overshoot_pct: Annotated[float, Field(gt=0.0, le=50.0, description="step, at most [%]")] = (
+        Target.overshoot_pct
+    )
+    pwm_fraction: Annotated[
+        float, Field(ge=0.05, le=1.0, description="peak PWM of the checked step, of the limit")
+    ] = Target.pwm_fraction
+    feedforward: bool = Field(True, description="suggest Feedforward 1st / 2nd gains")
+
+
+class TuningRequest(BaseModel):
+    """The joints (1..3) to identify and tune, and the target."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    joints: Annotated[list[int], Field(min_length=1, max_length=3)] = [1, 2, 3]
+    target: TargetIn = Field(default_factory=TargetIn)
+
+
+class TuningStarted(BaseModel):
+    run_id: str
+
+
+class ServoGains(BaseModel):
+    """Position gains in the XM430's register units (0..16383): KpP = p / 128, KiP =
+    i / 65536, KdP = d / 16, feed-forward ff1 / 4 (velocity) and ff2 / 4 (acceleration)."""
+
+    p: int
+    i: int
+    d: int
+    ff1: int
+    ff2: int
+
+
+class TuningOut(BaseModel):
+    """A tuning run. state: planned, moving, step, chirp, fitting, done, failed (error
+    says why), applied. model: per servo id, the fitted K wn^2 / (s^2 + 2 zeta wn s + wn^2)
+    e^{-sT} (gain, wn_rad_s, zeta, delay_s, bandwidth_hz, rmse_rad); suggested: per servo
+    id, the gains; predicted: per servo id, the loop with the suggested and the current
+    gains (crossover_hz, phase_margin_deg, bandwidth_hz, peak_db, overshoot_pct,
+    settling_s, peak_pwm_fraction, static_error_pct)."""
+
+    run_id: str
+    state: str
+    joints: list[int]
+    target: dict[str, Any]
+    error: str | None
+    runs: dict[str, str] = Field(description="the step and chirp runs recorded (kind: run id)")
+    model: dict[str, dict[str, Any]]
+    suggested: dict[str, ServoGains]
+    predicted: dict[str, dict[str, Any]]
+    files: list[str]
+
+
+class GainsOut(BaseModel):
+    gains: dict[str, ServoGains] = Field(description="the gains now in use, per servo id")
+    config_written: str | None = Field(description="the config file written, if one is in use")
+
+
+class TuningApplied(GainsOut):
+    run_id: str
+
+
+def _run(tuning: TuningManager, run_id: str) -> TuningRun:
+    run = tuning.get(run_id)
+    if run is None:
+        raise HTTPException(404, f"no tuning run {run_id!r}")
+    return run
+
+
+@router.post("/tuning/run", response_model=TuningStarted, responses=CONTROL)
+async def start_tuning(
+    body: TuningRequest, tuning: TuningDep, _c: ControllerDep, _: ControlClient
+) -> dict[str, Any]:
+    """Move to the start point, record a step and a chirp run, fit each joint's model and
+    suggest gains (GET the run for its progress). 409 when the robot may not move (torque
+    off, e-stop, a fault, another run, tuned gains in use); 422 naming the field."""
+    try:
+        target = Target(**body.target.model_dump())
+        run = await asyncio.to_thread(tuning.start, tuple(body.joints), target)
+    except TuningError as exc:
+        raise HTTPException(422, str(exc)) from None
+    return {"run_id": run.run_id}
+
+
+@router.post("/tuning/revert", response_model=GainsOut, responses=CONTROL)
+async def revert_tuning(tuning: TuningDep, _c: ControllerDep, _: ControlClient) -> dict[str, Any]:
+    """The gains in use before the last apply, back on the servos. 409 when nothing was
+    applied or a motion is running."""
+    return await asyncio.to_thread(tuning.revert)
+
+
+@router.get("/tuning/{run_id}", response_model=TuningOut, responses={**NOT_FOUND, **INVALID})
+def get_tuning_run(run_id: str, tuning: TuningDep) -> dict[str, Any]:
+    """State, the fitted models, the suggested gains and their predicted effect."""
+    return _run(tuning, run_id).view()
+
+
+@router.post(
+    "/tuning/{run_id}/apply", response_model=TuningApplied, responses={**CONTROL, **NOT_FOUND}
+)
+async def apply_tuning(
+    run_id: str, tuning: TuningDep, _c: ControllerDep, _: ControlClient
+) -> dict[str, Any]:
+    """The tuned joints' servos use the suggested gains from now on (the previous ones
+    kept for POST /api/tuning/revert). 409 for a run not done or a motion running."""
+    _run(tuning, run_id)
+    return await asyncio.to_thread(tuning.apply, run_id)
+
+
+@router.get(
+    "/tuning/{run_id}/{name}", response_class=FileResponse, responses={**NOT_FOUND, **INVALID}
+)
+def get_tuning_file(run_id: str, name: str, tuning: TuningDep) -> FileResponse:
+    """A run's file: bode.png (measured against fitted, per joint), result.json."""
+    run = _run(tuning, run_id)
+    path = run.folder / name
+    if name not in FILES or not path.is_file():
+        raise HTTPException(404, f"run {run_id} has no file {name!r}")
+    return FileResponse(path, media_type=FILES[name], filename=name)

@@ -1,0 +1,322 @@
+"""The tuning run on the robot: identify each joint, suggest gains, apply, revert.
+
+A ``TuningRun`` (its own thread, like app/calibration/procedure.py's) moves the arm to the
+runs' start point, records a step run and a chirp run through the run manager (the same
+``POST /api/tests/step`` and ``/chirp`` paths, logs under the runs folder), fits each chosen
+joint's model from them (`identify.identify`, the Bode plot in ``bode.png``), and suggests
+gains for the target (`gains.suggest`, checked by `gains.predict` against the gains now in
+use). Applying writes the suggested gains of the tuned joints to the servos through the
+controller (the others keep theirs), into the config file's joint records when the server
+runs from one (written to the servos when it starts), and keeps the previous ones for
+`revert`.
+
+The model is identified under the gains in use when the run starts: it is a P-only loop's
+(`gains.Plant.of`), so a run is refused while tuned gains are in use (revert first).
+
+States: planned -> moving -> step -> chirp -> fitting -> done | failed (a fault, e-stop,
+torque off, a run that did not finish, a fit that failed: ``error`` says why); done ->
+applied.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import threading
+import time
+import tomllib
+import uuid
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from app.calibration.procedure import Stopped, _require_motion
+from app.config import Settings
+from app.control.controller import Controller
+from app.control.errors import GoalRejected, MotionRefused
+from app.runs.logs import read_csv_rows
+from app.runs.manager import RunManager
+from app.runs.paths import ChirpParams, StepParams
+from app.tuning.gains import Plant, Suggestion, Target, TuningError, predict, suggest
+from app.tuning.identify import JOINTS, IdentificationError, JointFit, identify
+from hardware.bus import PositionGains
+from hardware.calibration import SECTION, save
+
+log = logging.getLogger(__name__)
+START_M = (0.0, 0.0, -0.24)  # where both runs start (the runs' default offset) [m]
+STEP = StepParams(size_m=0.004, duration_s=1.5, offset_m=START_M)
+CHIRP = ChirpParams(amplitude_m=0.003, f0_hz=0.5, f1_hz=8.0, duration_s=6.0, offset_m=START_M)
+MOVE_TIMEOUT_S = 60.0
+RUN_TIMEOUT_S = 120.0  # a starved twin runs slower than the wall clock
+POLL_S = 0.01
+
+
+def gains_out(gains: PositionGains) -> dict[str, int]:
+    """The API's form of a servo's gains: p, i, d, ff1, ff2 (register units)."""
+    return {
+        "p": gains.p,
+        "i": gains.i,
+        "d": gains.d,
+        "ff1": gains.feedforward_1st,
+        "ff2": gains.feedforward_2nd,
+    }
+
+
+def _finite(values: dict[str, float]) -> dict[str, float | None]:
+    return {k: (float(v) if math.isfinite(v) else None) for k, v in values.items()}
+
+
+@dataclass
+class TuningRun:
+    """One tuning: the joints (1..3) and target, progress, models and suggestions per
+    joint, and its files (``folder``)."""
+
+    run_id: str
+    joints: tuple[int, ...]
+    target: Target
+    servo_ids: tuple[int, ...]  # the legs' servo ids, joint order
+    current: dict[int, PositionGains]  # the gains in use when it started, per servo id
+    folder: Path
+    state: str = "planned"
+    error: str | None = None
+    runs: dict[str, str] = field(default_factory=dict)  # kind -> run id
+    fits: list[JointFit] = field(default_factory=list)
+    suggestions: dict[int, Suggestion] = field(default_factory=dict)  # servo id -> suggestion
+    predicted_now: dict[int, dict[str, float | None]] = field(default_factory=dict)
+
+    def servo(self, joint: int) -> int:
+        return self.servo_ids[joint - 1]
+
+    def view(self) -> dict[str, Any]:
+        """The API's body (GET /api/tuning/{run_id}); SI units, gains in register units."""
+        return {
+            "run_id": self.run_id,
+            "state": self.state,
+            "joints": list(self.joints),
+            "target": asdict(self.target),
+            "error": self.error,
+            "runs": dict(self.runs),
+            "model": {
+                str(self.servo(f.joint)): {
+                    "joint": f.joint,
+                    **_finite(f.model.as_dict()),
+                    "rmse_rad": f.rmse_rad,
+                    "nrmse": f.nrmse,
+                    "samples": f.samples,
+                }
+                for f in self.fits
+            },
+            "suggested": {str(sid): gains_out(s.gains) for sid, s in self.suggestions.items()},
+            "predicted": {
+                str(sid): {
+                    "suggested": _finite(s.prediction.as_dict()),
+                    "current": self.predicted_now.get(sid),
+                    "crossover_target_hz": s.crossover_hz,
+                    "meets_target": s.meets_target,
+                }
+                for sid, s in self.suggestions.items()
+            },
+            "files": sorted(p.name for p in self.folder.glob("*") if p.is_file()),
+        }
+
+
+class TuningManager:
+    """Starts tuning runs on one controller (recording through ``runs``), keeps them in
+    memory by id, applies one and reverts it."""
+
+    def __init__(
+        self,
+        controller: Controller,
+        runs: RunManager,
+        folder: Path,
+        busy: Callable[[], str | None] = lambda: None,
+        config_path: Path | None = None,
+    ) -> None:
+        self.controller, self.runs, self.folder, self.busy = controller, runs, Path(folder), busy
+        self.config_path = config_path
+        self._runs: dict[str, TuningRun] = {}
+        self._previous: list[dict[int, PositionGains]] = []  # what apply replaced, last on top
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+
+    def get(self, run_id: str) -> TuningRun | None:
+        return self._runs.get(run_id)
+
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self, joints: tuple[int, ...], target: Target) -> TuningRun:
+        """Start a run (returns at once; its thread moves the arm).
+
+        Raises:
+            TuningError: joints that are not 1..3, none, or repeated (422).
+            MotionRefused: the robot may not move now, a run is in progress, or tuned
+                gains are in use (409).
+        """
+        if not joints or len(set(joints)) != len(joints) or not set(joints) <= set(JOINTS):
+            raise TuningError(f"joints = {list(joints)}: distinct joints of {list(JOINTS)}")
+        with self._lock:
+            if self.running():
+                raise MotionRefused("a tuning run is in progress")
+            if (other := self.busy()) is not None:
+                raise MotionRefused(other)
+            _require_motion(self.controller.snapshot())
+            current = self.controller.gains
+            if any(g.i or g.d for g in current.values()):
+                raise MotionRefused(
+                    "tuned gains are in use: the model is identified under P only; "
+                    "POST /api/tuning/revert first"
+                )
+            run_id = "tune-" + time.strftime("%Y%m%d-%H%M%S") + "-" + uuid.uuid4().hex[:4]
+            folder = self.folder / run_id
+            folder.mkdir(parents=True, exist_ok=True)
+            servo_ids = tuple(self.controller.servo_ids)
+            run = TuningRun(run_id, tuple(joints), target, servo_ids, current, folder)
+            self._runs[run_id] = run
+            self._stop.clear()
+            self._thread = threading.Thread(
+                target=self._execute, args=(run,), name="deltadash-tuning", daemon=True
+            )
+            self._thread.start()
+            return run
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+
+    # ---- the run's thread ----
+    def _execute(self, run: TuningRun) -> None:
+        try:
+            logs = {}
+            for kind, params in (("step", STEP), ("chirp", CHIRP)):
+                run.state = "moving"
+                self._move_to_start()
+                run.state = kind
+                logs[kind] = self._record(run, kind, params)
+            run.state = "fitting"
+            chirp = (CHIRP.f0_hz, CHIRP.f1_hz, CHIRP.duration_s)
+            fits, bodes = identify(
+                read_csv_rows(logs["step"]), read_csv_rows(logs["chirp"]), chirp, run.joints
+            )
+            run.fits = fits
+            from app.tuning.identify import bode_figure  # matplotlib's figure: only here
+
+            bode_figure(fits, bodes, run.folder / "bode.png")
+            for fit in fits:
+                sid = run.servo(fit.joint)
+                plant = Plant.of(fit.model, run.current[sid].p)
+                run.suggestions[sid] = suggest(plant, run.target)
+                now = predict(plant, run.current[sid], run.target.step_rad)
+                run.predicted_now[sid] = _finite(now.as_dict())
+            run.state = "done"
+        except (Stopped, IdentificationError, TuningError, GoalRejected, MotionRefused) as exc:
+            run.state, run.error = "failed", str(exc)
+        except Exception as exc:  # a bug ends the run, saying so, never the server
+            log.exception("tuning run %s failed", run.run_id)
+            run.state, run.error = "failed", f"internal error: {exc!r}"
+        self._save(run)
+
+    def _save(self, run: TuningRun) -> None:
+        (run.folder / "result.json").write_text(json.dumps(run.view(), indent=1))
+
+    def _wait(self, what: str, until: Callable[[], bool], timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        while not until():
+            if self._stop.is_set():
+                raise Stopped("the server is shutting down")
+            _require_motion(self.controller.snapshot(), Stopped)
+            if time.monotonic() > deadline:
+                raise Stopped(f"timed out after {timeout_s:g} s waiting for {what}")
+            time.sleep(POLL_S)
+
+    def _move_to_start(self) -> None:
+        self.controller.move(point=START_M).result(timeout=MOVE_TIMEOUT_S)
+        self._wait(
+            "the move to the start point",
+            lambda: self.controller.snapshot().mode == "idle",
+            MOVE_TIMEOUT_S,
+        )
+
+    def _record(self, run: TuningRun, kind: str, params: Any) -> Path:
+        """Run `params` through the run manager; the log's path once it is done."""
+        recorded = self.runs.start(params, kind)
+        run.runs[kind] = recorded.run_id
+        self._wait(f"the {kind} run", lambda: recorded.state != "running", RUN_TIMEOUT_S)
+        if recorded.state != "done":
+            raise Stopped(f"the {kind} run {recorded.run_id} ended {recorded.state}")
+        return recorded.folder / "log.csv"
+
+    # ---- apply and revert ----
+    def apply(self, run_id: str) -> dict[str, Any]:
+        """The servos of the run's joints use its suggested gains from now on (the others
+        keep theirs); the gains replaced are kept for `revert`.
+
+        Raises:
+            MotionRefused: the run is not done (running, failed, applied already), or a
+                motion is running (409).
+        """
+        run = self._runs[run_id]
+        if run.state == "applied":
+            raise MotionRefused(f"run {run_id} is applied already")
+        if run.state != "done":
+            raise MotionRefused(f"run {run_id} is {run.state}: only a done run can be applied")
+        with self._lock:
+            before = self.controller.gains
+            wanted = {**before, **{sid: s.gains for sid, s in run.suggestions.items()}}
+            in_use = self.controller.set_gains(wanted).result(timeout=5.0)
+            self._previous.append(before)
+            run.state = "applied"
+            written = self._write_config(in_use)
+        self._save(run)
+        gains = {str(k): gains_out(g) for k, g in in_use.items()}
+        return {"run_id": run_id, "gains": gains, "config_written": written}
+
+    def revert(self) -> dict[str, Any]:
+        """The gains in use before the last apply, back on the servos.
+
+        Raises MotionRefused: nothing was applied, or a motion is running (409)."""
+        with self._lock:
+            if not self._previous:
+                raise MotionRefused("no applied tuning to revert")
+            in_use = self.controller.set_gains(self._previous[-1]).result(timeout=5.0)
+            self._previous.pop()
+            written = self._write_config(in_use)
+        gains = {str(k): gains_out(g) for k, g in in_use.items()}
+        return {"gains": gains, "config_written": written}
+
+    def _write_config(self, gains: dict[int, PositionGains]) -> str | None:
+        """The gains into the config file's joint records, when the server runs from one
+        (the server then writes them to the servos when it starts); its path, or None."""
+        if self.config_path is None:
+            return None
+        save_gains(self.config_path, self.controller.settings, gains)
+        return str(self.config_path)
+
+
+def save_gains(path: Path, settings: Settings, gains: dict[int, PositionGains]) -> None:
+    """Write `gains` (per leg servo id) as each ``[[hardware.joints]]`` record's ``gains``
+    in the TOML file `path`, keeping everything else; joint records the file lacks are
+    written from `settings` (the calibration in use) first."""
+    if not path.exists() or not _has_joint_records(path):
+        save(path, [joint.calibration() for joint in settings.hardware.joints])
+    with open(path, "rb") as file:
+        config = tomllib.load(file)
+    for record in config[SECTION]["joints"]:
+        sid = record.get("servo_id")
+        if sid in gains:
+            record["gains"] = gains_out(gains[sid])
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with open(tmp, "wb") as file:
+        tomli_w.dump(config, file)
+    tmp.replace(path)  # atomic, as hardware/calibration.py's save
+
+
+def _has_joint_records(path: Path) -> bool:
+    with open(path, "rb") as file:
+        return bool(tomllib.load(file).get(SECTION, {}).get("joints"))

@@ -1,0 +1,246 @@
+"""The tuning API (issue 21): its refusals, apply and revert reaching the servos' registers
+(the emulated bus: real packets, the emulator's control tables), and one whole run on the
+twin (identify, suggest, apply, revert)."""
+
+from __future__ import annotations
+
+import pytest
+
+from app.tuning.gains import Plant, Target, predict, suggest
+from app.tuning.identify import JointModel
+from app.tuning.procedure import TuningRun, gains_out
+from hardware.bus import PositionGains
+from hardware.dynamixel.control_table import Reg
+from tests.support.app_client import make_client, torque_on
+from tests.support.lease import take_lease
+from tests.support.wait import ok_json, wait_for
+
+FACTORY = {"p": 800, "i": 0, "d": 0, "ff1": 0, "ff2": 0}
+REGISTERS = {
+    "p": Reg.POSITION_P_GAIN,
+    "i": Reg.POSITION_I_GAIN,
+    "d": Reg.POSITION_D_GAIN,
+    "ff1": Reg.FEEDFORWARD_1ST_GAIN,
+    "ff2": Reg.FEEDFORWARD_2ND_GAIN,
+}
+
+
+@pytest.fixture(scope="module")
+def client(tmp_path_factory):
+    with make_client(tmp_path_factory.mktemp("tune")) as c:
+        yield c
+
+
+def _registers(client, servo_id: int) -> dict[str, int]:
+    table = client.app.state.backend.emulator.servo(servo_id).table
+    return {name: table.get(reg) for name, reg in REGISTERS.items()}
+
+
+def _done_run(client, joints=(1, 3)) -> TuningRun:
+    """A finished run, as a run's thread leaves it, with gains suggested for two joints of
+    different models (so each servo gets its own)."""
+    manager = client.app.state.tuning
+    ids = tuple(client.app.state.controller.servo_ids)
+    run_id = "tune-test-" + "".join(map(str, joints))
+    folder = manager.folder / run_id
+    folder.mkdir(parents=True, exist_ok=True)
+    gains = client.app.state.controller.gains
+    run = TuningRun(run_id, joints, Target(), ids, gains, folder, state="done")
+    for joint, wn in zip(joints, (55.0, 70.0), strict=False):
+        plant = Plant.of(JointModel(1.0, wn, 0.75, 0.008))
+        run.suggestions[ids[joint - 1]] = suggest(plant, Target(bandwidth_hz=15.0))
+        run.predicted_now[ids[joint - 1]] = predict(plant, PositionGains()).as_dict()
+    manager._runs[run.run_id] = run
+    return run
+
+
+def test_status_shows_the_factory_gains_per_servo(client):
+    status = ok_json(client.get("/api/status"))
+    ids = status["joints"]["servo_ids"]
+    assert status["gains"] == {str(i): FACTORY for i in ids}
+    assert all(_registers(client, i) == FACTORY for i in ids)
+
+
+@pytest.mark.parametrize(
+    ("body", "field"),
+    [
+        ({"joints": [4]}, "joints"),
+        ({"joints": [1, 1]}, "joints"),
+        ({"joints": []}, "joints"),
+        ({"joints": ["1"]}, "joints"),
+        ({"target": {"bandwidth_hz": -1.0}}, "bandwidth_hz"),
+        ({"target": {"overshoot_pct": 90.0}}, "overshoot_pct"),
+        ({"target": {"wobble": 1}}, "wobble"),
+        ({"jonts": [1]}, "jonts"),
+    ],
+)
+def test_bad_input_is_a_422_naming_the_field_and_nothing_moves(client, body, field):
+    take_lease(client)
+    torque_on(client)
+    answer = client.post("/api/tuning/run", json=body)
+    assert answer.status_code == 422, answer.text
+    assert field in answer.text
+    assert client.app.state.tuning.running() is False
+
+
+def test_a_run_needs_the_lease_and_torque(client):
+    client.headers.pop("X-Lease", None)
+    answer = client.post("/api/tuning/run", json={"joints": [1]})
+    assert answer.status_code == 409 and "lease" in answer.text.lower(), answer.text
+    take_lease(client)
+    ok_json(client.post("/api/torque", json={"enabled": False}))
+    answer = client.post("/api/tuning/run", json={"joints": [1]})
+    assert answer.status_code == 409 and "torque" in answer.text, answer.text
+    assert client.app.state.tuning.running() is False
+
+
+def test_unknown_runs_are_404_and_revert_without_apply_is_409(client):
+    take_lease(client)
+    assert client.get("/api/tuning/nope").status_code == 404
+    assert client.post("/api/tuning/nope/apply").status_code == 404
+    answer = client.post("/api/tuning/revert")
+    assert answer.status_code == 409 and "revert" in answer.text, answer.text
+
+
+def test_apply_writes_each_servos_registers_and_revert_restores_them(client):
+    take_lease(client)
+    torque_on(client)
+    run = _done_run(client)
+    ids = run.servo_ids
+    body = ok_json(client.get(f"/api/tuning/{run.run_id}"))
+    suggested = body["suggested"]
+    assert set(suggested) == {str(ids[0]), str(ids[2])}
+    assert suggested[str(ids[0])] != suggested[str(ids[2])]  # two models, two sets
+    assert all(0 <= v <= 16383 for g in suggested.values() for v in g.values())
+
+    applied = ok_json(client.post(f"/api/tuning/{run.run_id}/apply"))
+    expected = {str(ids[0]): suggested[str(ids[0])], str(ids[1]): FACTORY}
+    expected[str(ids[2])] = suggested[str(ids[2])]
+    assert applied["gains"] == expected
+    # the servos' own registers hold them, read from the emulator's control tables
+    for sid in ids:
+        assert _registers(client, sid) == expected[str(sid)], sid
+    assert ok_json(client.get("/api/status"))["gains"] == expected
+    again = client.post(f"/api/tuning/{run.run_id}/apply")
+    assert again.status_code == 409 and "applied already" in again.text
+    # a run is refused while tuned gains are in use: its model would not be a P loop's
+    refused = client.post("/api/tuning/run", json={"joints": [1]})
+    assert refused.status_code == 409 and "revert" in refused.text, refused.text
+
+    reverted = ok_json(client.post("/api/tuning/revert"))
+    assert reverted["gains"] == {str(i): FACTORY for i in ids}
+    for sid in ids:
+        assert _registers(client, sid) == FACTORY, sid
+    assert ok_json(client.get("/api/status"))["gains"] == reverted["gains"]
+    assert client.post("/api/tuning/revert").status_code == 409  # nothing more to revert
+
+
+def test_a_run_not_done_cannot_be_applied(client):
+    take_lease(client)
+    run = _done_run(client, joints=(2,))
+    run.state = "failed"
+    answer = client.post(f"/api/tuning/{run.run_id}/apply")
+    assert answer.status_code == 409 and "failed" in answer.text
+    assert ok_json(client.get("/api/status"))["gains"]["1"] == FACTORY
+
+
+# What this test looks at is the identification and the gains, not the loop's health: a
+# simulator starved on a loaded 2-core machine may stall for seconds without faulting.
+PATIENT = {"stale_feedback_s": 5.0, "following_error_time_s": 5.0}
+
+
+@pytest.mark.slow  # a step and a chirp run on the twin
+def test_a_run_on_the_twin_identifies_suggests_applies_and_reverts(tmp_path):
+    with make_client(tmp_path, backend="sim", safety=PATIENT) as twin:
+        take_lease(twin)
+        torque_on(twin)
+        run_id = ok_json(twin.post("/api/tuning/run", json={"joints": [1, 2, 3]}))["run_id"]
+
+        def ended() -> dict | None:
+            body = ok_json(twin.get(f"/api/tuning/{run_id}"))
+            return body if body["state"] in ("done", "failed") else None
+
+        body = wait_for(
+            ended,
+            f"tuning run {run_id} to end",
+            600.0,
+            poll_s=0.5,
+            seen=lambda: ok_json(twin.get(f"/api/tuning/{run_id}")),
+        )
+        assert body["state"] == "done", body
+        ids = [str(i) for i in twin.app.state.controller.servo_ids]
+        assert set(body["model"]) == set(body["suggested"]) == set(body["predicted"]) == set(ids)
+        for sid in ids:
+            model, predicted = body["model"][sid], body["predicted"][sid]
+            assert 4.0 < model["bandwidth_hz"] < 15.0, model  # the factory loop's
+            assert predicted["meets_target"], predicted
+            after, before = predicted["suggested"], predicted["current"]
+            assert after["overshoot_pct"] <= 5.0
+            assert after["bandwidth_hz"] > before["bandwidth_hz"], predicted
+        assert {"bode.png", "result.json"} <= set(body["files"])
+        png = twin.get(f"/api/tuning/{run_id}/bode.png")
+        assert png.status_code == 200 and png.content.startswith(b"\x89PNG")
+
+        ok_json(twin.post(f"/api/tuning/{run_id}/apply"))
+        bus = twin.app.state.backend.bus  # the twin's servo models, in their process
+        for sid, gains in zip(ids, bus.read_gains(), strict=True):
+            assert gains_out(gains) == body["suggested"][sid], sid
+        ok_json(twin.post("/api/tuning/revert"))
+        assert bus.read_gains() == [PositionGains()] * 3
+
+
+def test_apply_writes_the_config_and_a_server_started_from_it_uses_the_gains(tmp_path):
+    from app.config import load_settings
+    from hardware.calibration import load, save
+
+    config = tmp_path / "robot.toml"
+    config.write_text("[server]\nhttp_port = 8123\n")  # other sections must survive
+    with make_client(tmp_path / "first", config_path=config) as first:
+        take_lease(first)
+        torque_on(first)
+        run = _done_run(first)
+        applied = ok_json(first.post(f"/api/tuning/{run.run_id}/apply"))
+        assert applied["config_written"] == str(config)
+        expected = applied["gains"]
+    settings = load_settings(config)
+    assert settings.server.http_port == 8123
+    written = {str(j.servo_id): j.gains.model_dump() for j in settings.hardware.joints}
+    assert written == expected
+    # the calibration's own reader and writer leave the gains alone
+    calibrations = load(config)
+    save(config, calibrations)
+    assert load_settings(config).hardware.joints == settings.hardware.joints
+
+    joints = [j.model_dump() for j in settings.hardware.joints]
+    with make_client(tmp_path / "second", hardware={"joints": joints}) as second:
+        assert ok_json(second.get("/api/status"))["gains"] == expected
+        for sid in run.servo_ids:
+            assert _registers(second, sid) == expected[str(sid)], sid
+
+
+def test_config_gains_out_of_the_registers_range_are_refused_naming_the_field():
+    from app.config import ConfigError, load_settings
+
+    joints = [{"servo_id": i, "gains": {"p": 20000}} for i in (1, 2, 3)]
+    with pytest.raises(ConfigError, match=r"hardware\.joints\.0\.gains\.p: .* 16383"):
+        load_settings(hardware={"joints": joints})
+
+
+def test_gains_do_not_change_while_a_motion_runs(client):
+    take_lease(client)
+    torque_on(client)
+    run = _done_run(client, joints=(1, 2, 3))
+    ok_json(client.post("/api/move", json={"position_m": [0.0, 0.0, -0.26], "duration_s": 60}))
+    wait_for(
+        lambda: ok_json(client.get("/api/status"))["mode"] != "idle",
+        "the move to start",
+        seen=lambda: ok_json(client.get("/api/status"))["mode"],
+    )
+    answer = client.post(f"/api/tuning/{run.run_id}/apply")
+    assert answer.status_code == 409 and "rests" in answer.text, answer.text
+    ids = run.servo_ids
+    assert all(_registers(client, sid) == FACTORY for sid in ids)
+    assert ok_json(client.get("/api/status"))["gains"] == {str(i): FACTORY for i in ids}
+    assert run.state == "done"  # still offered
+    ok_json(client.post("/api/estop"))  # ends the move
+    ok_json(client.post("/api/reset"))

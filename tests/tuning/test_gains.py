@@ -1,0 +1,130 @@
+"""The gain rule by its laws: the plant a P-only fit implies gives back the loop it was
+fitted from; a higher target gives a higher P; what is offered meets its target and fits
+the registers; the prediction of the factory loop is the fitted model's."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from app.tuning.gains import (
+    REGISTER_MAX,
+    TICKS_PER_RAD,
+    Plant,
+    Target,
+    TuningError,
+    continuous,
+    predict,
+    registers,
+    suggest,
+)
+from app.tuning.identify import JointModel
+from hardware.bus import PositionGains
+
+# the twin's joints as the identification found them (tests/tuning/test_identify.py)
+MODEL = JointModel(gain=1.0, wn_rad_s=55.0, zeta=0.75, delay_s=0.008)
+PLANT = Plant.of(MODEL)
+
+
+def test_the_plant_closed_by_the_factory_p_is_the_fitted_loop():
+    # Kp0 g / (s^2 + a s + Kp0 g) must be wn^2 / (s^2 + 2 zeta wn s + wn^2)
+    kp0, _, _ = continuous(PositionGains())
+    assert kp0 * PLANT.g == pytest.approx(MODEL.wn_rad_s**2)
+    assert PLANT.a == pytest.approx(2 * MODEL.zeta * MODEL.wn_rad_s)
+    # and its predicted bandwidth is the model's (the firmware's 1 ms delay aside)
+    seen = predict(Plant(PLANT.g, PLANT.a, 0.0), PositionGains())
+    assert seen.bandwidth_hz == pytest.approx(MODEL.bandwidth_hz(), rel=0.02)
+
+
+def test_registers_and_continuous_gains_are_inverse():
+    gains = PositionGains(p=2000, i=1500, d=3000, feedforward_1st=0, feedforward_2nd=0)
+    kp, ki, kd = continuous(gains)
+    assert kp == pytest.approx(2000 / 128 * TICKS_PER_RAD)  # KpP = P / 128 per tick
+    assert registers(kp, ki, kd, 0.0, 0.0) == gains
+
+
+def test_a_higher_target_bandwidth_gives_a_higher_p_and_bandwidth():
+    found = [suggest(PLANT, Target(bandwidth_hz=f)) for f in (5.0, 10.0, 20.0, 30.0)]
+    p = [s.gains.p for s in found]
+    bandwidth = [s.prediction.bandwidth_hz for s in found]
+    assert p == sorted(p) and len(set(p)) == len(p), p
+    assert bandwidth == sorted(bandwidth), bandwidth
+    # the predicted bandwidth is near the target where the target was met as asked
+    for target, s in zip((5.0, 10.0, 20.0, 30.0), found, strict=True):
+        assert s.meets_target
+        assert s.crossover_hz == pytest.approx(target)
+        assert 0.9 * target < s.prediction.bandwidth_hz < 1.5 * target, s
+
+
+@pytest.mark.parametrize("bandwidth_hz", [2.0, 15.0, 40.0, 100.0])
+@pytest.mark.parametrize("overshoot_pct", [2.0, 5.0])
+def test_what_is_offered_meets_the_target_within_the_registers(bandwidth_hz, overshoot_pct):
+    target = Target(bandwidth_hz=bandwidth_hz, overshoot_pct=overshoot_pct)
+    s = suggest(PLANT, target)
+    assert s.meets_target, s
+    # the prediction is of the clipped registers, and it is independent of suggest
+    again = predict(PLANT, s.gains, target.step_rad)
+    assert again == s.prediction
+    assert again.overshoot_pct <= overshoot_pct
+    assert again.phase_margin_deg >= target.phase_margin_deg - 1.0
+    assert again.peak_pwm_fraction <= target.pwm_fraction
+    if bandwidth_hz >= 10.0:  # a slow loop's integral tail outlasts the simulated step
+        assert again.static_error_pct < 0.5
+    values = (s.gains.p, s.gains.i, s.gains.d, s.gains.feedforward_1st, s.gains.feedforward_2nd)
+    assert all(isinstance(v, int) and 0 <= v <= REGISTER_MAX for v in values), s.gains
+
+
+def test_huge_gains_are_clipped_to_the_registers():
+    gains = registers(1e9, 1e9, 1e9, 1e9, 1e9)
+    assert gains == PositionGains(*(REGISTER_MAX,) * 5)
+    assert registers(-1.0, -1.0, -1.0, -1.0, -1.0) == PositionGains(0, 0, 0, 0, 0)
+
+
+def test_the_step_check_sees_overshoot_and_saturation():
+    # P only with no damping from D on a light plant rings: the check must say so
+    light = Plant(g=PLANT.g * 10, a=PLANT.a / 10, tau_s=0.001)
+    ringing = predict(light, PositionGains(p=3000))
+    assert ringing.overshoot_pct > 20.0
+    # a 0.3 rad step at P 16383 asks for far more than the PWM limit
+    assert predict(PLANT, PositionGains(p=REGISTER_MAX), 0.3).peak_pwm_fraction == 1.0
+    # and the integral's absence leaves no static error on this plant (no load): 0
+    assert predict(PLANT, PositionGains()).static_error_pct < 0.1
+
+
+def test_the_feedforward_gains_are_the_models_velocity_and_acceleration_gains():
+    s = suggest(PLANT, Target(bandwidth_hz=10.0))
+    # PWM = (y'' + a y') / g: FF1 / 4 per (tick per period) of speed, FF2 / 4 per
+    # (tick per period^2) of acceleration
+    dt = 0.001
+    kv = s.gains.feedforward_1st / 4 * TICKS_PER_RAD * dt
+    ka = s.gains.feedforward_2nd / 4 * TICKS_PER_RAD * dt * dt
+    assert kv == pytest.approx(PLANT.a / PLANT.g, rel=0.01)
+    assert ka == pytest.approx(1 / PLANT.g, rel=0.01)
+    off = suggest(PLANT, Target(bandwidth_hz=10.0, feedforward=False))
+    assert (off.gains.feedforward_1st, off.gains.feedforward_2nd) == (0, 0)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("bandwidth_hz", 0.0),
+        ("bandwidth_hz", math.nan),
+        ("phase_margin_deg", 95.0),
+        ("overshoot_pct", -1.0),
+        ("pwm_fraction", 2.0),
+    ],
+)
+def test_bad_targets_are_refused_naming_the_field(field, value):
+    with pytest.raises(TuningError, match=field):
+        Target(**{field: value})
+
+
+def test_bad_plants_are_refused():
+    with pytest.raises(TuningError, match="p_identified"):
+        Plant.of(MODEL, p_identified=0)
+    with pytest.raises(TuningError):
+        suggest(Plant(np.nan, 1.0, 0.001))
+    with pytest.raises(TuningError):
+        suggest(Plant(1.0, -1.0, 0.001))
