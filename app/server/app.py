@@ -133,6 +133,7 @@ def create_app(
                 settings.runs.folder_path / "calibration",
                 busy=lambda: app.state.runs.busy() or _tuning_busy(app),
                 config_path=config_path,
+                probe=_twin_probe(settings, controller),
             )
             app.state.tuning = TuningManager(
                 controller,
@@ -140,7 +141,6 @@ def create_app(
                 settings.runs.folder_path / "tuning",
                 busy=lambda: app.state.runs.busy() or _calibration_busy(app),
                 config_path=config_path,
-                probe=_twin_probe(settings, controller),
             )
             controller.pose_status = app.state.world.tracker.status
             runs = lambda: app.state.runs  # noqa: E731
