@@ -241,6 +241,9 @@ def jog_source(state: LoopState, ctx: CommandContext, renewal: bool = False) -> 
     return state.source
 
 
+PHI_SAME_RAD = 1e-9  # a goal's wrist angle this close to the wrist's goal does not turn it
+
+
 def jog_to(
     state: LoopState,
     ctx: CommandContext,
@@ -250,7 +253,16 @@ def jog_to(
 ) -> list[float]:
     """Jog the tip towards ``goal`` [m] at wrist angle ``phi_rad`` [rad] (both already
     gated), starting a jog source if none is active; ``speed_m_s`` caps its speed per axis
-    (None: the configured jog limit)."""
+    (None: the configured jog limit).
+
+    A goal that turns a fitted wrist goes as a :func:`move` instead (the jog's limits), with
+    phi the path's fourth axis: a jog would put the legs at the new angle at once while the
+    wrist still turns, the tip off its goal by up to the tool offset times the turn."""
+    wrist = ctx.wrist_limits is not None and ctx.gate.wrist_min_rad is not None
+    if wrist and abs(phi_rad - start_phi(state)) > PHI_SAME_RAD:
+        state.hold_deadline_s = state.hold_velocity_m_s = None  # it ends a held jog
+        move(state, ctx, goal, None, False, phi_rad)
+        return goal.tolist()
     source = jog_source(state, ctx)
     _hold_tool_at(state, ctx, phi_rad)
     return _retarget(state, source, goal, speed_m_s)

@@ -154,3 +154,24 @@ def test_the_goal_shown_is_the_move_s_target_and_a_jog_stops_the_turn_where_it_i
     assert np.ptp(goals[:, 3]) <= 1e-12 and turned < 1.0
     assert control.state.phi_rad == pytest.approx(turned, abs=1e-12)
     np.testing.assert_allclose(_tips(control, goals)[-1], control.state.goal_m, atol=1e-9)
+
+
+def test_a_goal_that_turns_the_wrist_keeps_the_tip_on_its_path() -> None:
+    """A goal (the page's phi keys, POST /api/goal) that turns the wrist moves the legs with
+    it: every write's tip stays on the straight path to the goal (here the tip stays put),
+    never the legs at the new angle while the wrist still turns (off by the offset times the
+    turn: 18 mm here)."""
+    control, fake = _loop(phi0=0.3)
+    tip = control.state.point_m.copy()
+    phi = control.gate.check_phi(0.8)
+    goal = control.gate.check_point(tip, phi)
+    commands.jog_to(control.state, control.ctx, goal, phi_rad=phi)
+    start = len(fake.calls)
+    for _ in range(MAX_TICKS):  # until the wrist is there (a jog source never ends itself)
+        control.step()
+        if fake.calls[-1][0] == "write_goal" and fake.calls[-1][1][3] == pytest.approx(0.8):
+            break
+    goals = np.array([call[1] for call in fake.calls[start:] if call[0] == "write_goal"])
+    assert len(goals) > 10 and goals[-1, 3] == pytest.approx(0.8, abs=1e-12)
+    np.testing.assert_allclose(_tips(control, goals), np.tile(tip, (len(goals), 1)), atol=1e-6)
+    assert np.abs(np.diff(goals[:, 3])).max() <= STEP_RAD * (1 + 1e-9)
