@@ -1,6 +1,7 @@
 """The thesis's tracking test on the twin with the gains app/tuning/gains.py suggests.
 
 Usage: python benchmarks/tuned_sinusoid.py [--seconds 3] [--bandwidth 20] [--lead 0.02]
+       [--gravity-compensation]
        [--wn 53] [--zeta 0.75] [--delay 0.008]
 
 The joint model is the one the identification fits on the twin (wn ~53 rad/s, zeta ~0.75,
@@ -9,7 +10,9 @@ the target bandwidth (tighter and tighter tick-noise D caps), are checked on the
 `twin_check.check` (simulated time): the thesis sinusoid without and with the loop's lead
 (--lead), RMSE of FK of the encoders per axis, the share of time a PWM is at its limit,
 the 20 mm z step's overshoot and the error at rest at five points; and the limits each
-misses. The last line names the gains offered.
+misses. --gravity-compensation: the goals shifted by the loop's gravity offset (as with
+``[control] gravity_compensation = true``; it acts only on gains without I), and the
+candidates tried both with and without I. The last line names the gains offered.
 """
 
 from __future__ import annotations
@@ -45,17 +48,25 @@ def main() -> None:
     parser.add_argument("--wn", type=float, default=53.0, help="identified wn [rad/s]")
     parser.add_argument("--zeta", type=float, default=0.75, help="identified damping")
     parser.add_argument("--delay", type=float, default=0.008, help="identified delay [s]")
+    parser.add_argument("--gravity-compensation", action="store_true")
     args = parser.parse_args()
+    gravity = args.gravity_compensation
     plant = Plant.of(JointModel(1.0, args.wn, args.zeta, args.delay))
     print(
         "| gains | P I D | plain RMSE X / Y / Z [mm] | at limit | lead RMSE X / Y / Z [mm] "
         "| at limit | overshoot [%] | rest at 5 points [mm] | fails |"
     )
     factory = PositionGains()
-    print(row("factory", factory, check(factory, args.lead, args.seconds)), flush=True)
-    found = offer(plant, Target(bandwidth_hz=args.bandwidth), args.lead, args.seconds)
+    print(
+        row("factory", factory, check(factory, args.lead, args.seconds, gravity=gravity)),
+        flush=True,
+    )
+    found = offer(
+        plant, Target(bandwidth_hz=args.bandwidth), args.lead, args.seconds, gravity=gravity
+    )
     for target, gains, verdict in found.tried:
-        print(row(f"pwm_fraction {target.pwm_fraction:g}", gains, verdict), flush=True)
+        name = f"pwm_fraction {target.pwm_fraction:g}" + ("" if target.integral else ", no I")
+        print(row(name, gains, verdict), flush=True)
     print(f"offered: {found.gains} (pwm_fraction {found.target.pwm_fraction:g})")
 
 

@@ -83,8 +83,9 @@ class Target:
     """What the gains aim at: bandwidth_hz [Hz] of the closed position loop,
     phase_margin_deg [deg] at least, overshoot_pct [%] at most for a step of step_rad [rad]
     (the run's 4 mm step is ~0.02 rad) using at most pwm_fraction of the PWM limit,
-    feedforward: suggest FF1 / FF2 (else 0). Raises TuningError naming a field out of
-    range."""
+    feedforward: suggest FF1 / FF2 (else 0), integral: suggest I (else 0, the sag at rest
+    left to the loop's gravity offset, app/control/gravity.py). Raises TuningError naming a
+    field out of range."""
 
     bandwidth_hz: float = 20.0
     phase_margin_deg: float = 60.0
@@ -92,6 +93,7 @@ class Target:
     step_rad: float = 0.02
     pwm_fraction: float = 0.8
     feedforward: bool = True
+    integral: bool = True
 
     def __post_init__(self) -> None:
         checks = (
@@ -286,7 +288,8 @@ def suggest(plant: Plant, target: Target = Target()) -> Suggestion:
     for _ in range(TRIES):
         kp = plant.a * wc / plant.g
         for ratio in INTEGRAL_RATIOS:
-            gains = registers(kp, kp * wc / ratio, kp / plant.a, kv, ka)
+            ki = kp * wc / ratio if target.integral else 0.0
+            gains = registers(kp, ki, kp / plant.a, kv, ka)
             gains = replace(gains, d=min(gains.d, d_cap))
             prediction = predict(plant, gains, target.step_rad)
             meets = (

@@ -24,6 +24,8 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from app.control.gravity import GravityOffset, position_stiffness_nm_rad
+from app.tuning.gains import Plant, Target, suggest
 from hardware.bus import PositionGains
 from hardware.dynamixel.control_table import RAD_PER_TICK
 from hardware.shaft_motion import MotionCommand
@@ -63,7 +65,19 @@ def command(shaft_rad: float, gains: PositionGains) -> MotionCommand:
     )
 
 
-def _send(twin: DeltaTwin, joints: np.ndarray, gains: PositionGains) -> None:
+def _offset(gains: PositionGains, on: bool) -> GravityOffset | None:
+    """The loop's gravity offset under `gains` (``[control] gravity_compensation``): none
+    where off or where the gains have an integral (app/control/gravity.py)."""
+    if not on or gains.i > 0:
+        return None
+    return GravityOffset(THESIS_DELTA, stiffness_nm_rad=position_stiffness_nm_rad(gains.p))
+
+
+def _send(
+    twin: DeltaTwin, joints: np.ndarray, gains: PositionGains, offset: GravityOffset | None
+) -> None:
+    if offset is not None:
+        joints = joints + offset.offset_rad(joints)
     ticks = np.round(twin.shafts_of_joints(joints) / RAD_PER_TICK)
     twin.set_commands([command(float(t * RAD_PER_TICK), gains) for t in ticks])
 
@@ -87,21 +101,27 @@ class Tracking:
 
 
 def sinusoid(
-    gains: PositionGains, seconds: float = 3.0, lead_s: float = 0.0, warmup_s: float = 1.0
+    gains: PositionGains,
+    seconds: float = 3.0,
+    lead_s: float = 0.0,
+    warmup_s: float = 1.0,
+    gravity: bool = False,
 ) -> Tracking:
     """The thesis sinusoid tracked with `gains`, goals `lead_s` [s] ahead, measured over
-    `seconds` [s] after `warmup_s` [s] (module docstring). Raises ValueError for a negative
-    time."""
+    `seconds` [s] after `warmup_s` [s] (module docstring); `gravity`: the goals shifted by
+    the loop's gravity offset where the gains have no integral. Raises ValueError for a
+    negative time."""
     if min(seconds, lead_s, warmup_s) < 0 or seconds == 0:
         raise ValueError("seconds, lead_s, warmup_s: must be >= 0 (seconds > 0)")
     twin, robot = DeltaTwin(), THESIS_DELTA
+    offset = _offset(gains, gravity)
     q = robot.ik(thesis_reference(lead_s)).joints
     twin.reset(robot.ik(thesis_reference(0.0)).joints)
     per_tick = _per_tick(twin)
     errors, peak, saturated, steps = [], 0.0, 0, 0
     for k in range(round((seconds + warmup_s) * RATE_HZ)):
         q = robot.ik(thesis_reference(k / RATE_HZ + lead_s), near=q).joints
-        _send(twin, q, gains)
+        _send(twin, q, gains, offset)
         for _ in range(per_tick):
             twin.step()
             if twin.time_s < warmup_s:
@@ -116,17 +136,20 @@ def sinusoid(
     return Tracking((float(rmse[0]), float(rmse[1]), float(rmse[2])), peak, saturated / steps)
 
 
-def step(gains: PositionGains, duration_s: float = 1.5) -> float:
+def step(gains: PositionGains, duration_s: float = 1.5, gravity: bool = False) -> float:
     """The largest joint overshoot [%] of the 20 mm z step held `duration_s` [s]
-    (module docstring)."""
+    (module docstring); `gravity` as for `sinusoid`."""
     twin, robot = DeltaTwin(), THESIS_DELTA
+    offset = _offset(gains, gravity)
     q0 = robot.ik(HOME_M).joints
+    q1 = robot.ik(HOME_M + STEP_M, near=q0).joints
+    if offset is not None:
+        q0, q1 = q0 + offset.offset_rad(q0), q1 + offset.offset_rad(q1)
     twin.reset(q0)
-    _send(twin, q0, gains)
+    _send(twin, q0, gains, None)
     twin.advance(0.5)
     start = _encoder_joints(twin)
-    q1 = robot.ik(HOME_M + STEP_M, near=q0).joints
-    _send(twin, q1, gains)
+    _send(twin, q1, gains, None)
     goal = twin.joints_of_shafts(np.round(twin.shafts_of_joints(q1) / RAD_PER_TICK) * RAD_PER_TICK)
     size = goal - start
     worst = 0.0
@@ -142,10 +165,13 @@ def _blend(s: float) -> float:
     return 10 * s**3 - 15 * s**4 + 6 * s**5
 
 
-def rest(gains: PositionGains, move_s: float = 1.0, rest_s: float = 1.5) -> list[float]:
+def rest(
+    gains: PositionGains, move_s: float = 1.0, rest_s: float = 1.5, gravity: bool = False
+) -> list[float]:
     """The true platform's distance [m] from each of the five goals after the move and the
-    rest (module docstring): a list of 5."""
+    rest (module docstring): a list of 5; `gravity` as for `sinusoid`."""
     twin, robot = DeltaTwin(), THESIS_DELTA
+    offset = _offset(gains, gravity)
     per_tick = _per_tick(twin)
     out = []
     for point in REST_POINTS_M:
@@ -155,7 +181,7 @@ def rest(gains: PositionGains, move_s: float = 1.0, rest_s: float = 1.5) -> list
         for k in range(round((move_s + rest_s) * RATE_HZ) + 1):
             target = HOME_M + _blend(k / RATE_HZ / move_s) * (goal - HOME_M)
             q = robot.ik(target, near=q).joints
-            _send(twin, q, gains)
+            _send(twin, q, gains, offset)
             twin.step(per_tick)
         out.append(float(np.linalg.norm(twin.platform_m - goal)))
     return out
@@ -208,13 +234,19 @@ def _tracking_fails(t: Tracking, limits: Limits) -> list[str]:
 
 
 def check(
-    gains: PositionGains, lead_s: float = 0.02, seconds: float = 3.0, limits: Limits = Limits()
+    gains: PositionGains,
+    lead_s: float = 0.02,
+    seconds: float = 3.0,
+    limits: Limits = Limits(),
+    gravity: bool = False,
 ) -> Verdict:
-    """All three checks of `gains` on the twin and the limits they miss (`Verdict`)."""
-    plain = sinusoid(gains, seconds)
-    lead = sinusoid(gains, seconds, lead_s)
-    overshoot = step(gains)
-    rest_m = tuple(rest(gains))
+    """All three checks of `gains` on the twin and the limits they miss (`Verdict`);
+    `gravity`: with the loop's gravity offset (``[control] gravity_compensation``), which
+    acts only where the gains have no integral."""
+    plain = sinusoid(gains, seconds, gravity=gravity)
+    lead = sinusoid(gains, seconds, lead_s, gravity=gravity)
+    overshoot = step(gains, gravity=gravity)
+    rest_m = tuple(rest(gains, gravity=gravity))
     failed = []
     if _tracking_fails(plain, limits) and _tracking_fails(lead, limits):
         failed += _tracking_fails(lead, limits)
@@ -230,15 +262,16 @@ def check(
 @dataclass(frozen=True)
 class Offer:
     """The gains offered: `gains`, the `target` they were suggested for, their `verdict`
-    on the twin, and `tried`: (target, verdict) of every candidate, in order."""
+    on the twin, and `tried`: (target, gains, verdict) of every candidate, in order."""
 
     gains: PositionGains
-    target: object
+    target: Target
     verdict: Verdict
-    tried: tuple[tuple[object, PositionGains, Verdict], ...]
+    tried: tuple[tuple[Target, PositionGains, Verdict], ...]
 
 
-PWM_FRACTIONS = (0.8, 0.9, 0.95, 0.98, 0.99)  # tighter and tighter D caps (gains.d_limit)
+# tighter and tighter D caps (gains.d_limit), down to none at 1.0
+PWM_FRACTIONS = (0.8, 0.9, 0.95, 0.98, 0.99, 1.0)
 
 
 def excess(v: Verdict, limits: Limits = Limits()) -> float:
@@ -258,22 +291,30 @@ def _score(v: Verdict, limits: Limits) -> tuple[int, float]:
     return len(v.failed), excess(v, limits)
 
 
-def offer(plant, target, lead_s: float = 0.02, seconds: float = 3.0, limits: Limits = Limits()):
-    """The first of `target`'s variants with a tighter and tighter tick-noise D cap
-    (pwm_fraction in PWM_FRACTIONS at or above the target's) whose suggested gains pass
-    every limit on the twin (`check`); if none passes, the one missing the fewest limits
-    (then the least `excess` over them), its verdict naming what it misses. `plant` and `target` as
-    app/tuning/gains.py's `suggest` takes them."""
-    from app.tuning.gains import suggest  # gains imports no twin: the check sits above it
-
-    tried = []
+def offer(
+    plant: Plant,
+    target: Target,
+    lead_s: float = 0.02,
+    seconds: float = 3.0,
+    limits: Limits = Limits(),
+    gravity: bool = False,
+) -> Offer:
+    """The first of `target`'s variants whose suggested gains (`gains.suggest`) pass every
+    limit on the twin (`check`): a tighter and tighter tick-noise D cap (pwm_fraction in
+    PWM_FRACTIONS at or above the target's), each with the integral and, with `gravity`
+    (the loop's gravity offset on), also without it (the offset then removes the sag). If
+    none passes, the one missing the fewest limits, then the least `excess` over them; its
+    verdict names what it misses."""
+    tried: list[tuple[Target, PositionGains, Verdict]] = []
     fractions = [f for f in PWM_FRACTIONS if f >= target.pwm_fraction] or [target.pwm_fraction]
+    integrals = (True, False) if gravity else (target.integral,)
     for fraction in fractions:
-        variant = replace(target, pwm_fraction=fraction)
-        gains = suggest(plant, variant).gains
-        verdict = check(gains, lead_s, seconds, limits)
-        tried.append((variant, gains, verdict))
-        if verdict.passes:
-            break
+        for integral in integrals:
+            variant = replace(target, pwm_fraction=fraction, integral=integral)
+            gains = suggest(plant, variant).gains
+            verdict = check(gains, lead_s, seconds, limits, gravity)
+            tried.append((variant, gains, verdict))
+            if verdict.passes:
+                return Offer(gains, variant, verdict, tuple(tried))
     best = min(tried, key=lambda t: _score(t[2], limits))
     return Offer(best[1], best[0], best[2], tuple(tried))
