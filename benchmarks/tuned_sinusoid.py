@@ -65,7 +65,8 @@ def main() -> None:
         plant, Target(bandwidth_hz=args.bandwidth), args.lead, args.seconds, gravity=gravity
     )
     for target, gains, verdict in found.tried:
-        name = f"pwm_fraction {target.pwm_fraction:g}" + ("" if target.integral else ", no I")
+        name = f"pwm_fraction {target.pwm_fraction:g}, model overshoot {target.overshoot_pct:g} %"
+        name += "" if target.integral else ", no I"
         print(row(name, gains, verdict), flush=True)
     print(f"offered: {found.gains} (pwm_fraction {found.target.pwm_fraction:g})")
 

@@ -168,3 +168,13 @@ def test_the_predicted_step_sees_the_capped_d():
     full = registers(kp, ki, kp / PLANT.a, 0.0, 0.0)
     capped = PositionGains(full.p, full.i, 700, 0, 0)
     assert predict(PLANT, capped).overshoot_pct > predict(PLANT, full).overshoot_pct + 5.0
+
+
+def test_no_headroom_means_no_d_and_no_integral_means_no_i():
+    assert d_limit(1.0) == 0  # no PWM left above the target: no tick noise allowed
+    s = suggest(PLANT, Target(bandwidth_hz=20.0, pwm_fraction=1.0, integral=False))
+    assert (s.gains.d, s.gains.i) == (0, 0)
+    assert s.meets_target and s.gains.p > 0
+    # without the pole-cancelling D the damping is a / (2 sqrt(g Kp)): P must stay low
+    kp, _, _ = continuous(s.gains)
+    assert PLANT.a / (2 * math.sqrt(PLANT.g * kp)) > 0.6
