@@ -35,9 +35,21 @@ PM_min and an overshoot limit:
    firmware period; the e-manual's KpP = P / 128, KiP = I / 65536, KdP = D / 16, KFF = FF / 4
    on errors in ticks and rates per period, as hardware/sim/xm430.py models them), rounded
    and clipped to the XM430's limits 0..16383.
-6. Checked (`predict`) with the clipped registers: the open loop's crossover and phase
+6. D is capped by the encoder's quantisation. The firmware's D term is D / 16 times the
+   error's change per period in whole ticks (hardware/sim/xm430.py: PWM = P/128 e +
+   I/65536 sum e + D/16 (e_k - e_{k-1}) + ...), so one tick of velocity noise (the encoder
+   stepping by one tick between two periods, which it does at any speed that is not a
+   whole number of ticks per period, and at rest at a tick's edge) is a PWM jump of D / 16.
+   That jump must leave the PWM headroom the target keeps: D / 16 * 1 tick <=
+   (1 - pwm_fraction) * 885, i.e. D <= 16 (1 - pwm_fraction) 885 (2832 at the default 0.8;
+   `d_limit`). When the cap binds, D no longer cancels the pole, the PD loop's damping is
+   (a + g Kd) / (2 sqrt(g Kp)), and the check below lowers wc (hence Kp) until the step's
+   overshoot is back within the limit.
+7. Checked (`predict`) with the clipped registers: the open loop's crossover and phase
    margin, the closed loop's -3 dB bandwidth, and a simulated step of ``step_rad`` through
-   the firmware's discrete PID at dt with its PWM limit (overshoot, peak PWM). While the
+   the firmware's discrete PID at dt with its PWM limit and its encoder (the error in whole
+   ticks, so the D cap's loss of damping and the tick's limit cycle both show in the
+   overshoot), peak PWM. While the
    overshoot exceeds the limit, the PI zero moves down (wc / 80, / 160, / 320: a weaker
    I, a smaller residue); if none passes, or the step's peak PWM is over the target's
    headroom, wc is lowered by 15 % and the rule repeats.
@@ -46,7 +58,7 @@ PM_min and an overshoot limit:
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -71,8 +83,9 @@ class Target:
     """What the gains aim at: bandwidth_hz [Hz] of the closed position loop,
     phase_margin_deg [deg] at least, overshoot_pct [%] at most for a step of step_rad [rad]
     (the run's 4 mm step is ~0.02 rad) using at most pwm_fraction of the PWM limit,
-    feedforward: suggest FF1 / FF2 (else 0). Raises TuningError naming a field out of
-    range."""
+    feedforward: suggest FF1 / FF2 (else 0), integral: suggest I (else 0, the sag at rest
+    left to the loop's gravity offset, app/control/gravity.py). Raises TuningError naming a
+    field out of range."""
 
     bandwidth_hz: float = 20.0
     phase_margin_deg: float = 60.0
@@ -80,6 +93,7 @@ class Target:
     step_rad: float = 0.02
     pwm_fraction: float = 0.8
     feedforward: bool = True
+    integral: bool = True
 
     def __post_init__(self) -> None:
         checks = (
@@ -126,6 +140,14 @@ def continuous(gains: PositionGains) -> tuple[float, float, float]:
 
 def _register(value: float) -> int:
     return int(min(max(round(value), 0), REGISTER_MAX))
+
+
+def d_limit(pwm_fraction: float) -> int:
+    """The largest Position D Gain register whose response to one tick of velocity noise,
+    D / 16 [PWM per tick per period] (the firmware's KdP = D / 16 on the error's change in
+    ticks per period), stays within the headroom above `pwm_fraction` of the PWM limit:
+    floor(16 (1 - pwm_fraction) 885) (module rule 6). 2832 at 0.8."""
+    return min(int(math.floor(16.0 * (1.0 - pwm_fraction) * PWM_LIMIT + 1e-9)), REGISTER_MAX)
 
 
 def registers(kp: float, ki: float, kd: float, kv: float, ka: float) -> PositionGains:
@@ -202,13 +224,13 @@ def simulate_step(
     dt, sub = FIRMWARE_PERIOD_S, 10
     h = dt / sub
     delay = max(round(plant.tau_s / dt), 0)
-    goal = step_rad * TICKS_PER_RAD
+    goal = float(round(step_rad * TICKS_PER_RAD))  # Goal Position: whole ticks
     y = v = integral = 0.0
     last_error: float | None = None
     pwm_queue = [0.0] * delay
     out, peak = [], 0.0
     for _ in range(round(duration_s / dt)):
-        error = goal - y * TICKS_PER_RAD
+        error = goal - round(y * TICKS_PER_RAD)  # the encoder: whole ticks
         integral += error
         if gains.i > 0:  # the firmware's anti-windup (hardware/sim/xm430.py)
             bound = PWM_LIMIT * 65536.0 / gains.i
@@ -261,11 +283,14 @@ def suggest(plant: Plant, target: Target = Target()) -> Suggestion:
     if plant.tau_s > 0:
         wc = min(wc, max(room, 0.0) / plant.tau_s)
     result: Suggestion | None = None
+    d_cap = d_limit(target.pwm_fraction)
     kv, ka = (plant.a / plant.g, 1.0 / plant.g) if target.feedforward else (0.0, 0.0)
     for _ in range(TRIES):
         kp = plant.a * wc / plant.g
         for ratio in INTEGRAL_RATIOS:
-            gains = registers(kp, kp * wc / ratio, kp / plant.a, kv, ka)
+            ki = kp * wc / ratio if target.integral else 0.0
+            gains = registers(kp, ki, kp / plant.a, kv, ka)
+            gains = replace(gains, d=min(gains.d, d_cap))
             prediction = predict(plant, gains, target.step_rad)
             meets = (
                 prediction.overshoot_pct <= target.overshoot_pct
