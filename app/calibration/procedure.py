@@ -294,7 +294,7 @@ class CalibrationManager:
             self._stop.clear()
             self._claim = claim
             self._thread = threading.Thread(
-                target=self._execute, args=(run, claim), name="deltadash-calibration", daemon=True
+                target=self._hold, args=(run, claim), name="deltadash-calibration", daemon=True
             )
             self._thread.start()
             return run
@@ -339,16 +339,17 @@ class CalibrationManager:
             self._thread.join(timeout=5.0)
 
     # ---- the run's thread ----
-    def _execute(self, run: CalibrationRun, claim: Claim) -> None:
+    def _hold(self, run: CalibrationRun, claim: Claim) -> None:
+        """The thread: its motions are ``claim``'s; the robot is free again when it ends."""
         owner = self.controller.owner
         owner.bind(claim)
         try:
-            self._steps(run)
+            self._execute(run)
         finally:
             owner.release(claim)
             self._save(run)
 
-    def _steps(self, run: CalibrationRun) -> None:
+    def _execute(self, run: CalibrationRun) -> None:
         try:
             if run.source == "probe":
                 self._execute_probe(run)

@@ -229,7 +229,7 @@ class TuningManager:
             self._stop.clear()
             self._claim = claim
             self._thread = threading.Thread(
-                target=self._execute, args=(run, claim), name="deltadash-tuning", daemon=True
+                target=self._hold, args=(run, claim), name="deltadash-tuning", daemon=True
             )
             self._thread.start()
             return run
@@ -240,16 +240,17 @@ class TuningManager:
             self._thread.join(timeout=5.0)
 
     # ---- the run's thread ----
-    def _execute(self, run: TuningRun, claim: Claim) -> None:
+    def _hold(self, run: TuningRun, claim: Claim) -> None:
+        """The thread: its motions are ``claim``'s; the robot is free again when it ends."""
         owner = self.controller.owner
         owner.bind(claim)
         try:
-            self._steps(run)
+            self._execute(run)
         finally:
             owner.release(claim)
             self._save(run)
 
-    def _steps(self, run: TuningRun) -> None:
+    def _execute(self, run: TuningRun) -> None:
         try:
             logs = {}
             for kind, params in (("step", STEP), ("chirp", CHIRP)):
