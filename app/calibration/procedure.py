@@ -281,22 +281,26 @@ class CalibrationManager:
             claim = self.controller.owner.claim(
                 f"calibration run {run_id}", f"POST /api/calibration/{run_id}/abort"
             )
-            folder = self.folder / run_id
-            folder.mkdir(parents=True, exist_ok=True)
-            run = CalibrationRun(run_id, parameters, poses, chosen, folder)
-            run.source, run.plate_z_m, run.fit_plate_z, run.probe_xy = (
-                source,
-                plate_z_m,
-                fit_plate_z,
-                xy,
-            )
-            self._runs[run_id] = run
-            self._stop.clear()
-            self._claim = claim
-            self._thread = threading.Thread(
-                target=self._hold, args=(run, claim), name="deltadash-calibration", daemon=True
-            )
-            self._thread.start()
+            try:  # nothing may keep the robot held but a running thread
+                folder = self.folder / run_id
+                folder.mkdir(parents=True, exist_ok=True)
+                run = CalibrationRun(run_id, parameters, poses, chosen, folder)
+                run.source, run.plate_z_m, run.fit_plate_z, run.probe_xy = (
+                    source,
+                    plate_z_m,
+                    fit_plate_z,
+                    xy,
+                )
+                self._runs[run_id] = run
+                self._stop.clear()
+                self._claim = claim
+                self._thread = threading.Thread(
+                    target=self._hold, args=(run, claim), name="deltadash-calibration", daemon=True
+                )
+                self._thread.start()
+            except BaseException:
+                self.controller.owner.release(claim)
+                raise
             return run
 
     def _plan_probe(

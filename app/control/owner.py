@@ -4,10 +4,10 @@ A guided procedure (calibration, tuning) moves the robot from its own thread, in
 motions with gaps between them (the next pose, the step run then the chirp run). While it
 runs, nothing else may move the robot, not even in those gaps: it ``claim``s the
 ``MotionOwner`` the controller holds (and ``bind``s its thread to the claim), and every
-motion command of the controller (goals,
-jogs, moves, sources, and the run manager's runs through them) asks ``permit()`` first,
-which refuses (``MotionRefused``, HTTP 409) any caller but the claiming thread, naming the
-procedure and how to stop it. E-stop, torque and reset never ask: they always work.
+motion command of the controller (goals, jogs, moves, sources, gains and joint offsets;
+the run manager's runs through them) asks ``permit()`` first, which refuses
+(``MotionRefused``, HTTP 409) any caller but the claiming thread, naming the procedure and
+how to stop it. E-stop, torque and reset never ask: they always work.
 
 ``release`` ends the claim; an abort releases it first and then stops the motion under
 the same lock (see ``MotionOwner.release``), so a motion the procedure's thread had in

@@ -221,17 +221,21 @@ class TuningManager:
             claim = self.controller.owner.claim(
                 f"tuning run {run_id}", f"POST /api/tuning/{run_id}/abort"
             )
-            folder = self.folder / run_id
-            folder.mkdir(parents=True, exist_ok=True)
-            servo_ids = tuple(self.controller.servo_ids)
-            run = TuningRun(run_id, tuple(joints), target, servo_ids, current, folder)
-            self._runs[run_id] = run
-            self._stop.clear()
-            self._claim = claim
-            self._thread = threading.Thread(
-                target=self._hold, args=(run, claim), name="deltadash-tuning", daemon=True
-            )
-            self._thread.start()
+            try:  # nothing may keep the robot held but a running thread
+                folder = self.folder / run_id
+                folder.mkdir(parents=True, exist_ok=True)
+                servo_ids = tuple(self.controller.servo_ids)
+                run = TuningRun(run_id, tuple(joints), target, servo_ids, current, folder)
+                self._runs[run_id] = run
+                self._stop.clear()
+                self._claim = claim
+                self._thread = threading.Thread(
+                    target=self._hold, args=(run, claim), name="deltadash-tuning", daemon=True
+                )
+                self._thread.start()
+            except BaseException:
+                self.controller.owner.release(claim)
+                raise
             return run
 
     def close(self) -> None:
