@@ -22,7 +22,12 @@ It writes ``touches.csv`` in place of ``pairs.csv``.
 
 States: planned -> moving -> fitting -> done | refused (the fit is worse than the current
 model on the held-out poses: never applied) | failed (a fault, e-stop, torque off, no
-measurement); done -> applied.
+measurement) | aborted (``abort``: the motion stopped at once, the robot holds where it
+is); done -> applied.
+
+While a run is planned, moving or fitting it holds the controller's ``MotionOwner``
+(app/control/owner.py): no other run, jog, goal or move can start, even between its poses,
+until it ends or is aborted.
 """
 
 from __future__ import annotations
@@ -53,6 +58,7 @@ from app.calibration.probe import (
 )
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
+from app.control.owner import Claim
 from app.control.state import Snapshot
 from hardware.calibration import JointCalibration, save
 from hardware.encoder import RAD_PER_TICK
@@ -65,7 +71,9 @@ REST_TICKS = 40  # the joints must stay within REST_TOLERANCE_RAD this many tick
 REST_TOLERANCE_RAD = 2 * RAD_PER_TICK
 REST_SPEED_RAD_S = 0.02  # and every joint's speed below this (about 1 deg/s)
 MOVE_TIMEOUT_S = 60.0
+STOP_TIMEOUT_S = 5.0
 POLL_S = 0.005
+RUNNING = ("planned", "moving", "fitting")  # the states abort stops
 
 
 def external(snapshot: Snapshot) -> np.ndarray:
@@ -96,6 +104,27 @@ class CalibrationRun:
     plate_z_m: float | None = None
     fit_plate_z: bool = False
     probe_xy: np.ndarray | None = field(default=None, repr=False)  # (poses, 2) [m]
+    aborted: threading.Event = field(default_factory=threading.Event, repr=False)
+    created_unix_s: float = field(default_factory=time.time)
+
+    def advance(self, state: str, error: str | None = None) -> None:
+        """The run's thread moves on to ``state``; an aborted run stays aborted."""
+        if not self.aborted.is_set():
+            self.state, self.error = state, error if error is not None else self.error
+
+    def summary(self) -> dict[str, Any]:
+        """The list's entry (GET /api/calibration): id, state, what was fitted, RMSEs."""
+        result = self.result
+        return {
+            "run_id": self.run_id,
+            "state": self.state,
+            "parameters_fitted": self.parameters,
+            "source": self.source,
+            "rmse_before_m": _num(result.rmse_before_m) if result else None,
+            "rmse_after_m": _num(result.rmse_after_m) if result else None,
+            "holdout_rmse_m": _num(result.holdout_rmse_m) if result else None,
+            "error": self.error,
+        }
 
     def view(self) -> dict[str, Any]:
         """The API's body (GET /api/calibration/{run_id}); SI units; NaN -> None."""
@@ -157,6 +186,11 @@ class CalibrationManager:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._lock = threading.Lock()
+        self._claim: Claim | None = None  # the robot, held by the run in progress
+
+    def _stop_motion(self) -> None:
+        """The arm holds where it is commanded (returns once the loop has stopped it)."""
+        self.controller.stop_any().result(timeout=STOP_TIMEOUT_S)
 
     def nominal(self) -> PerLegRotaryDelta:
         robot = self.controller.robot
@@ -178,6 +212,32 @@ class CalibrationManager:
 
     def get(self, run_id: str) -> CalibrationRun | None:
         return self._runs.get(run_id)
+
+    def list(self) -> list[CalibrationRun]:
+        """This server's runs (kept in memory), newest first."""
+        return sorted(self._runs.values(), key=lambda r: r.created_unix_s, reverse=True)
+
+    def abort(self, run_id: str) -> CalibrationRun:
+        """Stop the run ``run_id`` now: the motion stops (the robot holds where it is
+        commanded), the run ends ``aborted`` and the robot is free for other commands at
+        once (its thread, if still fitting, moves nothing more and ends on its own).
+
+        Raises:
+            KeyError: no run ``run_id`` (404).
+            MotionRefused: the run is not running (done, failed, aborted...) (409).
+        """
+        run = self._runs[run_id]
+        with self._lock:
+            if run.state not in RUNNING or run.aborted.is_set():
+                raise MotionRefused(
+                    f"run {run_id} is {run.state}: only a running run can be aborted"
+                )
+            run.aborted.set()
+            run.state, run.error = "aborted", "aborted by the operator"
+            if self._claim is not None:
+                self.controller.owner.release(self._claim, then=self._stop_motion)
+        self._save(run)
+        return run
 
     def running(self) -> bool:
         """A run's thread is moving the arm or fitting."""
@@ -205,7 +265,8 @@ class CalibrationManager:
         with self._lock:
             if self._thread is not None and self._thread.is_alive():
                 raise MotionRefused("a calibration run is in progress")
-            if (other := self.busy()) is not None:
+            # another procedure holds the robot (named, with its abort route), or a run
+            if (other := self.controller.owner.busy() or self.busy()) is not None:
                 raise MotionRefused(other)
             snap = self.controller.snapshot()
             _require_motion(snap)
@@ -217,21 +278,29 @@ class CalibrationManager:
             else:
                 raise CalibrationError(f"source: {source!r} is not 'motion' or 'probe'")
             run_id = "cal-" + time.strftime("%Y%m%d-%H%M%S") + "-" + uuid.uuid4().hex[:4]
-            folder = self.folder / run_id
-            folder.mkdir(parents=True, exist_ok=True)
-            run = CalibrationRun(run_id, parameters, poses, chosen, folder)
-            run.source, run.plate_z_m, run.fit_plate_z, run.probe_xy = (
-                source,
-                plate_z_m,
-                fit_plate_z,
-                xy,
+            claim = self.controller.owner.claim(
+                f"calibration run {run_id}", f"POST /api/calibration/{run_id}/abort"
             )
-            self._runs[run_id] = run
-            self._stop.clear()
-            self._thread = threading.Thread(
-                target=self._execute, args=(run,), name="deltadash-calibration", daemon=True
-            )
-            self._thread.start()
+            try:  # nothing may keep the robot held but a running thread
+                folder = self.folder / run_id
+                folder.mkdir(parents=True, exist_ok=True)
+                run = CalibrationRun(run_id, parameters, poses, chosen, folder)
+                run.source, run.plate_z_m, run.fit_plate_z, run.probe_xy = (
+                    source,
+                    plate_z_m,
+                    fit_plate_z,
+                    xy,
+                )
+                self._runs[run_id] = run
+                self._stop.clear()
+                self._claim = claim
+                self._thread = threading.Thread(
+                    target=self._hold, args=(run, claim), name="deltadash-calibration", daemon=True
+                )
+                self._thread.start()
+            except BaseException:
+                self.controller.owner.release(claim)
+                raise
             return run
 
     def _plan_probe(
@@ -274,19 +343,28 @@ class CalibrationManager:
             self._thread.join(timeout=5.0)
 
     # ---- the run's thread ----
+    def _hold(self, run: CalibrationRun, claim: Claim) -> None:
+        """The thread: its motions are ``claim``'s; the robot is free again when it ends."""
+        owner = self.controller.owner
+        owner.bind(claim)
+        try:
+            self._execute(run)
+        finally:
+            owner.release(claim)
+            self._save(run)
+
     def _execute(self, run: CalibrationRun) -> None:
         try:
             if run.source == "probe":
                 self._execute_probe(run)
-                self._save(run)
                 return
-            run.state = "moving"
+            run.advance("moving")
             for q in run.plan.joints:
-                joints, measured = self._visit(q)
+                joints, measured = self._visit(run, q)
                 run.joints.append(joints)
                 run.measured.append(measured)
                 run.pose += 1
-            run.state = "fitting"
+            run.advance("fitting")
             holdout = len(run.plan.holdout_joints)
             joints, measured = np.array(run.joints), np.array(run.measured)
             write_pairs(run.folder / "pairs.csv", joints, measured, holdout)
@@ -297,20 +375,19 @@ class CalibrationManager:
             write_report(run.folder / "report.png", result, f"calibration {run.run_id}")
             _judge(run, result)
         except (Stopped, CalibrationError, GoalRejected, MotionRefused) as exc:
-            run.state, run.error = "failed", str(exc)
+            run.advance("failed", str(exc))
         except Exception as exc:  # a bug ends the run, saying so, never the server
             log.exception("calibration run %s failed", run.run_id)
-            run.state, run.error = "failed", f"internal error: {exc!r}"
-        self._save(run)
+            run.advance("failed", f"internal error: {exc!r}")
 
     def _execute_probe(self, run: CalibrationRun) -> None:
         try:
             assert self.probe is not None and run.probe_xy is not None and run.plate_z_m is not None
-            run.state = "moving"
+            run.advance("moving")
             joints = self.probe(run.probe_xy, run.plate_z_m, 0)
             run.joints = list(joints)
             run.pose = len(joints)
-            run.state = "fitting"
+            run.advance("fitting")
             holdout = len(run.plan.holdout_joints)
             plate = np.full(len(joints), run.plate_z_m)
             write_touches(run.folder / "touches.csv", joints, plate, holdout)
@@ -324,20 +401,24 @@ class CalibrationManager:
             write_report(run.folder / "report.png", result, title)
             _judge(run, result)
         except (Stopped, CalibrationError, GoalRejected, MotionRefused) as exc:
-            run.state, run.error = "failed", str(exc)
+            run.advance("failed", str(exc))
         except Exception as exc:  # a bug ends the run, saying so, never the server
             log.exception("calibration run %s failed", run.run_id)
-            run.state, run.error = "failed", f"internal error: {exc!r}"
+            run.advance("failed", f"internal error: {exc!r}")
 
     def _save(self, run: CalibrationRun) -> None:
         (run.folder / "result.json").write_text(json.dumps(run.view(), indent=1))
 
-    def _wait(self, what: str, until: Callable[[Snapshot], bool], timeout_s: float) -> Snapshot:
+    def _wait(
+        self, run: CalibrationRun, what: str, until: Callable[[Snapshot], bool], timeout_s: float
+    ) -> Snapshot:
         deadline = time.monotonic() + timeout_s
         while True:
             snap = self.controller.snapshot()
             if self._stop.is_set():
                 raise Stopped("the server is shutting down")
+            if run.aborted.is_set():
+                raise Stopped("aborted by the operator")
             _require_motion(snap, Stopped)
             if until(snap):
                 return snap
@@ -348,11 +429,11 @@ class CalibrationManager:
     def _fresh(self, after: int) -> Callable[[Snapshot], bool]:
         return lambda snap: snap.tick > after
 
-    def _visit(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _visit(self, run: CalibrationRun, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Move to ``q`` [rad], wait for rest, average joints and measurement; (3,), (3,)."""
         started = self.controller.move(joints=q, joint_space=True).result(timeout=MOVE_TIMEOUT_S)
         del started
-        self._wait("the move to end", lambda s: s.mode == "idle", MOVE_TIMEOUT_S)
+        self._wait(run, "the move to end", lambda s: s.mode == "idle", MOVE_TIMEOUT_S)
         window: list[np.ndarray] = []
         last = -1
 
@@ -373,10 +454,10 @@ class CalibrationManager:
                 and not moving.any()
             )
 
-        self._wait("the arm to come to rest", rested, MOVE_TIMEOUT_S)
+        self._wait(run, "the arm to come to rest", rested, MOVE_TIMEOUT_S)
         joints, measured = [], []
         while len(joints) < AVERAGE_TICKS:
-            snap = self._wait("a fresh tick", self._fresh(last), 5.0)
+            snap = self._wait(run, "a fresh tick", self._fresh(last), 5.0)
             last = snap.tick
             if snap.stale:
                 continue  # the same state again: it would count twice
@@ -425,12 +506,14 @@ class CalibrationManager:
 
 def _judge(run: CalibrationRun, result: FitResult) -> None:
     """done when the fit beats the current model on the held-out data, else refused."""
-    run.state = "done" if result.better else "refused"
-    if not result.better:
-        run.error = (
+    if result.better:
+        run.advance("done")
+    else:
+        run.advance(
+            "refused",
             f"the fit is worse on the held-out poses than the current model "
             f"({result.holdout_rmse_m * 1e3:.3f} mm vs "
-            f"{result.holdout_before_m * 1e3:.3f} mm): it is not offered"
+            f"{result.holdout_before_m * 1e3:.3f} mm): it is not offered",
         )
 
 

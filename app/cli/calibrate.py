@@ -30,7 +30,7 @@ from typing import Any
 
 _EPILOG = (
     "Exit 0: fitted (and written when asked); 1: the run failed or the fit was refused; "
-    "2: bad input or the server refused; 130: Ctrl-C."
+    "2: bad input or the server refused; 130: Ctrl-C (the run is aborted: the arm holds)."
 )
 
 
@@ -213,6 +213,7 @@ def _remote(args: argparse.Namespace) -> int:
     code = 0
     try:
         headers = cli_run._take_control(url, args.token, args.take_over)
+        running = None  # the run to abort if this ends (Ctrl-C) before it does
         try:
             cli_run._http(f"{url}/api/torque", "POST", {"enabled": True}, headers)
             request: dict[str, Any] = {"poses": args.poses, "parameters": args.parameters}
@@ -223,6 +224,7 @@ def _remote(args: argparse.Namespace) -> int:
                     "fit_plate_z": bool(args.fit_plate_z),
                 }
             run_id = cli_run._http(f"{url}/api/calibration/run", "POST", request, headers)["run_id"]
+            running = run_id
             body = cli_run._http(f"{url}/api/calibration/{run_id}", headers=headers)
             condition = body["condition_number"]
             print(
@@ -237,10 +239,14 @@ def _remote(args: argparse.Namespace) -> int:
                     bar.update_to(body["progress"]["pose"], body["state"])
                     time.sleep(0.5)
                     body = cli_run._http(f"{url}/api/calibration/{run_id}", headers=headers)
+            running = None
             code = _show(body, args.json)
             if code == 0 and args.write:
                 code = _apply(url, run_id, headers, args)
         finally:
+            if running is not None:  # the arm stops and holds where it is
+                path = f"/api/calibration/{running}/abort"
+                cli_run._try(problems, f"abort calibration {running}", url, path, "POST", headers)
             cli_run._try(problems, "give control back", url, "/api/lease", "DELETE", headers)
     except cli_run.LeaseRefused as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -252,7 +258,7 @@ def _remote(args: argparse.Namespace) -> int:
         print(f"error: {url}: {exc}", file=sys.stderr)
         code = 2
     except KeyboardInterrupt:
-        print("interrupted (the run goes on; e-stop the robot to stop it)", file=sys.stderr)
+        print("interrupted (the calibration run was aborted)", file=sys.stderr)
         code = 130
     for problem in problems:
         print(f"error: {problem}", file=sys.stderr)

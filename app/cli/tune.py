@@ -19,7 +19,7 @@ from typing import Any
 
 _EPILOG = (
     "Exit 0: gains suggested (and applied when asked) or reverted; 1: the run failed; "
-    "2: bad input or the server refused; 130: Ctrl-C."
+    "2: bad input or the server refused; 130: Ctrl-C (the run is aborted: the arm holds)."
 )
 STAGES = ("planned", "moving", "step", "chirp", "fitting")
 
@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {url}: {exc}", file=sys.stderr)
         code = 2
     except KeyboardInterrupt:
-        print("interrupted (the run goes on; e-stop the robot to stop it)", file=sys.stderr)
+        print("interrupted (the tuning run was aborted)", file=sys.stderr)
         code = 130
     for problem in problems:
         print(f"error: {problem}", file=sys.stderr)
@@ -152,12 +152,20 @@ def _tune(url: str, headers: dict[str, str], args: argparse.Namespace) -> int:
         "target": {"bandwidth_hz": args.bandwidth, "overshoot_pct": args.overshoot},
     }
     run_id = cli_run._http(f"{url}/api/tuning/run", "POST", request, headers)["run_id"]
-    body = cli_run._http(f"{url}/api/tuning/{run_id}", headers=headers)
-    with Progress(len(STAGES), f"tuning {run_id}", "stages") as bar:
-        while body["state"] in STAGES:
-            bar.update_to(STAGES.index(body["state"]), body["state"])
-            time.sleep(0.5)
-            body = cli_run._http(f"{url}/api/tuning/{run_id}", headers=headers)
+    try:
+        body = cli_run._http(f"{url}/api/tuning/{run_id}", headers=headers)
+        with Progress(len(STAGES), f"tuning {run_id}", "stages") as bar:
+            while body["state"] in STAGES:
+                bar.update_to(STAGES.index(body["state"]), body["state"])
+                time.sleep(0.5)
+                body = cli_run._http(f"{url}/api/tuning/{run_id}", headers=headers)
+    except BaseException:  # Ctrl-C (or a lost server) while it runs: stop the arm there
+        problems: list[str] = []
+        path = f"/api/tuning/{run_id}/abort"
+        cli_run._try(problems, f"abort tuning {run_id}", url, path, "POST", headers)
+        for problem in problems:
+            print(f"error: {problem}", file=sys.stderr)
+        raise
     print(json.dumps(body, indent=1) if args.json else format_result(body))
     code = 0 if body["state"] == "done" else 1
     if code == 0 and args.apply:

@@ -31,6 +31,7 @@ from app.control.errors import GoalRejected, MotionRefused
 from app.control.gravity import GravityOffset, gravity_offset, loop_stiffness_nm_rad
 from app.control.joint_offsets import OffsetBus, set_offsets
 from app.control.loop_state import LoopState
+from app.control.owner import MotionOwner
 from app.control.safety import servo_faults
 from app.control.sources import GoalSource, Setpoint
 from app.control.state import Fault, Snapshot
@@ -98,6 +99,9 @@ class Controller:
         self.timing = TimingRecorder(settings.loop.rate_hz)
         self.state = LoopState.initial(settings.safety, self.period_s)
         self._commands: SimpleQueue[tuple[Callable[[], Any], Future]] = SimpleQueue()
+        # who may move the robot: a procedure (calibration, tuning) claims it while it runs
+        # and every motion command below asks it (app/control/owner.py)
+        self.owner = MotionOwner()
         self._listeners: list[Listener] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -182,13 +186,20 @@ class Controller:
             self._commands.put((command, future))
         return future
 
+    def submit_motion(self, command: Callable[[], Any]) -> Future:
+        """:meth:`submit` for a command that moves the robot (or changes how it moves):
+        MotionRefused, in the caller's thread, while a procedure holds the robot and the
+        caller is not its thread (app/control/owner.py)."""
+        with self.owner.permit():
+            return self.submit(command)
+
     def set_goal(self, point: Any, phi_rad: float = 0.0) -> Future:
         """Jog target: the tool tip [m] at wrist angle ``phi_rad`` [rad], checked strictly
         (a tip whose platform point is outside the workspace is refused with the nearest)."""
         phi = self.gate.check_phi(phi_rad)
         goal = self.gate.check_point(point, phi)
         self.gate.solve(goal, self._near_measured(), phi)
-        return self.submit(lambda: commands.jog_to(self.state, self.ctx, goal, phi_rad=phi))
+        return self.submit_motion(lambda: commands.jog_to(self.state, self.ctx, goal, phi_rad=phi))
 
     def jog(self, delta_m: Any, speed_m_s: float | None = None) -> Future:
         """Relative jog step [m] from what the loop commands when the step runs (not from a
@@ -199,7 +210,7 @@ class Controller:
             raise GoalRejected(f"delta_m: expected 3 finite numbers, got {delta_m!r}")
         if speed_m_s is not None and not (math.isfinite(speed_m_s) and speed_m_s > 0):
             raise GoalRejected(f"speed_m_s: expected a positive number, got {speed_m_s!r}")
-        return self.submit(lambda: commands.jog_by(self.state, self.ctx, delta, speed_m_s))
+        return self.submit_motion(lambda: commands.jog_by(self.state, self.ctx, delta, speed_m_s))
 
     def hold_jog(self, velocity_m_s: Any) -> Future:
         """Start or renew a held jog at ``velocity_m_s`` [m/s] (zero stops it): it moves
@@ -208,7 +219,9 @@ class Controller:
         velocity = np.asarray(velocity_m_s, dtype=np.float64)
         if velocity.shape != (3,) or not np.isfinite(velocity).all():
             raise GoalRejected(f"velocity_m_s: expected 3 finite numbers, got {velocity_m_s!r}")
-        return self.submit(lambda: held_jog.hold_jog(self.state, self.ctx, velocity, self._now()))
+        return self.submit_motion(
+            lambda: held_jog.hold_jog(self.state, self.ctx, velocity, self._now())
+        )
 
     def move(
         self,
@@ -224,7 +237,7 @@ class Controller:
             self.gate, point, joints, joint_space, self._near_measured(), phi_rad
         )
         phi = float(phi_rad)  # checked by check_move
-        return self.submit(
+        return self.submit_motion(
             lambda: commands.move(self.state, self.ctx, target, duration_s, joint_space, phi)
         )
 
@@ -235,13 +248,23 @@ class Controller:
 
         The plan was checked from that point; if the robot has moved since, it is refused.
         """
-        return self.submit(
+        return self.submit_motion(
             lambda: commands.run_source(self.state, source, expected_start_m, tolerance_m)
         )
 
     def stop_source(self, source: GoalSource) -> Future:
         """Stop ``source`` if it is still the active one; the robot holds where it is."""
         return self.submit(lambda: commands.stop_source(self.state, source))
+
+    def stop_any(self) -> Future:
+        """Stop whatever source is active (the robot holds where it is commanded): an
+        aborted procedure's motion. The Future holds whether one was running."""
+
+        def stop() -> bool:
+            source = self.state.source
+            return source is not None and commands.stop_source(self.state, source)
+
+        return self.submit(stop)
 
     def set_torque(self, enabled: bool) -> Future:
         return self.submit(
@@ -294,12 +317,14 @@ class Controller:
         the caller's thread) outside the wrist's limits or without a wrist; MotionRefused
         (in the Future) when the robot may not move. The hook for goals with a heading."""
         phi = self.gate.check_phi(phi_rad)
-        return self.submit(lambda: turn_to(self.state, phi))
+        return self.submit_motion(lambda: turn_to(self.state, phi))
 
     def set_joint_offsets(self, offsets_rad: Any) -> Future:
         """Joint offsets [rad] (3,) from calibration, added to every joint read from now on
         (app/control/joint_offsets.py); refused while a motion runs."""
-        return self.submit(lambda: set_offsets(self.state, self.robot, self.joint_bus, offsets_rad))
+        return self.submit_motion(
+            lambda: set_offsets(self.state, self.robot, self.joint_bus, offsets_rad)
+        )
 
     def set_gains(self, gains: dict[int, PositionGains]) -> Future:
         """Position gains per leg servo id (app/tuning), written to the servos in the
@@ -323,7 +348,7 @@ class Controller:
             self.state.notice = "position gains changed"
             return self.gains
 
-        return self.submit(write)
+        return self.submit_motion(write)
 
     def _use_gains(self, ordered: list[PositionGains]) -> None:
         """Write the legs' gains (joint order) and use them (the gravity offset's stiffness

@@ -196,6 +196,9 @@ class RunManager:
         return None
 
     def _refuse_if_busy(self) -> None:
+        # a procedure (calibration, tuning) holds the robot: only its own thread may start
+        # runs (app/control/owner.py); the controller checks again when the run starts
+        self.controller.owner.check()
         if self._active is not None and self._active[0].state == "running":
             raise MotionRefused(f"run {self._active[0].run_id} is in progress; abort it first")
 

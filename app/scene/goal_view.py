@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import viser
 
-from app.control.errors import GoalRejected
+from app.control.errors import GoalRejected, MotionRefused
 from app.control.state import Snapshot
 from app.scene.goal_store import load_points, save_points
 
@@ -207,9 +207,12 @@ class GoalView:
             try:
                 goal = self.gate.clamp_towards(start, goal, self._near(), phi)
                 future = self.controller.set_goal(goal, phi)
-            except GoalRejected as exc:
+            except (GoalRejected, MotionRefused) as exc:
                 self.message = str(exc)
                 return None
+        except MotionRefused as exc:  # a procedure holds the robot (app/control/owner.py)
+            self.message = str(exc)
+            return None
         future.add_done_callback(self._outcome)
         return goal
 

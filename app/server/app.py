@@ -92,14 +92,6 @@ def _twin_probe(settings: Settings, controller: Controller) -> Touch | None:
     return twin_probe(true_robot, nominal, lambda: controller.joint_offsets_rad)
 
 
-def _tuning_busy(app: FastAPI) -> str | None:
-    return "a tuning run is in progress" if app.state.tuning.running() else None
-
-
-def _calibration_busy(app: FastAPI) -> str | None:
-    return "a calibration run is in progress" if app.state.calibration.running() else None
-
-
 def create_app(
     settings: Settings, backend_opener: Callable = open_backend, config_path: Path | None = None
 ) -> FastAPI:
@@ -128,10 +120,12 @@ def create_app(
             app.state.program_workers = ProgramWorkers(
                 settings, programs.CONCURRENT_CHECKS, settings.programs.check_timeout_s
             )
+            # one mover at a time: a procedure claims controller.owner while it runs (every
+            # motion command asks it: app/control/owner.py), and starts only with no run
             app.state.calibration = CalibrationManager(
                 controller,
                 settings.runs.folder_path / "calibration",
-                busy=lambda: app.state.runs.busy() or _tuning_busy(app),
+                busy=lambda: app.state.runs.busy(),
                 config_path=config_path,
                 probe=_twin_probe(settings, controller),
             )
@@ -139,7 +133,7 @@ def create_app(
                 controller,
                 app.state.runs,
                 settings.runs.folder_path / "tuning",
-                busy=lambda: app.state.runs.busy() or _calibration_busy(app),
+                busy=lambda: app.state.runs.busy(),
                 config_path=config_path,
             )
             controller.pose_status = app.state.world.tracker.status

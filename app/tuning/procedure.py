@@ -14,8 +14,13 @@ The model is identified under the gains in use when the run starts: it is a P-on
 (`gains.Plant.of`), so a run is refused while tuned gains are in use (revert first).
 
 States: planned -> moving -> step -> chirp -> fitting -> done | failed (a fault, e-stop,
-torque off, a run that did not finish, a fit that failed: ``error`` says why); done ->
-applied.
+torque off, a run that did not finish, a fit that failed: ``error`` says why) | aborted
+(``abort``: the motion, or the step or chirp run, stopped at once; the robot holds where
+it is); done -> applied.
+
+While a run is in progress it holds the controller's ``MotionOwner``
+(app/control/owner.py): nothing else moves the robot, not even between its step and chirp
+runs, until it ends or is aborted.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from app.calibration.procedure import Stopped, _require_motion
 from app.config import Settings
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
+from app.control.owner import Claim
 from app.runs.logs import read_csv_rows
 from app.runs.manager import RunManager
 from app.runs.paths import ChirpParams, StepParams
@@ -51,8 +57,10 @@ START_M = (0.0, 0.0, -0.24)  # where both runs start (the runs' default offset) 
 STEP = StepParams(size_m=0.004, duration_s=1.5, offset_m=START_M)
 CHIRP = ChirpParams(amplitude_m=0.003, f0_hz=0.5, f1_hz=8.0, duration_s=6.0, offset_m=START_M)
 MOVE_TIMEOUT_S = 60.0
+STOP_TIMEOUT_S = 5.0
 RUN_TIMEOUT_S = 120.0  # a starved twin runs slower than the wall clock
 POLL_S = 0.01
+RUNNING = ("planned", "moving", "step", "chirp", "fitting")  # the states abort stops
 
 
 def gains_out(gains: PositionGains) -> dict[str, int]:
@@ -87,6 +95,12 @@ class TuningRun:
     fits: list[JointFit] = field(default_factory=list)
     suggestions: dict[int, Suggestion] = field(default_factory=dict)  # servo id -> suggestion
     predicted_now: dict[int, dict[str, float | None]] = field(default_factory=dict)
+    aborted: threading.Event = field(default_factory=threading.Event, repr=False)
+
+    def advance(self, state: str, error: str | None = None) -> None:
+        """The run's thread moves on to ``state``; an aborted run stays aborted."""
+        if not self.aborted.is_set():
+            self.state, self.error = state, error if error is not None else self.error
 
     def servo(self, joint: int) -> int:
         return self.servo_ids[joint - 1]
@@ -143,9 +157,39 @@ class TuningManager:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._lock = threading.Lock()
+        self._claim: Claim | None = None  # the robot, held by the run in progress
 
     def get(self, run_id: str) -> TuningRun | None:
         return self._runs.get(run_id)
+
+    def abort(self, run_id: str) -> TuningRun:
+        """Stop the run ``run_id`` now: the move or the step or chirp run stops (the robot
+        holds where it is commanded), the run ends ``aborted`` and the robot is free for
+        other commands at once (its thread, if still fitting, moves nothing more).
+
+        Raises:
+            KeyError: no run ``run_id`` (404).
+            MotionRefused: the run is not running (done, failed, aborted...) (409).
+        """
+        run = self._runs[run_id]
+        with self._lock:
+            if run.state not in RUNNING or run.aborted.is_set():
+                raise MotionRefused(
+                    f"run {run_id} is {run.state}: only a running run can be aborted"
+                )
+            run.aborted.set()
+            run.state, run.error = "aborted", "aborted by the operator"
+            claim = self._claim
+
+            def stop() -> None:
+                for recorded in run.runs.values():  # the step or chirp run, if one is running
+                    self.runs.abort(recorded, f"tuning run {run_id} aborted")
+                self.controller.stop_any().result(timeout=STOP_TIMEOUT_S)
+
+            if claim is not None:
+                self.controller.owner.release(claim, then=stop)
+        self._save(run)
+        return run
 
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
@@ -163,7 +207,8 @@ class TuningManager:
         with self._lock:
             if self.running():
                 raise MotionRefused("a tuning run is in progress")
-            if (other := self.busy()) is not None:
+            # another procedure holds the robot (named, with its abort route), or a run
+            if (other := self.controller.owner.busy() or self.busy()) is not None:
                 raise MotionRefused(other)
             _require_motion(self.controller.snapshot())
             current = self.controller.gains
@@ -173,16 +218,24 @@ class TuningManager:
                     "POST /api/tuning/revert first"
                 )
             run_id = "tune-" + time.strftime("%Y%m%d-%H%M%S") + "-" + uuid.uuid4().hex[:4]
-            folder = self.folder / run_id
-            folder.mkdir(parents=True, exist_ok=True)
-            servo_ids = tuple(self.controller.servo_ids)
-            run = TuningRun(run_id, tuple(joints), target, servo_ids, current, folder)
-            self._runs[run_id] = run
-            self._stop.clear()
-            self._thread = threading.Thread(
-                target=self._execute, args=(run,), name="deltadash-tuning", daemon=True
+            claim = self.controller.owner.claim(
+                f"tuning run {run_id}", f"POST /api/tuning/{run_id}/abort"
             )
-            self._thread.start()
+            try:  # nothing may keep the robot held but a running thread
+                folder = self.folder / run_id
+                folder.mkdir(parents=True, exist_ok=True)
+                servo_ids = tuple(self.controller.servo_ids)
+                run = TuningRun(run_id, tuple(joints), target, servo_ids, current, folder)
+                self._runs[run_id] = run
+                self._stop.clear()
+                self._claim = claim
+                self._thread = threading.Thread(
+                    target=self._hold, args=(run, claim), name="deltadash-tuning", daemon=True
+                )
+                self._thread.start()
+            except BaseException:
+                self.controller.owner.release(claim)
+                raise
             return run
 
     def close(self) -> None:
@@ -191,15 +244,25 @@ class TuningManager:
             self._thread.join(timeout=5.0)
 
     # ---- the run's thread ----
+    def _hold(self, run: TuningRun, claim: Claim) -> None:
+        """The thread: its motions are ``claim``'s; the robot is free again when it ends."""
+        owner = self.controller.owner
+        owner.bind(claim)
+        try:
+            self._execute(run)
+        finally:
+            owner.release(claim)
+            self._save(run)
+
     def _execute(self, run: TuningRun) -> None:
         try:
             logs = {}
             for kind, params in (("step", STEP), ("chirp", CHIRP)):
-                run.state = "moving"
-                self._move_to_start()
-                run.state = kind
+                run.advance("moving")
+                self._move_to_start(run)
+                run.advance(kind)
                 logs[kind] = self._record(run, kind, params)
-            run.state = "fitting"
+            run.advance("fitting")
             chirp = (CHIRP.f0_hz, CHIRP.f1_hz, CHIRP.duration_s)
             fits, bodes = identify(
                 read_csv_rows(logs["step"]), read_csv_rows(logs["chirp"]), chirp, run.joints
@@ -214,30 +277,32 @@ class TuningManager:
                 run.suggestions[sid] = suggest(plant, run.target)
                 now = predict(plant, run.current[sid], run.target.step_rad)
                 run.predicted_now[sid] = _finite(now.as_dict())
-            run.state = "done"
+            run.advance("done")
         except (Stopped, IdentificationError, TuningError, GoalRejected, MotionRefused) as exc:
-            run.state, run.error = "failed", str(exc)
+            run.advance("failed", str(exc))
         except Exception as exc:  # a bug ends the run, saying so, never the server
             log.exception("tuning run %s failed", run.run_id)
-            run.state, run.error = "failed", f"internal error: {exc!r}"
-        self._save(run)
+            run.advance("failed", f"internal error: {exc!r}")
 
     def _save(self, run: TuningRun) -> None:
         (run.folder / "result.json").write_text(json.dumps(run.view(), indent=1))
 
-    def _wait(self, what: str, until: Callable[[], bool], timeout_s: float) -> None:
+    def _wait(self, run: TuningRun, what: str, until: Callable[[], bool], timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
         while not until():
             if self._stop.is_set():
                 raise Stopped("the server is shutting down")
+            if run.aborted.is_set():
+                raise Stopped("aborted by the operator")
             _require_motion(self.controller.snapshot(), Stopped)
             if time.monotonic() > deadline:
                 raise Stopped(f"timed out after {timeout_s:g} s waiting for {what}")
             time.sleep(POLL_S)
 
-    def _move_to_start(self) -> None:
+    def _move_to_start(self, run: TuningRun) -> None:
         self.controller.move(point=START_M).result(timeout=MOVE_TIMEOUT_S)
         self._wait(
+            run,
             "the move to the start point",
             lambda: self.controller.snapshot().mode == "idle",
             MOVE_TIMEOUT_S,
@@ -247,7 +312,7 @@ class TuningManager:
         """Run `params` through the run manager; the log's path once it is done."""
         recorded = self.runs.start(params, kind)
         run.runs[kind] = recorded.run_id
-        self._wait(f"the {kind} run", lambda: recorded.state != "running", RUN_TIMEOUT_S)
+        self._wait(run, f"the {kind} run", lambda: recorded.state != "running", RUN_TIMEOUT_S)
         if recorded.state != "done":
             raise Stopped(f"the {kind} run {recorded.run_id} ended {recorded.state}")
         return recorded.folder / "log.csv"

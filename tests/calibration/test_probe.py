@@ -216,6 +216,11 @@ class _Idle:
 
     robot = THESIS_DELTA
 
+    def __init__(self) -> None:
+        from app.control.owner import MotionOwner
+
+        self.owner = MotionOwner()  # nobody holds the robot
+
     def snapshot(self):
         from types import SimpleNamespace
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from app.config import load_settings
 from app.control.commands import CommandContext
+from app.control.owner import MotionOwner
 from app.control.state import Snapshot
 from app.runs.manager import RunManager
 
@@ -27,6 +28,10 @@ def resting_manager(folder, start_m=REST_M, **runs) -> RunManager:
         point_commanded_m=start,
     )
     controller = SimpleNamespace(
-        snapshot=lambda: snap, period_s=ctx.period_s, settings=config, gate=ctx.gate
+        snapshot=lambda: snap,
+        period_s=ctx.period_s,
+        settings=config,
+        gate=ctx.gate,
+        owner=MotionOwner(),
     )
     return RunManager(controller, folder)  # type: ignore[arg-type]

@@ -91,7 +91,8 @@ class Frame(BaseModel):
 
 class CalibrationOut(BaseModel):
     """A calibration run. state: planned, moving, fitting, done, refused (worse than the
-    current model on held-out poses: never applied), failed (error says why), applied.
+    current model on held-out poses: never applied), failed (error says why), aborted
+    (POST .../abort), applied.
     RMSE [m] is the root mean square 3D distance between FK and the measurement; *_before
     the current model (its measurement frame fitted), holdout_* on the held-out poses."""
 
@@ -128,6 +129,19 @@ class CalibrationApplied(BaseModel):
     config_written: str | None = Field(description="the config file written, if one is in use")
 
 
+class CalibrationSummary(BaseModel):
+    """A calibration run in the list: its state and RMSEs [m] (None until fitted)."""
+
+    run_id: str
+    state: str
+    parameters_fitted: str = Field(description="offsets or geometry")
+    source: str = Field(description="motion or probe")
+    rmse_before_m: float | None
+    rmse_after_m: float | None
+    holdout_rmse_m: float | None
+    error: str | None
+
+
 def _run(calibration: CalibrationManager, run_id: str) -> CalibrationRun:
     run = calibration.get(run_id)
     if run is None:
@@ -154,6 +168,24 @@ async def start_calibration(
     except CalibrationError as exc:
         raise HTTPException(422, str(exc)) from None
     return {"run_id": run.run_id}
+
+
+@router.get("/calibration", response_model=list[CalibrationSummary])
+def list_calibration_runs(calibration: CalibrationDep) -> list[dict[str, Any]]:
+    """This server's calibration runs, newest first."""
+    return [run.summary() for run in calibration.list()]
+
+
+@router.post(
+    "/calibration/{run_id}/abort", response_model=CalibrationOut, responses={**CONTROL, **NOT_FOUND}
+)
+async def abort_calibration(
+    run_id: str, calibration: CalibrationDep, _c: ControllerDep, _: ControlClient
+) -> dict[str, Any]:
+    """Stop the run now: the arm holds where it is, the run ends "aborted", and the robot
+    takes other commands at once. 404 for an unknown run, 409 for one not running."""
+    _run(calibration, run_id)
+    return (await asyncio.to_thread(calibration.abort, run_id)).view()
 
 
 @router.get(

@@ -336,6 +336,7 @@ async def run_program(
     Its progress carries program_line; its stats program.lines, the error per line."""
     controller = runs.controller
     _require_motion(controller)  # torque off, e-stop, fault: said as such, before the check
+    controller.owner.check()  # a calibration or tuning holds the robot: before the check too
     checked = await asyncio.to_thread(_check, body, controller, controller.settings, workers, True)
     if isinstance(checked, JSONResponse):
         return checked

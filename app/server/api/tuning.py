@@ -62,11 +62,12 @@ class ServoGains(BaseModel):
 
 class TuningOut(BaseModel):
     """A tuning run. state: planned, moving, step, chirp, fitting, done, failed (error
-    says why), applied. model: per servo id, the fitted K wn^2 / (s^2 + 2 zeta wn s + wn^2)
-    e^{-sT} (gain, wn_rad_s, zeta, delay_s, bandwidth_hz, rmse_rad); suggested: per servo
-    id, the gains; predicted: per servo id, the loop with the suggested and the current
-    gains (crossover_hz, phase_margin_deg, bandwidth_hz, peak_db, overshoot_pct,
-    settling_s, peak_pwm_fraction, static_error_pct)."""
+    says why), aborted (POST .../abort), applied. model: per servo id, the fitted
+    K wn^2 / (s^2 + 2 zeta wn s + wn^2) e^{-sT} (gain, wn_rad_s, zeta, delay_s,
+    bandwidth_hz, rmse_rad); suggested: per servo id, the gains; predicted: per servo id,
+    the loop with the suggested and the current gains (crossover_hz, phase_margin_deg,
+    bandwidth_hz, peak_db, overshoot_pct, settling_s, peak_pwm_fraction,
+    static_error_pct)."""
 
     run_id: str
     state: str
@@ -116,6 +117,17 @@ async def revert_tuning(tuning: TuningDep, _c: ControllerDep, _: ControlClient) 
     """The gains in use before the last apply, back on the servos. 409 when nothing was
     applied or a motion is running."""
     return await asyncio.to_thread(tuning.revert)
+
+
+@router.post("/tuning/{run_id}/abort", response_model=TuningOut, responses={**CONTROL, **NOT_FOUND})
+async def abort_tuning(
+    run_id: str, tuning: TuningDep, _c: ControllerDep, _: ControlClient
+) -> dict[str, Any]:
+    """Stop the run now: its move, step or chirp run stops (the arm holds where it is),
+    the run ends "aborted", and the robot takes other commands at once. 404 for an unknown
+    run, 409 for one not running."""
+    _run(tuning, run_id)
+    return (await asyncio.to_thread(tuning.abort, run_id)).view()
 
 
 @router.get("/tuning/{run_id}", response_model=TuningOut, responses={**NOT_FOUND, **INVALID})
