@@ -55,8 +55,19 @@ def commanded(client) -> np.ndarray:
     return np.array(snapshot(client).point_commanded_m, dtype=float)
 
 
+def procedure_active(client) -> bool:
+    """A run, a calibration or a tuning accepted earlier: its thread may move the arm later
+    (a procedure plans first, then moves; CI's loaded run saw one move it 4 mm after the
+    arm had looked still)."""
+    state = client.app.state
+    return bool(state.runs.busy() or state.calibration.running() or state.tuning.running())
+
+
 def at_rest(client) -> bool:
-    """Torque on, no e-stop or fault, idle or holding a goal, commanded at REST_M, still."""
+    """Torque on, no e-stop or fault, no run or procedure going, idle or holding a goal,
+    commanded at REST_M, still."""
+    if procedure_active(client):
+        return False
     now = ok_json(client.get("/api/status"))
     if not now["torque"] or now["estopped"] or now["faults"] or now["mode"] not in ("idle", "jog"):
         return False
