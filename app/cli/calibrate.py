@@ -203,16 +203,12 @@ def _write(config: str, parameters: str, offsets_rad: list[float]) -> int:
 
 
 def _remote(args: argparse.Namespace) -> int:
-    import urllib.error
-
     from app.cli import run as cli_run
     from app.cli.progress import Progress
 
     url = args.url.rstrip("/")
-    problems: list[str] = []
-    code = 0
-    try:
-        headers = cli_run._take_control(url, args.token, args.take_over)
+
+    def work(headers: dict[str, str], problems: list[str]) -> int:
         running = None  # the run to abort if this ends (Ctrl-C) before it does
         try:
             cli_run._http(f"{url}/api/torque", "POST", {"enabled": True}, headers)
@@ -247,22 +243,11 @@ def _remote(args: argparse.Namespace) -> int:
             if running is not None:  # the arm stops and holds where it is
                 path = f"/api/calibration/{running}/abort"
                 cli_run._try(problems, f"abort calibration {running}", url, path, "POST", headers)
-            cli_run._try(problems, "give control back", url, "/api/lease", "DELETE", headers)
-    except cli_run.LeaseRefused as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        code = 2
-    except urllib.error.HTTPError as exc:
-        print(f"error: {exc.code} {cli_run._detail(exc)}", file=sys.stderr)
-        code = 2
-    except (urllib.error.URLError, OSError) as exc:
-        print(f"error: {url}: {exc}", file=sys.stderr)
-        code = 2
-    except KeyboardInterrupt:
-        print("interrupted (the calibration run was aborted)", file=sys.stderr)
-        code = 130
-    for problem in problems:
-        print(f"error: {problem}", file=sys.stderr)
-    return code
+        return code
+
+    return cli_run.under_control(
+        url, args.token, args.take_over, work, "interrupted (the calibration run was aborted)"
+    )
 
 
 def _apply(url: str, run_id: str, headers: dict[str, str], args: argparse.Namespace) -> int:

@@ -14,6 +14,7 @@ import sys
 import time
 import urllib.error
 import urllib.request
+from collections.abc import Callable
 from typing import Any
 
 from app.cli.progress import Progress
@@ -161,6 +162,44 @@ def _remote(
     base = f"{url}/api/runs/{run_id}"
     run["files"] = {name: f"{base}/{name}" for name in FILES}
     return run
+
+
+def under_control(
+    url: str,
+    token: str | None,
+    take_over: bool,
+    work: Callable[[dict[str, str], list[str]], int],
+    interrupted: str,
+) -> int:
+    """Take the control lease of the server at ``url``, do ``work(headers, problems)``
+    (its exit code; it aborts what it started when interrupted), give control back.
+
+    Returns the exit code: ``work``'s; 2 after a refused lease, an HTTP error (its code and
+    the server's detail) or a connection error; 130 on Ctrl-C (``interrupted`` is printed).
+    What could not be done at the end (``problems``) is printed as errors."""
+    problems: list[str] = []
+    code = 0
+    try:
+        headers = _take_control(url, token, take_over)
+        try:
+            code = work(headers, problems)
+        finally:
+            _try(problems, "give control back", url, "/api/lease", "DELETE", headers)
+    except LeaseRefused as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        code = 2
+    except urllib.error.HTTPError as exc:
+        print(f"error: {exc.code} {_detail(exc)}", file=sys.stderr)
+        code = 2
+    except (urllib.error.URLError, OSError) as exc:
+        print(f"error: {url}: {exc}", file=sys.stderr)
+        code = 2
+    except KeyboardInterrupt:
+        print(interrupted, file=sys.stderr)
+        code = 130
+    for problem in problems:
+        print(f"error: {problem}", file=sys.stderr)
+    return code
 
 
 def _try(problems: list[str], what: str, url: str, path: str, method: str, headers: dict) -> None:

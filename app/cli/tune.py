@@ -99,38 +99,20 @@ def format_result(body: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    import urllib.error
-
     from app.cli import run as cli_run
 
     url = args.url.rstrip("/")
-    problems: list[str] = []
-    code = 0
-    try:
-        headers = cli_run._take_control(url, args.token, args.take_over)
-        try:
-            if args.revert:
-                body = cli_run._http(f"{url}/api/tuning/revert", "POST", None, headers)
-                _print_gains("reverted", body)
-            else:
-                code = _tune(url, headers, args)
-        finally:
-            cli_run._try(problems, "give control back", url, "/api/lease", "DELETE", headers)
-    except cli_run.LeaseRefused as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        code = 2
-    except urllib.error.HTTPError as exc:
-        print(f"error: {exc.code} {cli_run._detail(exc)}", file=sys.stderr)
-        code = 2
-    except (urllib.error.URLError, OSError) as exc:
-        print(f"error: {url}: {exc}", file=sys.stderr)
-        code = 2
-    except KeyboardInterrupt:
-        print("interrupted (the tuning run was aborted)", file=sys.stderr)
-        code = 130
-    for problem in problems:
-        print(f"error: {problem}", file=sys.stderr)
-    return code
+
+    def work(headers: dict[str, str], problems: list[str]) -> int:
+        if args.revert:
+            body = cli_run._http(f"{url}/api/tuning/revert", "POST", None, headers)
+            _print_gains("reverted", body)
+            return 0
+        return _tune(url, headers, args)
+
+    return cli_run.under_control(
+        url, args.token, args.take_over, work, "interrupted (the tuning run was aborted)"
+    )
 
 
 def _print_gains(what: str, body: dict[str, Any]) -> None:
