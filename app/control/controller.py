@@ -322,8 +322,19 @@ class Controller:
     def set_joint_offsets(self, offsets_rad: Any) -> Future:
         """Joint offsets [rad] (3,) from calibration, added to every joint read from now on
         (app/control/joint_offsets.py); refused while a motion runs."""
+
+        def tip_commanded(platform: np.ndarray) -> np.ndarray:
+            state = self.state
+            phi = state.phi_rad if state.phi_commanded_rad is None else state.phi_commanded_rad
+            return self.gate.tip(platform, phi)
+
+        def tip_measured(platform: np.ndarray) -> np.ndarray:
+            return self.gate.tip(platform, self._phi_measured())
+
         return self.submit_motion(
-            lambda: set_offsets(self.state, self.robot, self.joint_bus, offsets_rad)
+            lambda: set_offsets(
+                self.state, self.robot, self.joint_bus, offsets_rad, tip_measured, tip_commanded
+            )
         )
 
     def set_gains(self, gains: dict[int, PositionGains]) -> Future:

@@ -11,6 +11,7 @@ joint positions or writes goals; every other call goes to the bus unchanged.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -44,10 +45,20 @@ class OffsetBus:
         return getattr(self.inner, name)
 
 
-def set_offsets(state: LoopState, robot: Any, bus: OffsetBus, offsets_rad: Any) -> list[float]:
+def set_offsets(
+    state: LoopState,
+    robot: Any,
+    bus: OffsetBus,
+    offsets_rad: Any,
+    tip_measured: Callable[[np.ndarray], np.ndarray] = lambda platform: platform,
+    tip_commanded: Callable[[np.ndarray], np.ndarray] = lambda platform: platform,
+) -> list[float]:
     """Use ``offsets_rad`` (3,) [rad] from now on (control thread), holding the arm where it
     is: what the loop read and commanded is shifted by the change, so the goal written to
     the servos stays the same ticks. Refused while a motion runs (MotionRefused).
+    ``tip_measured`` / ``tip_commanded``: the tool tip [m] of a platform point (3,) at the
+    measured / commanded wrist angle (the platform itself without a tool): the loop's points
+    and goal are tips.
 
     Returns the offsets now in use [rad].
     """
@@ -62,10 +73,11 @@ def set_offsets(state: LoopState, robot: Any, bus: OffsetBus, offsets_rad: Any) 
     bus.offsets_rad = new
     if state.joints is not None:
         state.joints = replace(state.joints, position_rad=state.joints.position_rad + delta)
-        state.point_m = robot.fk(state.joints.position_rad).points
+        state.platform_m = robot.fk(state.joints.position_rad).points
+        state.point_m = tip_measured(state.platform_m)
     if state.commanded_rad is not None:
         state.commanded_rad = state.commanded_rad + delta
-        state.commanded_point_m = robot.fk(state.commanded_rad).points
+        state.commanded_point_m = tip_commanded(robot.fk(state.commanded_rad).points)
         if state.torque:
             state.goal_m = state.commanded_point_m.copy()
     state.resync = True  # the next motion starts from what is measured now

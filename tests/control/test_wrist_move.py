@@ -8,6 +8,8 @@ offset turned by the written phi) is the goal; without a wrist a move is as befo
 
 from __future__ import annotations
 
+from concurrent.futures import Future
+
 import numpy as np
 import pytest
 
@@ -175,3 +177,26 @@ def test_a_goal_that_turns_the_wrist_keeps_the_tip_on_its_path() -> None:
     assert len(goals) > 10 and goals[-1, 3] == pytest.approx(0.8, abs=1e-12)
     np.testing.assert_allclose(_tips(control, goals), np.tile(tip, (len(goals), 1)), atol=1e-6)
     assert np.abs(np.diff(goals[:, 3])).max() <= STEP_RAD * (1 + 1e-9)
+
+
+def test_new_joint_offsets_keep_the_goal_and_the_points_tips() -> None:
+    """Applying joint offsets (a calibration's apply) re-reads the loop's points through the
+    new offsets: with a tool they stay tool tips at the wrist's angle (an attacker's trial
+    saw the goal become the platform centre, 48 mm from the tip, until the next motion)."""
+    control, _ = _loop(phi0=-0.4)
+    control.step()
+
+    def now(command):  # the control thread's part, run here at once (the loop is stepped)
+        future = Future()
+        future.set_result(command())
+        return future
+
+    control.submit = now  # type: ignore[method-assign]
+    goal = control.state.goal_m.copy()
+    control.set_joint_offsets(np.zeros(3)).result()
+    np.testing.assert_allclose(control.state.goal_m, goal, atol=1e-9)  # nothing changed
+    control.set_joint_offsets([0.01, -0.02, 0.015]).result()
+    state, robot, gate = control.state, control.robot, control.gate
+    np.testing.assert_allclose(state.goal_m, gate.tip(robot.fk(state.commanded_rad).points, -0.4))
+    measured = gate.tip(robot.fk(state.joints.position_rad).points, -0.4)
+    np.testing.assert_allclose(state.point_m, measured, atol=1e-12)
