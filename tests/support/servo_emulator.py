@@ -8,6 +8,8 @@ import select
 import time
 import tty
 
+import dynamixel_sdk as sdk
+
 from hardware.calibration import JointCalibration
 from hardware.dynamixel.control_table import Reg
 from hardware.dynamixel.driver import DynamixelConfig
@@ -38,6 +40,20 @@ def make_config(port: str, **overrides: object) -> DynamixelConfig:
     if "rx_timeout_s" not in overrides:
         settings.setdefault("min_reply_wait_s", EMULATOR_REPLY_WAIT_S)
     return DynamixelConfig(**settings)  # type: ignore[arg-type]
+
+
+class PatientPort(sdk.PortHandler):
+    """The SDK's own port, waiting at least EMULATOR_REPLY_WAIT_S for each status packet
+    (the SDK's ~34 ms is sized for real servos, not for an emulator thread that a loaded
+    machine deschedules); a test of a missing reply then waits that long for it."""
+
+    def setPacketTimeout(self, packet_length):  # noqa: N802 (the SDK's name)
+        super().setPacketTimeout(packet_length)
+        self.packet_timeout = max(self.packet_timeout, EMULATOR_REPLY_WAIT_S * 1e3)
+
+    def setPacketTimeoutMillis(self, msec):  # noqa: N802
+        super().setPacketTimeoutMillis(msec)
+        self.packet_timeout = max(self.packet_timeout, EMULATOR_REPLY_WAIT_S * 1e3)
 
 
 class RawPort:

@@ -12,7 +12,7 @@ import dynamixel_sdk as sdk
 import pytest
 
 from app.cli import emulate as emulator_cli
-from tests.support.servo_emulator import BAUD
+from tests.support.servo_emulator import BAUD, PatientPort
 
 
 def test_parse_ids() -> None:
@@ -43,7 +43,7 @@ def test_run_prints_a_port_the_sdk_can_ping() -> None:
                 break
             stop.wait(0.01)
         path = out.getvalue().strip()
-        port = sdk.PortHandler(path)
+        port = PatientPort(path)
         assert port.openPort() and port.setBaudRate(BAUD)
         try:
             ph = sdk.PacketHandler(2.0)

@@ -9,12 +9,12 @@ import dynamixel_sdk as sdk
 import pytest
 
 from hardware.emulator import ServoEmulator
-from tests.support.servo_emulator import BAUD, RawPort
+from tests.support.servo_emulator import BAUD, PatientPort, RawPort
 
 
 @pytest.fixture
 def sdk_port(emulator: ServoEmulator) -> Iterator[tuple[sdk.PortHandler, object]]:
-    port = sdk.PortHandler(emulator.port)
+    port = PatientPort(emulator.port)
     assert port.openPort() and port.setBaudRate(BAUD)
     try:
         yield port, sdk.PacketHandler(2.0)
