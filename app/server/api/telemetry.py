@@ -29,6 +29,10 @@ def latest_telemetry(controller: ControllerDep) -> dict[str, Any]:
 async def telemetry(websocket: WebSocket, controller: ControllerDep, settings: SettingsDep) -> None:
     """Stream snapshots as JSON; ``?hz=`` sets the rate (1-200, default from config)."""
     if not websocket_token_ok(websocket):
+        # accepted, then closed with the policy code: a close before the accept is an HTTP
+        # 403 to the browser, whose close event then says only 1006 (no reason), and the
+        # page could not tell that it should ask for the token
+        await websocket.accept()
         await websocket.close(code=1008, reason="missing or wrong token (?token=)")
         return
     hz = stream_rate_hz(websocket.query_params.get("hz"), settings.server.telemetry_hz)
