@@ -31,9 +31,11 @@ def test_control_needs_the_token(guarded):
 def test_websocket_needs_the_token(guarded):
     # closed with the policy code 1008 after the handshake (the page asks for the token on
     # that code; a refused handshake would show the browser only 1006)
-    with pytest.raises(WebSocketDisconnect) as refused:
-        with guarded.websocket_connect("/api/telemetry") as ws:
-            ws.receive_json()
+    with (
+        pytest.raises(WebSocketDisconnect) as refused,
+        guarded.websocket_connect("/api/telemetry") as ws,
+    ):
+        ws.receive_json()
     assert refused.value.code == 1008 and "token" in refused.value.reason
     with guarded.websocket_connect(f"/api/telemetry?token={TOKEN}") as ws:
         assert "mode" in ws.receive_json()
