@@ -1,14 +1,20 @@
 """The page's e-stop latency: from the key press or click to the server's receipt.
 
 Usage: python benchmarks/estop_latency.py [--trials 20] [--input key|button|both]
-       [--no-embed]
+       [--no-embed] [--state holding|moving]
 
 `deltadash serve` on the simulator with its 3D scene, and the dashboard in Debian's headless
 chromium with software WebGL (SwiftShader), the scene embedded ("show here" ticked: viser
 drawing in software) and the plots running. Each trial resets the e-stop (the page's Reset
 button), waits a random 0.5 to 1.5 s so that presses fall anywhere in the scene's
-frames, then presses Space (or clicks E-STOP) and waits for the server to have it. Printed
+frames, then presses Space (or clicks E-STOP) and waits for the server to have it. With
+``--state moving`` each press lands during a sinusoid run started from the page (the scene
+redrawing the moving arm at its full rate, the plots scrolling): the page's Start run, the
+test part under way, then the random wait and the press (which aborts the run). Printed
 per input, in ms, p50 / p99 / worst of:
+
+The plots' frame rate over each input's trials is printed beside it (the plots run in their
+own frame, plots.html, from the other loopback name: another renderer process than the page).
 
 - page: from the input event's own time stamp in the page (``performance.timeOrigin +
   event.timeStamp``: when chromium received the input, before any wait for the page's main
@@ -41,7 +47,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tests.support.browser import chromium_page  # noqa: E402
+from tests.support.browser import chromium_page, plots_frame  # noqa: E402
 from tests.support.server import Server, serve  # noqa: E402
 
 
@@ -77,13 +83,48 @@ def _canvas(frame: Any) -> bool:
 PATHS = ("listener", "middleware", "route")
 
 
-def trial(page: Any, server: Server, how: str) -> tuple[float, float, float, dict[str, float]]:
+def start_moving(page: Any, server: Server) -> None:
+    """A 30 s sinusoid started from the page, waited on until its test part runs (started
+    again if a loaded machine faulted it on the way)."""
+    page.fill("input[name=duration]", "30")
+    deadline = time.monotonic() + 300.0
+    while True:
+        runs = server.get("/api/runs")
+        running = [r for r in runs if r["state"] == "running"]
+        if running and ((running[0].get("progress") or {}).get("test_elapsed_s") or 0) > 0.2:
+            return
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"no run under way: {page.locator('#toast').inner_text()!r}")
+        if not running:  # a click a second until one starts
+            status = server.get("/api/status")
+            if status["faults"] or status["estopped"]:
+                page.click("#reset")
+            elif not status["torque"]:
+                page.click("#torque-on")
+            elif status["ee"]["position_m"][2] < -0.3:  # hanging below the workspace: home
+                for axis, value in zip("xyz", ("0", "0", "-240"), strict=True):
+                    page.fill(f"#goal-form input[name={axis}]", value)
+                page.click("#goal-form button[type=submit]")
+                if page.locator("#confirm").is_visible():  # a long move is confirmed
+                    page.click("#confirm-yes")
+            else:
+                page.click("#sine-start")
+            time.sleep(1.0)
+        else:
+            time.sleep(0.05)
+
+
+def trial(
+    page: Any, server: Server, how: str, moving: bool = False
+) -> tuple[float, float, float, dict[str, float]]:
     """One press: (page event -> server, of which page event -> request sent, driver ->
     server, {path: page event -> arrival by that path}) [ms]."""
     if server.get("/api/status")["estopped"]:
         # as the operator does (the page holds the control lease)
         page.click("#reset", timeout=300_000)
         until(lambda: not server.get("/api/status")["estopped"], "the reset")
+    if moving:
+        start_moving(page, server)
     before = server.get("/api/status")["estop_received_unix_s"]
     count = page.evaluate("window.deltadash.estops.length")
     time.sleep(random.uniform(0.5, 1.5))
@@ -147,6 +188,12 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=20)
     parser.add_argument("--input", choices=["key", "button", "both"], default="both")
     parser.add_argument("--no-embed", action="store_true", help="the scene not embedded")
+    parser.add_argument(
+        "--state",
+        choices=["holding", "moving"],
+        default="holding",
+        help="the arm at rest (torque as left) or each press during a sinusoid run",
+    )
     args = parser.parse_args()
     inputs = ["key", "button"] if args.input == "both" else [args.input]
     with (
@@ -155,10 +202,20 @@ def main() -> None:
         chromium_page(1366, 900) as page,
     ):
         open_page(page, server, not args.no_embed)
-        print(f"scene {'not ' if args.no_embed else ''}embedded; load {os.getloadavg()}")
+        print(
+            f"scene {'not ' if args.no_embed else ''}embedded, arm {args.state}; "
+            f"load {os.getloadavg()}"
+        )
+        moving = args.state == "moving"
+        # the plots' frame (before it, the plots were drawn in the page itself)
+        plots = plots_frame(page) if page.locator("#plots-frame").count() else page
         for how in inputs:
-            results = [trial(page, server, how) for _ in range(args.trials)]
-            print(f"{how} ({args.trials} presses)")
+            frames, began = plots.evaluate("window.deltadashPlot.frames"), time.monotonic()
+            results = [trial(page, server, how, moving) for _ in range(args.trials)]
+            fps = (plots.evaluate("window.deltadashPlot.frames") - frames) / (
+                time.monotonic() - began
+            )
+            print(f"{how} ({args.trials} presses; the plots drew {fps:.1f} frames/s meanwhile)")
             print("  " + report("page event -> server", [r[0] for r in results]))
             print("  " + report("  of which event -> request sent", [r[1] for r in results]))
             print("  " + report("driver -> server", [r[2] for r in results]))

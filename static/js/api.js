@@ -14,8 +14,26 @@ export function clientName() {
   return name;
 }
 
+// A frame from another site may be refused storage (chromium blocks third-party storage
+// where it blocks third-party cookies): the plots' frame then keeps its token in memory.
+let memoryToken = null;
+
 export function token() {
-  return sessionStorage.getItem(TOKEN_KEY);
+  try {
+    return sessionStorage.getItem(TOKEN_KEY);
+  } catch {
+    return memoryToken;
+  }
+}
+
+// Keep ``value`` as this tab's token (the plots' frame is given the page's).
+export function setToken(value) {
+  memoryToken = value;
+  try {
+    sessionStorage.setItem(TOKEN_KEY, value);
+  } catch {
+    // refused storage: memoryToken serves
+  }
 }
 
 export class ApiError extends Error {
@@ -37,7 +55,7 @@ export function promptToken(reason, sent = null) {
   if (!tokenPrompt) {
     tokenPrompt = Promise.resolve().then(() => {
       const value = window.prompt(`${reason}\nServer token:`, "");
-      if (value) sessionStorage.setItem(TOKEN_KEY, value.trim());
+      if (value) setToken(value.trim());
       tokenPrompt = null;
       return Boolean(value);
     });

@@ -1,7 +1,8 @@
 // Operator commands: e-stop (Space / Esc), torque, reset, go-to, and hold-to-move jogs from
 // the pad, the arrow keys and a gamepad (they move only while held: see startHold).
 
-import { postControl, takeLease, token } from "./api.js";
+import { postControl, takeLease } from "./api.js";
+import { isEstopKey, newPressId, postEstop, postListener, typing } from "./estopkey.js";
 import { operatorText, parseDecimal, showError, showMessage, setText } from "./ui.js";
 import { PHI_STEP_DEG, clampPhi, currentPhiRad, wrist } from "./wrist.js";
 
@@ -56,24 +57,22 @@ const estops = [];
 window.deltadash = Object.assign(window.deltadash || {}, { estops });
 let estopListenerUrl = null; // "http://<this host>:<estop_port>/estop", null: none known
 
-function newPressId() {
-  return `${Date.now().toString(36)}-${Math.random().toString(36).slice(2, 10)}`;
-}
-
-export function estop(event = null) {
-  const press = newPressId();
-  const headers = token() ? { Authorization: `Bearer ${token()}` } : {};
-  const options = { method: "POST", keepalive: true, priority: "high" };
-  const requests = [fetch(`/api/estop?press=${press}`, { ...options, headers })];
-  if (estopListenerUrl) { // no headers: a plain cross-origin POST, no preflight round trip
-    requests.push(fetch(`${estopListenerUrl}?press=${press}`, { ...options, mode: "cors" }));
-  }
+// ``forwarded``: a press the plots' frame took (it had the keyboard focus) and already sent
+// to /api/estop itself: { press, event_unix_ms, source }; the page records it and sends it
+// by the other paths with the same id.
+export function estop(event = null, forwarded = null) {
+  const press = forwarded ? forwarded.press : newPressId();
+  const requests = forwarded ? [] : [postEstop(press)];
+  if (estopListenerUrl) requests.push(postListener(estopListenerUrl, press));
+  if (forwarded) requests.push(postEstop(press)); // the frame's own request may not be answered
   const sentMs = Date.now();
   // event.timeStamp is when the input arrived, before any wait for the main thread
-  const eventMs = event ? performance.timeOrigin + event.timeStamp : sentMs;
+  const eventMs = forwarded ? forwarded.event_unix_ms
+    : event ? performance.timeOrigin + event.timeStamp : sentMs;
   estops.push({
-    source: event ? event.type : "call", event_unix_ms: eventMs, sent_unix_ms: sentMs,
-    press, paths: requests.length,
+    source: forwarded ? `plots:${forwarded.source}` : event ? event.type : "call",
+    event_unix_ms: eventMs, sent_unix_ms: forwarded ? forwarded.sent_unix_ms : sentMs,
+    press, paths: requests.length + (forwarded ? 1 : 0),
   });
   const confirmed = (request) => request.then((response) => {
     if (!response.ok) throw new Error(`E-stop refused by the server (HTTP ${response.status})`);
@@ -316,14 +315,9 @@ function axisVelocity(axis, sign) {
   return velocity;
 }
 
-function typing(target) {
-  return target instanceof HTMLInputElement && target.type !== "checkbox" ||
-    target instanceof HTMLSelectElement || target instanceof HTMLTextAreaElement;
-}
-
 function onKey(event) {
   // E-stop wins over everything, even a focused button (Space would otherwise click it).
-  if (event.key === "Escape" || (event.key === " " && !typing(event.target))) {
+  if (isEstopKey(event)) {
     if (!event.repeat) estop(event); // first, before anything else (a held key sends one)
     event.preventDefault();
     event.stopImmediatePropagation();

@@ -3,11 +3,11 @@
 import { get } from "./api.js";
 import { startControl } from "./control.js";
 import { renderHealth } from "./health.js";
-import { startPlots } from "./plots.js";
+import { startPlotsFrame } from "./plotshost.js";
 import { startPrograms } from "./programs.js";
 import { onStatus, startRuns } from "./runs.js";
 import { startScene } from "./scene.js";
-import { setStreamOnline, startStatus, state } from "./status.js";
+import { startStatus, state } from "./status.js";
 import { onWorkspaceStatus, startWorkspace2d } from "./workspace2d.js";
 import { renderWrist, startWrist } from "./wrist.js";
 
@@ -25,7 +25,7 @@ async function boot() {
   state.listeners.push(renderHealth, onWorkspaceStatus);
   startControl(info);
   startRuns();
-  startPlots(setStreamOnline);
+  startPlotsFrame(info);
   startWorkspace2d();
   startPrograms();
 }

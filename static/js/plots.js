@@ -256,6 +256,10 @@ function onMessage(message) {
   dirty = true;
 }
 
+// ``askToken(reason, sent)``: how to get the token when the stream wants one (a promise);
+// null: ask the operator here.
+let askToken = null;
+
 function connect(onState) {
   const sent = token();
   const ws = new WebSocket(telemetryUrl(HZ));
@@ -265,7 +269,10 @@ function connect(onState) {
     plotStats.connected = false;
     onState(false);
     // 1008 = policy: the server wants a token; ask, then reconnect with it
-    if (event.code === 1008) await promptToken("The telemetry stream requires a token.", sent);
+    if (event.code === 1008) {
+      const reason = "The telemetry stream requires a token.";
+      await (askToken ? askToken(reason, sent) : promptToken(reason, sent));
+    }
     setTimeout(() => connect(onState), 1000);
   };
 }
@@ -423,7 +430,9 @@ function startControls() {
   showHeading();
 }
 
-export function startPlots(onState) {
+// ``onState(online)``: the stream's state; ``ask``: see askToken.
+export function startPlots(onState, ask = null) {
+  askToken = ask;
   if (!window.Plotly) {
     document.getElementById("plot").textContent = "plotly.js did not load (/vendor/plotly.min.js).";
     return;

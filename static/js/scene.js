@@ -3,7 +3,10 @@
 // took it over and the plots fell below 1 frame/s. So the frame is on by default only with
 // hardware rendering; the operator's choice is remembered per browser.
 
+import { isolatedOrigin } from "./isolation.js";
+
 const CHOICE_KEY = "deltadash.sceneEmbed";
+const SOFTWARE_DPR = 0.5;
 
 // True when WebGL runs on the CPU (SwiftShader, llvmpipe, software rasterisers).
 function softwareWebGL() {
@@ -17,15 +20,6 @@ function softwareWebGL() {
   } catch {
     return true;
   }
-}
-
-// The same machine under another site's name: a frame from another site gets its own
-// renderer process (chromium's site isolation), so viser's drawing cannot hold up this page's
-// main thread, where the e-stop key is handled. A port alone does not make another site.
-export function isolatedHost(hostname) {
-  if (hostname === "127.0.0.1" || hostname === "[::1]") return "localhost";
-  if (hostname === "localhost") return "127.0.0.1";
-  return null;
 }
 
 function show(url, embed) {
@@ -52,11 +46,15 @@ export function startScene(info) {
     return;
   }
   const url = `${location.protocol}//${location.hostname}:${info.viser_port}/`;
-  const isolated = isolatedHost(location.hostname);
-  const frameUrl = isolated ? `${location.protocol}//${isolated}:${info.viser_port}/` : url;
+  // Without a GPU every pixel of the scene is drawn by the CPU that also runs this page's
+  // e-stop key: the embedded scene draws at half resolution there (a quarter of the pixels;
+  // viser's own fixedDpr setting). The tab of "open in a new tab" keeps full resolution.
+  const software = softwareWebGL();
+  const frameBase = `${isolatedOrigin(info.viser_port)}/`; // its own process (isolation.js)
+  const frameUrl = software ? `${frameBase}?fixedDpr=${SOFTWARE_DPR}` : frameBase;
   link.href = url;
   const saved = localStorage.getItem(CHOICE_KEY);
-  toggle.checked = saved === null ? !softwareWebGL() : saved === "1";
+  toggle.checked = saved === null ? !software : saved === "1";
   toggle.addEventListener("change", () => {
     localStorage.setItem(CHOICE_KEY, toggle.checked ? "1" : "0");
     show(frameUrl, toggle.checked);

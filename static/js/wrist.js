@@ -26,13 +26,17 @@ export function currentPhiRad(s) {
   return s.ee && Number.isFinite(s.ee.phi_rad) ? s.ee.phi_rad : 0;
 }
 
-export function startWrist(info) {
-  const w = info && info.wrist;
+// ``w``: /api/info's wrist ({enabled, min_rad, max_rad}) or null: the record only.
+export function setWrist(w) {
   wrist.enabled = Boolean(w && w.enabled);
   if (wrist.enabled) {
     wrist.minRad = w.min_rad;
     wrist.maxRad = w.max_rad;
   }
+}
+
+export function startWrist(info) {
+  setWrist(info && info.wrist);
   if (info && Array.isArray(info.tool_offset_m)) wrist.offsetM = info.tool_offset_m;
   document.querySelectorAll("[data-wrist]").forEach((el) => { el.hidden = !wrist.enabled; });
   document.querySelectorAll("[data-tool]").forEach((el) => { el.hidden = !hasTool(); });

@@ -5,6 +5,10 @@ Space and a press on the E-STOP button each reach the server; the latency (the i
 event's time in the page to the server's arrival time, GET /api/status
 ``estop_received_unix_s``) is printed, not asserted (figures: docs/dashboard.md, measured
 by benchmarks/estop_latency.py). Reset brings the page back each time.
+
+The plots run in their own frame, on another renderer main thread than the page's keys: a
+press on the page reaches the server while the plots' frame is held busy (it would wait for
+the frame on a shared thread), and Space pressed while the frame has the focus e-stops too.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from tests.support.browser import (
     browser_skip_reason,
     dashboard_page,
     page_condition,
+    plots_frame,
 )
 from tests.support.server import Server, wait_for
 
@@ -33,10 +38,11 @@ def page(server: Server) -> Iterator[Any]:
         yield page
 
 
-def scene_frame(page: Any) -> Any:
+def scene_frame(page: Any, viser_port: int) -> Any:
     """The embedded scene's frame once viser has put its canvas in it, else None."""
+    page.evaluate("0")  # a new frame is known only after a call into Playwright
     for frame in page.frames:
-        if frame == page.main_frame:
+        if frame == page.main_frame or urlsplit(frame.url).port != viser_port:
             continue
         try:
             if frame.evaluate("document.querySelectorAll('canvas').length > 0"):
@@ -84,6 +90,18 @@ def press_estop(page: Any, server: Server, how: str) -> float:
     return received * 1e3 - record["event_unix_ms"]
 
 
+def plots_running(page: Any) -> Any:
+    """The plots' frame, once it draws (from another site than the page, like the scene)."""
+    plots = plots_frame(page)
+    assert urlsplit(plots.url).hostname != urlsplit(page.url).hostname
+    page_condition(
+        plots,
+        "() => document.getElementById('plot-fps').textContent.trim() !== ''",
+        "the plots to run",
+    )
+    return plots
+
+
 def reset(page: Any, server: Server) -> None:
     page.click("#reset", timeout=PAGE_WAIT_S * 1e3)
     wait_for(lambda: not server.get("/api/status")["estopped"], "the reset to clear the e-stop")
@@ -98,12 +116,11 @@ def test_estop_answers_with_the_scene_embedded_and_plots_running(page: Any, serv
     frame_url = urlsplit(page.locator("#scene").get_attribute("src"))
     assert frame_url.hostname != page_url.hostname
     assert frame_url.port == server.get("/api/info")["viser_port"]
-    wait_for(lambda: scene_frame(page), "viser's canvas in the embedded scene", PAGE_WAIT_S)
-    page_condition(
-        page,
-        "() => document.getElementById('plot-fps').textContent.trim() !== ''",
-        "the plots to run",
+    viser_port = server.get("/api/info")["viser_port"]
+    wait_for(
+        lambda: scene_frame(page, viser_port), "viser's canvas in the embedded scene", PAGE_WAIT_S
     )
+    plots_running(page)
     latencies = {}
     for how in ("key", "button", "key"):
         latencies.setdefault(how, []).append(press_estop(page, server, how))
@@ -114,3 +131,71 @@ def test_estop_answers_with_the_scene_embedded_and_plots_running(page: Any, serv
         "e-stop latency, input event in the page -> server [ms]: "
         + ", ".join(f"{how} {', '.join(f'{v:.0f}' for v in vs)}" for how, vs in latencies.items())
     )
+
+
+# The plots' frame held busy until it sees the server e-stopped (a synchronous status read
+# in its busy loop), for at most ``limit_ms``: ``__busy`` says whether it saw the e-stop while
+# busy, ``__busyFrom`` when the loop began [Unix ms]. (A message to the page from inside the
+# loop would not do: chromium sends a cross-site postMessage after the sender's task.)
+HOLD_BUSY = """(limit_ms) => {
+  window.__busy = "starting";
+  setTimeout(() => {
+    window.__busyFrom = Date.now();
+    const end = Date.now() + limit_ms;
+    while (Date.now() < end) {
+      const request = new XMLHttpRequest();
+      request.open("GET", "/api/status", false);  // synchronous: the thread stays busy
+      request.send();
+      if (JSON.parse(request.responseText).estopped) { window.__busy = "saw the e-stop"; return; }
+    }
+    window.__busy = "gave up";
+  }, 0);
+}"""
+
+
+def test_the_page_stops_while_the_plots_frame_is_held_busy(page: Any, server: Server) -> None:
+    # the scene unloaded: it shares the plots' process (the same other site), whose thread it
+    # holds for seconds at a time, so the busy loop would begin long after the key each time
+    page.uncheck("#scene-embed", timeout=PAGE_WAIT_S * 1e3)
+    plots = plots_running(page)
+    seen = []
+    for _ in range(5):  # until the key came after the loop began (it usually does at once)
+        assert not server.get("/api/status")["estopped"]
+        page.evaluate("window.focus()")  # the keys go to the page, not to a frame
+        count = page.evaluate("window.deltadash.estops.length")
+        plots.evaluate(HOLD_BUSY, 120_000)  # returns at once; the loop begins just after
+        page.keyboard.press("Space")
+        wait_for(lambda: server.get("/api/status")["estopped"], "the e-stop with the plots busy")
+        # the frame's thread is held until its loop sees the e-stop: this read waits for that
+        busy, busy_from = plots.evaluate("[window.__busy, window.__busyFrom]")
+        record = page.evaluate(f"window.deltadash.estops[{count}]")
+        assert record["source"] == "keydown", record
+        seen.append((busy, busy_from, record["sent_unix_ms"]))
+        reset(page, server)
+        if record["sent_unix_ms"] >= busy_from:
+            # the page handled the key while the frame's loop ran, and the loop was still
+            # running when the stop arrived: two threads (one would have run them in turn)
+            assert busy == "saw the e-stop", seen
+            return
+    raise AssertionError(f"the key was handled before the busy loop began every time: {seen}")
+
+
+def test_space_while_the_plots_have_the_focus_stops(page: Any, server: Server) -> None:
+    plots = plots_running(page)
+    assert not server.get("/api/status")["estopped"]
+    count = page.evaluate("window.deltadash.estops.length")
+    pause = plots.locator("#plot-pause")
+    pause.click()  # the focus is in the plots' frame now, on the Pause button
+    wait_for(lambda: pause.inner_text() == "Resume", "the plots paused by the click")
+    page.keyboard.press("Space")
+    wait_for(lambda: server.get("/api/status")["estopped"], "the e-stop from the plots' frame")
+    # the frame sent it and told the page, which recorded it and sent it by its paths too
+    record = wait_for(
+        lambda: page.evaluate(f"window.deltadash.estops[{count}]"), "the page's record"
+    )
+    assert record["source"] == "plots:keydown", record
+    assert record["paths"] == 3, record  # the frame's /api/estop, the page's and the listener
+    assert pause.inner_text() == "Resume", "Space clicked the focused button"
+    pause.click()
+    wait_for(lambda: pause.inner_text() == "Pause", "the plots running again")
+    reset(page, server)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterator
 from typing import Any
+from urllib.parse import urlsplit
 
 import pytest
 
@@ -21,6 +22,7 @@ from tests.support.browser import (
     browser_skip_reason,
     dashboard_page,
     page_condition,
+    plots_frame,
     save_artifact,
     toasts,
 )
@@ -86,7 +88,10 @@ def test_header_fills_in_from_the_server(page: Any, server: Server) -> None:
     # headless chromium renders WebGL in software: the scene is offered, not embedded
     assert not page.locator("#scene-embed").is_checked()
     page.check("#scene-embed")
-    assert page.locator("#scene").get_attribute("src").endswith(scene_url)
+    # embedded under software WebGL at half resolution (viser's fixedDpr): a quarter of the
+    # pixels for the CPU to draw
+    frame_url = urlsplit(page.locator("#scene").get_attribute("src"))
+    assert f":{frame_url.port}/" == scene_url and frame_url.query == "fixedDpr=0.5"
     assert page.locator("#scene").is_visible() and not page.locator("#scene-note").is_visible()
     wait_for(lambda: page.locator("#servo-rows tr").count() == 3, "three servo rows")
     shot(page, "loaded")
@@ -198,8 +203,9 @@ def test_plot_buffer_keeps_a_fixed_window_in_order(page: Any) -> None:
 
 
 def plotted_span_mm(page: Any) -> float:
-    """Peak-to-peak of the measured x in the plot itself (plotly's own trace data) [mm]."""
-    return page.evaluate(
+    """Peak-to-peak of the measured x in the plot itself (plotly's own trace data, in the
+    plots' frame) [mm]."""
+    return plots_frame(page).evaluate(
         "(() => { const y = document.getElementById('plot').data[1].y.filter(v => v !== null);"
         " return Math.max(...y) - Math.min(...y); })()"
     )
@@ -259,9 +265,10 @@ def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -
     page.fill("input[name=duration]", "2")
     feasible(page)
     assert "peak joint speed" in text(page, "#sine-preview")
-    before = page.evaluate("window.deltadashPlot.samples")
+    plots = plots_frame(page)
+    before = plots.evaluate("window.deltadashPlot.samples")
     start_from_page(page, server)
-    wait_for(lambda: page.evaluate("window.deltadashPlot.samples") > before, "new plot samples")
+    wait_for(lambda: plots.evaluate("window.deltadashPlot.samples") > before, "new plot samples")
     # the sinusoid's x amplitude is 50 mm: the plotted measured x must swing by tens of mm
     wait_for(lambda: plotted_span_mm(page) > 30, "the plotted x to show the sinusoid")
     shot(page, "running")
@@ -276,7 +283,8 @@ def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -
     rmse_mm = run["stats"]["tracking"]["x"]["rmse_m"] * 1000
     wait_for(lambda: f"{rmse_mm:.2f}" in row.inner_text(), "the x RMSE in mm in the row")
     assert row.locator("a", has_text="CSV").get_attribute("href").endswith("/log.csv")
-    save_artifact("dashboard-plot.json", json.dumps(page.evaluate("window.deltadashPlot")).encode())
+    stats = plots.evaluate("window.deltadashPlot")
+    save_artifact("dashboard-plot.json", json.dumps(stats).encode())
     shot(page, "run-done")
 
 

@@ -1,5 +1,6 @@
 """The plots and the runs table as an operator reads them, in Debian's chromium against
-`deltadash serve` on the simulator (no 3D scene) with three runs saved beforehand.
+`deltadash serve` on the simulator (no 3D scene) with three runs saved beforehand. The plots
+live in their own frame (plots.html): ``plots`` is that frame, ``page`` the dashboard.
 
 Plots: pause freezes what is drawn while the server's loop goes on and resume continues;
 the cursor readout gives the drawn values at the hovered time; a drag zooms a time range and
@@ -24,7 +25,9 @@ from tests.support.browser import (
     box_of,
     browser_skip_reason,
     dashboard_page,
+    frame_pixel,
     page_condition,
+    plots_frame,
     save_artifact,
 )
 from tests.support.saved_runs import HEALTHY, UNHEALTHY, save_run, synthetic_rows
@@ -70,10 +73,16 @@ def server(tmp_path_factory) -> Iterator[Server]:
 @pytest.fixture(scope="module")
 def page(server: Server) -> Iterator[Any]:
     with dashboard_page(server) as page:
-        page_condition(
-            page, "() => window.deltadashPlot && window.deltadashPlot.fullDraws > 0", "a first plot"
-        )
         yield page
+
+
+@pytest.fixture(scope="module")
+def plots(page: Any) -> Any:
+    frame = plots_frame(page)
+    page_condition(
+        frame, "() => window.deltadashPlot && window.deltadashPlot.fullDraws > 0", "a first plot"
+    )
+    return frame
 
 
 HOVER_PX = 2.5  # how far from the pointer the nearest drawn sample may lie [px]
@@ -86,57 +95,59 @@ READOUT = """() => {
 }"""
 
 
-def drawn(page: Any) -> Any:
-    return json.loads(page.evaluate(DRAWN))
+def drawn(plots: Any) -> Any:
+    return json.loads(plots.evaluate(DRAWN))
 
 
-def paused(page: Any) -> bool:
-    return bool(page.evaluate("window.deltadashPlot.paused"))
+def paused(plots: Any) -> bool:
+    return bool(plots.evaluate("window.deltadashPlot.paused"))
 
 
-def set_paused(page: Any, want: bool) -> None:
+def set_paused(plots: Any, want: bool) -> None:
     """Pause or resume; a pause returns once what is shown is final (a draw begun before
     the pause may still finish and change it: the pause's own draw comes after it)."""
-    draws = page.evaluate("window.deltadashPlot.pausedDraws")
-    if paused(page) != want:
-        page.click("#plot-pause")
-    wait_for(lambda: paused(page) == want, f"the plots {'paused' if want else 'running'}")
+    draws = plots.evaluate("window.deltadashPlot.pausedDraws")
+    if paused(plots) != want:
+        plots.click("#plot-pause")
+    wait_for(lambda: paused(plots) == want, f"the plots {'paused' if want else 'running'}")
     if want:
         page_condition(
-            page, f"() => window.deltadashPlot.pausedDraws > {draws}", "the paused plot drawn"
+            plots, f"() => window.deltadashPlot.pausedDraws > {draws}", "the paused plot drawn"
         )
 
 
-def x_range(page: Any) -> list[float]:
-    return page.evaluate("document.getElementById('plot').layout.xaxis.range")
+def x_range(plots: Any) -> list[float]:
+    return plots.evaluate("document.getElementById('plot').layout.xaxis.range")
 
 
-def pixel_of(page: Any, t: float) -> tuple[float, float]:
-    """The page pixel of time ``t`` [s] half-way up the first subplot (scrolled into view:
-    panels above it, e.g. the first-steps guidance, can push it below the fold)."""
-    return page.evaluate(
+def pixel_of(plots: Any, t: float) -> tuple[float, float]:
+    """The page pixel of time ``t`` [s] half-way up the first subplot (the plots' frame
+    scrolled into view: panels above it, e.g. the first-steps guidance, can push it below
+    the fold)."""
+    plots.frame_element().evaluate("e => e.scrollIntoView({block: 'center'})")
+    x, y = plots.evaluate(
         """(t) => {
           const p = document.getElementById('plot');
-          p.scrollIntoView({block: 'center'});
           const r = p.getBoundingClientRect();
           const xa = p._fullLayout.xaxis, ya = p._fullLayout.yaxis;
           return [r.left + xa._offset + xa.l2p(t), r.top + ya._offset + ya._length / 2];
         }""",
         t,
     )
+    return frame_pixel(plots, x, y)
 
 
 @pytest.fixture(autouse=True)
-def live_plot(page: Any) -> Iterator[None]:
+def live_plot(plots: Any) -> Iterator[None]:
     """Each test starts (and leaves) the plots live, unzoomed, on the 10 s window: one that
     fails half-way must not leave the shared page paused for the next."""
 
     def reset() -> None:
-        set_paused(page, False)
-        if page.locator("#plot-window").input_value() != "10":
-            page.select_option("#plot-window", "10")
+        set_paused(plots, False)
+        if plots.locator("#plot-window").input_value() != "10":
+            plots.select_option("#plot-window", "10")
         wait_for(
-            lambda: x_range(page) == [-10, 0], "the live 10 s window", seen=lambda: x_range(page)
+            lambda: x_range(plots) == [-10, 0], "the live 10 s window", seen=lambda: x_range(plots)
         )
 
     reset()
@@ -144,28 +155,28 @@ def live_plot(page: Any) -> Iterator[None]:
     reset()
 
 
-def test_pause_freezes_the_plot_and_resume_continues(page: Any, server: Server) -> None:
-    set_paused(page, True)
-    page_condition(page, "() => window.deltadashPlot.dropped > 0", "samples arriving while paused")
-    first = drawn(page)
+def test_pause_freezes_the_plot_and_resume_continues(plots: Any, server: Server) -> None:
+    set_paused(plots, True)
+    page_condition(plots, "() => window.deltadashPlot.dropped > 0", "samples arriving while paused")
+    first = drawn(plots)
     start = server.get("/api/status")["time_s"]
     wait_for(lambda: server.get("/api/status")["time_s"] > start + 0.5, "the loop to go on")
-    dropped = page.evaluate("window.deltadashPlot.dropped")
-    page_condition(page, f"() => window.deltadashPlot.dropped > {dropped}", "more samples dropped")
-    assert drawn(page) == first, "the plot changed while paused"
-    assert page.locator("#plot-pause").inner_text() == "Resume"
-    assert "paused" in page.locator("#plot-state").inner_text()
-    set_paused(page, False)
-    wait_for(lambda: drawn(page) != first, "the plot to move on after resume")
-    assert page.locator("#plot-pause").inner_text() == "Pause"
+    dropped = plots.evaluate("window.deltadashPlot.dropped")
+    page_condition(plots, f"() => window.deltadashPlot.dropped > {dropped}", "more samples dropped")
+    assert drawn(plots) == first, "the plot changed while paused"
+    assert plots.locator("#plot-pause").inner_text() == "Resume"
+    assert "paused" in plots.locator("#plot-state").inner_text()
+    set_paused(plots, False)
+    wait_for(lambda: drawn(plots) != first, "the plot to move on after resume")
+    assert plots.locator("#plot-pause").inner_text() == "Pause"
 
 
-def test_the_cursor_reads_out_the_drawn_values_at_the_hovered_time(page: Any) -> None:
-    set_paused(page, False)
-    wait_for(lambda: min(drawn(page)[0][0]) < -3.5, "samples drawn at t = -3 s", PAGE_WAIT_S)
-    set_paused(page, True)
-    data = drawn(page)
-    readout = page.locator("#plot-readout")
+def test_the_cursor_reads_out_the_drawn_values_at_the_hovered_time(plots: Any, page: Any) -> None:
+    set_paused(plots, False)
+    wait_for(lambda: min(drawn(plots)[0][0]) < -3.5, "samples drawn at t = -3 s", PAGE_WAIT_S)
+    set_paused(plots, True)
+    data = drawn(plots)
+    readout = plots.locator("#plot-readout")
     # the drawn sample nearest -3 s: hovered there, it is the nearest to the pointer even
     # where a loaded machine left a gap in the samples around -3 s
     times = data[0][0]
@@ -174,25 +185,25 @@ def test_the_cursor_reads_out_the_drawn_values_at_the_hovered_time(page: Any) ->
     last: dict[str, Any] = {"target": target}
 
     def hovered() -> bool:
-        x, y = pixel_of(page, target)
-        page.mouse.move(x - 1, y)  # a move per try: a busy page may miss one
+        x, y = pixel_of(plots, target)
+        page.mouse.move(x - 1, y)  # a move per try: a busy frame may miss one
         page.mouse.move(x, y)
         shown = readout.get_attribute("data-t")
-        last.update(pixel=(x, y), shown=shown, plot=page.evaluate("window.deltadashPlot"))
+        last.update(pixel=(x, y), shown=shown, plot=plots.evaluate("window.deltadashPlot"))
         if shown is None:
             return False
         # the readout is the drawn sample nearest the pointer: the target, or (where a loaded
         # machine left samples sparse) a neighbour at most a pixel or two away; a layout that
         # moved between reading the pixel and the move hovers elsewhere: again
-        last["off_px"] = abs(pixel_of(page, float(shown))[0] - x)
+        last["off_px"] = abs(pixel_of(plots, float(shown))[0] - x)
         return last["off_px"] <= HOVER_PX
 
     wait_for(hovered, f"the cursor readout at t = {target:.3f} s", PAGE_WAIT_S, seen=lambda: last)
-    # read in one go: a hover the page handles late may rewrite the readout between reads
-    shown = page.evaluate(READOUT)
+    # read in one go: a hover the frame handles late may rewrite the readout between reads
+    shown = plots.evaluate(READOUT)
     t, j = float(shown["time_s"]), int(shown["index"])
     assert shown["t"] == f"{t:.2f}"  # the time shown [s before now]
-    assert abs(pixel_of(page, t)[0] - pixel_of(page, target)[0]) <= HOVER_PX, (t, target)
+    assert abs(pixel_of(plots, t)[0] - pixel_of(plots, target)[0]) <= HOVER_PX, (t, target)
     assert data[0][0][j] == pytest.approx(t)
     # each series' readout is its drawn value at that sample (goal, measured, error per axis)
     for i, key in enumerate(f"{k}_{a}" for a in "xyz" for k in ("goal", "measured", "error")):
@@ -200,23 +211,23 @@ def test_the_cursor_reads_out_the_drawn_values_at_the_hovered_time(page: Any) ->
         assert shown[key] == ("–" if value is None else f"{value:.2f}"), (key, shown, value)
     # the cursor line stands at the read-out time in the first column
     # (a redraw after the pause may re-lay the plot out: the line follows its time)
-    line = page.locator("#plot .plot-cursor").first
+    line = plots.locator("#plot .plot-cursor").first
     where: dict[str, Any] = {}
 
     def at_time() -> bool:
         where["line"] = line.bounding_box() if line.is_visible() else None
-        where["time"] = pixel_of(page, t)[0]
+        where["time"] = pixel_of(plots, t)[0]
         return where["line"] is not None and abs(where["line"]["x"] - where["time"]) <= 2
 
     wait_for(at_time, f"the cursor line at t = {t} s", seen=lambda: where)
     save_artifact("plots-cursor.png", page.screenshot())
-    set_paused(page, False)
+    set_paused(plots, False)
 
 
-def test_a_drag_zooms_a_time_range_and_double_click_restores(page: Any) -> None:
-    wait_for(lambda: x_range(page) == [-10, 0], "the whole 10 s window")
-    x0, y = pixel_of(page, -6.0)
-    x1, _ = pixel_of(page, -2.0)
+def test_a_drag_zooms_a_time_range_and_double_click_restores(plots: Any, page: Any) -> None:
+    wait_for(lambda: x_range(plots) == [-10, 0], "the whole 10 s window")
+    x0, y = pixel_of(plots, -6.0)
+    x1, _ = pixel_of(plots, -2.0)
     page.mouse.move(x0, y)
     page.mouse.down()
     page.mouse.move((x0 + x1) / 2, y, steps=4)
@@ -224,25 +235,25 @@ def test_a_drag_zooms_a_time_range_and_double_click_restores(page: Any) -> None:
     page.mouse.up()
 
     def zoomed() -> list[float] | None:
-        lo, hi = x_range(page)
+        lo, hi = x_range(plots)
         return [lo, hi] if hi - lo < 9 else None
 
     lo, hi = wait_for(zoomed, "the x range to narrow to the dragged range")
     assert lo == pytest.approx(-6.0, abs=0.2) and hi == pytest.approx(-2.0, abs=0.2)
-    assert paused(page), "zooming pauses the plot"
+    assert paused(plots), "zooming pauses the plot"
     # the other subplots follow the same time range
-    assert page.evaluate(
+    assert plots.evaluate(
         "document.getElementById('plot')._fullLayout.xaxis5.range"
     ) == pytest.approx([lo, hi])
     save_artifact("plots-zoomed.png", page.locator("section.plots").screenshot())
-    page.mouse.dblclick(*pixel_of(page, -4.0))
-    wait_for(lambda: x_range(page) == [-10, 0], "the window restored by a double-click")
-    wait_for(lambda: not paused(page), "the plot live again (the zoom had paused it)")
+    page.mouse.dblclick(*pixel_of(plots, -4.0))
+    wait_for(lambda: x_range(plots) == [-10, 0], "the window restored by a double-click")
+    wait_for(lambda: not paused(plots), "the plot live again (the zoom had paused it)")
 
 
-def test_snapshot_downloads_a_png(page: Any) -> None:
+def test_snapshot_downloads_a_png(plots: Any, page: Any) -> None:
     with page.expect_download() as info:
-        page.click("#plot-snapshot")
+        plots.click("#plot-snapshot")
     download = info.value
     assert download.suggested_filename.endswith(".png")
     data = Path(download.path()).read_bytes()
@@ -250,17 +261,17 @@ def test_snapshot_downloads_a_png(page: Any) -> None:
     save_artifact("plots-snapshot.png", data)
 
 
-def test_the_window_select_sets_the_span(page: Any) -> None:
-    page.select_option("#plot-window", "30")
-    wait_for(lambda: x_range(page) == [-30, 0], "a 30 s x range")
-    assert "last 30 s" in page.locator("#plots-title").inner_text()
-    # samples older than 10 s are drawn once the page has seen them (the rings keep 60 s)
-    wait_for(lambda: min(drawn(page)[0][0]) < -12, "samples older than 10 s drawn", timeout_s=120)
-    page.select_option("#plot-window", "5")
-    wait_for(lambda: x_range(page) == [-5, 0], "a 5 s x range")
-    wait_for(lambda: min(drawn(page)[0][0]) >= -5.2, "only the last 5 s drawn")
-    page.select_option("#plot-window", "10")
-    wait_for(lambda: x_range(page) == [-10, 0], "back to 10 s")
+def test_the_window_select_sets_the_span(plots: Any) -> None:
+    plots.select_option("#plot-window", "30")
+    wait_for(lambda: x_range(plots) == [-30, 0], "a 30 s x range")
+    assert "last 30 s" in plots.locator("#plots-title").inner_text()
+    # samples older than 10 s are drawn once the frame has seen them (the rings keep 60 s)
+    wait_for(lambda: min(drawn(plots)[0][0]) < -12, "samples older than 10 s drawn", timeout_s=120)
+    plots.select_option("#plot-window", "5")
+    wait_for(lambda: x_range(plots) == [-5, 0], "a 5 s x range")
+    wait_for(lambda: min(drawn(plots)[0][0]) >= -5.2, "only the last 5 s drawn")
+    plots.select_option("#plot-window", "10")
+    wait_for(lambda: x_range(plots) == [-10, 0], "back to 10 s")
 
 
 def test_each_run_shows_its_loop_health_as_a_flag_with_reasons(page: Any) -> None:

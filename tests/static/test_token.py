@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from tests.support.browser import browser_skip_reason, chromium_page
+from tests.support.browser import browser_skip_reason, chromium_page, plots_frame
 from tests.support.server import Server, serve, wait_for
 
 SKIP = browser_skip_reason()
@@ -33,7 +33,8 @@ def test_token_prompt_then_control_and_telemetry(token_server: Server) -> None:
         page.on("dialog", answer)
         page.goto(token_server.url + "/")
         # the telemetry stream is refused without the token: the page asks, then connects
-        wait_for(lambda: page.evaluate("window.deltadashPlot.connected"), "telemetry with token")
+        plots = plots_frame(page)  # the plots' frame: its stream was refused, the page asked
+        wait_for(lambda: plots.evaluate("window.deltadashPlot.connected"), "telemetry with token")
         assert page.evaluate("sessionStorage.getItem('deltadash.token')") == TOKEN
         wait_for(  # clicked until accepted (an arm past its joint limits is refused)
             lambda: token_server.get("/api/status")["torque"] or page.click("#torque-on"),

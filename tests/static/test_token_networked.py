@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from tests.support.browser import browser_skip_reason, chromium_page
+from tests.support.browser import browser_skip_reason, chromium_page, plots_frame
 from tests.support.server import Server, serve, wait_for
 
 SKIP = browser_skip_reason()
@@ -39,7 +39,8 @@ def test_the_page_asks_for_the_token_once_then_reads_and_commands(networked: Ser
         page.on("dialog", answer)
         page.goto(networked.url + "/")
         wait_for(lambda: page.locator("#servo-rows tr").count() == 3, "status read with the token")
-        wait_for(lambda: page.evaluate("window.deltadashPlot.connected"), "telemetry with token")
+        plots = plots_frame(page)  # the plots' frame: its stream was refused, the page asked
+        wait_for(lambda: plots.evaluate("window.deltadashPlot.connected"), "telemetry with token")
         page.click("#torque-on")  # the first click asks for the token (once)
         wait_for(  # then clicked until accepted (an arm past its joint limits is refused)
             lambda: (

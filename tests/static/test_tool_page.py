@@ -21,6 +21,7 @@ from tests.support.browser import (
     browser_skip_reason,
     dashboard_page,
     page_condition,
+    plots_frame,
     toasts,
 )
 from tests.support.server import Server, serve, wait_for
@@ -92,10 +93,11 @@ def test_the_wrist_angle_the_tool_and_the_phi_plot_are_shown(page: Any, tooled: 
     assert text(page, "#tool-offset") == "(0.0, 0.0, -40.0) mm at φ = 0"
     assert page.locator("#goal-form input[name=phi]").is_enabled()
     assert page.locator("[data-phi='1']").is_visible()
+    plots = plots_frame(page)
     page_condition(
-        page, "window.deltadashPhiPlot && window.deltadashPhiPlot.frames > 0", "phi plot"
+        plots, "window.deltadashPhiPlot && window.deltadashPhiPlot.frames > 0", "phi plot"
     )
-    assert page.locator("#plot-phi .scatterlayer .trace").count() == 2  # goal and measured
+    assert plots.locator("#plot-phi .scatterlayer .trace").count() == 2  # goal and measured
     # the 2D view: the platform centre marked beside the tip, 40 mm above it in the side view
     page_condition(page, "document.getElementById('ws-side').dataset.platformPx", "the platform")
     side = page.locator("#ws-side")
@@ -168,8 +170,10 @@ def test_without_a_wrist_no_phi_control_appears(page: Any, tooled: Server, tmp_p
                 shown = page.locator(selector).evaluate_all("els => els.filter(e => !e.hidden)")
                 assert shown == [], selector
             assert page.locator("#goal-form input[name=phi]").is_disabled()
-            assert not page.locator("#plot-phi").is_visible()
-            assert page.evaluate("window.deltadashPhiPlot.frames") == 0
+            plots = plots_frame(page)
+            wait_for(lambda: plots.evaluate("window.deltadashPlot.connected"), "the plots")
+            assert not plots.locator("#plot-phi").is_visible()
+            assert plots.evaluate("window.deltadashPhiPlot.frames") == 0
             assert page.locator("#ws-side").get_attribute("data-platform-px") is None
         finally:
             page.goto(tooled.url + "/", wait_until="commit")

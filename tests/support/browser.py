@@ -148,6 +148,33 @@ def dashboard_page(
         assert not errors, f"JavaScript errors on the page: {errors}"
 
 
+def plots_frame(page: Any, timeout_s: float = PAGE_WAIT_S) -> Any:
+    """The dashboard's tracking plots: the Playwright frame of plots.html (which the page loads
+    from the other loopback name, its own renderer process) once its plots module has run,
+    scrolled into view (chromium draws no frame of another site while it is off screen).
+    Look it up again after a reload: the frame is a new one then."""
+
+    def found() -> Any:
+        page.evaluate("0")  # a new frame is known only after a call into Playwright
+        frame = next((f for f in page.frames if "/plots.html" in f.url), None)
+        if frame is None:
+            return None
+        try:
+            return frame if frame.evaluate("Boolean(window.deltadashPlot)") else None
+        except Exception:  # navigating, or its document not there yet
+            return None
+
+    frame = wait_for(found, "the tracking plots' frame", timeout_s, poll_s=0.2)
+    frame.frame_element().evaluate("e => e.scrollIntoView({block: 'nearest'})")
+    return frame
+
+
+def frame_pixel(frame: Any, x: float, y: float) -> tuple[float, float]:
+    """The page pixel of ``(x, y)`` in ``frame``'s viewport (for page.mouse)."""
+    box = frame.frame_element().bounding_box()
+    return box["x"] + x, box["y"] + y
+
+
 def box_of(locator: Any, what: str, timeout_s: float = PAGE_WAIT_S) -> dict[str, float]:
     """The bounding box of ``locator`` once it is laid out with a size; fail naming ``what``.
 
