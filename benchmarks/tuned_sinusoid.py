@@ -64,11 +64,12 @@ def main() -> None:
     found = offer(
         plant, Target(bandwidth_hz=args.bandwidth), args.lead, args.seconds, gravity=gravity
     )
-    for target, gains, verdict in found.tried:
+    for c in found.tried:  # one plant for the three joints: the same gains on each
+        target = c.target
         name = f"pwm_fraction {target.pwm_fraction:g}, model overshoot {target.overshoot_pct:g} %"
         name += "" if target.integral else ", no I"
-        print(row(name, gains, verdict), flush=True)
-    print(f"offered: {found.gains} (pwm_fraction {found.target.pwm_fraction:g})")
+        print(row(name, c.gains[0], c.verdict), flush=True)
+    print(f"offered: {found.gains[0]} (pwm_fraction {found.target.pwm_fraction:g}): {found.reason}")
 
 
 if __name__ == "__main__":
