@@ -27,7 +27,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from app.control.gravity import GravityOffset, loop_stiffness_nm_rad
-from app.tuning.gains import Plant, Target, d_limit, suggest
+from app.tuning.gains import Plant, Suggestion, Target, d_limit, suggest
 from hardware.bus import PositionGains, per_joint
 from hardware.dynamixel.control_table import RAD_PER_TICK
 from hardware.shaft_motion import MotionCommand
@@ -282,12 +282,14 @@ def check(
 @dataclass(frozen=True)
 class Candidate:
     """One gain set checked on the twin: the `target` variant the rule was given, the
-    `gains` per joint (1..3; a joint not tuned keeps the gains it had) and the twin's
-    `verdict`."""
+    `gains` per joint (1..3; a joint not tuned keeps the gains it had), the twin's
+    `verdict`, and the rule's `suggestions` per tuned joint (gains and the model's
+    prediction of them)."""
 
     target: Target
     gains: JointGains
     verdict: Verdict
+    suggestions: dict[int, Suggestion] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -400,26 +402,25 @@ def offer(
     kept = joint_gains(current)
     tried: list[Candidate] = []
     for variant in variants(target, gravity):
-        gains = joint_gains(
-            [suggest(plants[j], variant).gains if j in plants else kept[j - 1] for j in JOINTS]
-        )
+        rule = {j: suggest(p, variant) for j, p in plants.items()}
+        gains = joint_gains([rule[j].gains if j in rule else kept[j - 1] for j in JOINTS])
         if any(gains == c.gains for c in tried):
             continue
         verdict = check_fn(gains, lead_s, seconds, limits, gravity)
-        tried.append(Candidate(variant, gains, verdict))
+        tried.append(Candidate(variant, gains, verdict, rule))
         if verdict.passes:
             reason = (
-                f"candidate {len(tried)} of those tried is the first to pass every limit on "
-                "the twin (tried in order: the rule's own target, then tighter D caps and, "
-                "with no D, wider model overshoot allowances)"
+                f"the first of {len(tried)} tried to pass every limit on the twin (tried in "
+                "order: the rule's own target, then tighter D caps and, with no D, wider "
+                "model overshoot allowances)"
             )
             return Offer(tuple(tried), len(tried) - 1, reason)
     best = min(range(len(tried)), key=lambda k: _score(tried[k].verdict, limits))
     v = tried[best].verdict
     reason = (
-        f"no candidate met the goal: of {len(tried)} tried, candidate {best + 1} misses the "
-        f"fewest limits ({len(v.failed)}: {', '.join(v.failed)}), then the least excess "
-        f"over them ({excess(v, limits):.2f}); offered as the closest"
+        f"no candidate met the goal: of {len(tried)} tried, this one misses the fewest "
+        f"limits ({len(v.failed)}: {', '.join(v.failed)}), then by the least excess over "
+        f"them ({excess(v, limits):.2f}); offered as the closest"
     )
     return Offer(tuple(tried), best, reason)
 
