@@ -53,6 +53,10 @@ PM_min and an overshoot limit:
    overshoot exceeds the limit, the PI zero moves down (wc / 80, / 160, / 320: a weaker
    I, a smaller residue); if none passes, or the step's peak PWM is over the target's
    headroom, wc is lowered by 15 % and the rule repeats.
+8. Once a lowered wc passes, the step between it and the last that failed is halved
+   (geometrically) three times: wc is then within 2 % of the boundary (1.176^(1/8)), not
+   15 % (the 15 % steps went from P 912 to P 1073 for the twin's joints with no D, and
+   missed the P ~1000 between that passes on the twin).
 """
 
 from __future__ import annotations
@@ -72,6 +76,7 @@ REGISTER_MAX = 16383  # Position P/I/D and Feedforward 1st/2nd gains: 0..16383 (
 INTEGRAL_RATIOS = (40.0, 80.0, 160.0, 320.0)  # the PI zero this far below the crossover
 SHRINK = 0.85  # the crossover's step down while a check fails
 TRIES = 40
+REFINE = 3  # halvings of the last step down (rule 8): 0.85^(1/8), a 2 % resolution
 
 
 class TuningError(ValueError):
@@ -268,11 +273,37 @@ class Suggestion:
     meets_target: bool
 
 
+def gains_at(plant: Plant, target: Target, crossover_hz: float) -> Suggestion:
+    """The rule's gains for `plant` at one crossover `crossover_hz` [Hz] (module rules
+    1-7 without the search over wc): the PI zero moved down while the predicted step
+    overshoots, and whether the result meets `target`."""
+    wc = 2 * math.pi * crossover_hz
+    d_cap = d_limit(target.pwm_fraction)
+    kv, ka = (plant.a / plant.g, 1.0 / plant.g) if target.feedforward else (0.0, 0.0)
+    kp = plant.a * wc / plant.g
+    result: Suggestion | None = None
+    for ratio in INTEGRAL_RATIOS:
+        ki = kp * wc / ratio if target.integral else 0.0
+        gains = registers(kp, ki, kp / plant.a, kv, ka)
+        gains = replace(gains, d=min(gains.d, d_cap))
+        prediction = predict(plant, gains, target.step_rad)
+        meets = (
+            prediction.overshoot_pct <= target.overshoot_pct
+            and prediction.phase_margin_deg >= target.phase_margin_deg - 1.0
+            and prediction.peak_pwm_fraction <= target.pwm_fraction
+        )
+        result = Suggestion(gains, crossover_hz, prediction, meets)
+        if meets or prediction.peak_pwm_fraction > target.pwm_fraction or not target.integral:
+            break
+    assert result is not None
+    return result
+
+
 def suggest(plant: Plant, target: Target = Target()) -> Suggestion:
     """Gains by the module's rule for `plant` and `target`, checked by `predict`; the
     highest crossover at or below the target's whose clipped registers keep the overshoot
-    within the limit and the margin over the floor. Raises TuningError for a plant that
-    is not positive and finite."""
+    within the limit and the margin over the floor, found to 2 % (rule 8). Raises
+    TuningError for a plant that is not positive and finite."""
     if not all(math.isfinite(x) for x in (plant.g, plant.a, plant.tau_s)):
         raise TuningError(f"plant {plant}: not finite")
     if plant.g <= 0 or plant.a <= 0 or plant.tau_s < 0:
@@ -282,26 +313,20 @@ def suggest(plant: Plant, target: Target = Target()) -> Suggestion:
     room = math.radians(90.0 - target.phase_margin_deg) - math.atan(1.0 / INTEGRAL_RATIOS[0])
     if plant.tau_s > 0:
         wc = min(wc, max(room, 0.0) / plant.tau_s)
-    result: Suggestion | None = None
-    d_cap = d_limit(target.pwm_fraction)
-    kv, ka = (plant.a / plant.g, 1.0 / plant.g) if target.feedforward else (0.0, 0.0)
-    for _ in range(TRIES):
-        kp = plant.a * wc / plant.g
-        for ratio in INTEGRAL_RATIOS:
-            ki = kp * wc / ratio if target.integral else 0.0
-            gains = registers(kp, ki, kp / plant.a, kv, ka)
-            gains = replace(gains, d=min(gains.d, d_cap))
-            prediction = predict(plant, gains, target.step_rad)
-            meets = (
-                prediction.overshoot_pct <= target.overshoot_pct
-                and prediction.phase_margin_deg >= target.phase_margin_deg - 1.0
-                and prediction.peak_pwm_fraction <= target.pwm_fraction
-            )
-            result = Suggestion(gains, wc / (2 * math.pi), prediction, meets)
-            if meets or prediction.peak_pwm_fraction > target.pwm_fraction:
-                break
-        if result is not None and result.meets_target:
+    failed_hz: float | None = None  # the lowest crossover tried that failed
+    result = gains_at(plant, target, wc / (2 * math.pi))
+    for _ in range(TRIES - 1):
+        if result.meets_target:
             break
-        wc *= SHRINK
-    assert result is not None
+        failed_hz = result.crossover_hz
+        result = gains_at(plant, target, failed_hz * SHRINK)
+    if result.meets_target and failed_hz is not None:  # rule 8: halve the last step
+        low, high = result.crossover_hz, failed_hz
+        for _ in range(REFINE):
+            middle = math.sqrt(low * high)
+            trial = gains_at(plant, target, middle)
+            if trial.meets_target:
+                low, result = middle, trial
+            else:
+                high = middle
     return result
