@@ -30,6 +30,10 @@ PM_min and an overshoot limit:
    plant along a path without error: PWM = (y'' + a y') / g, so kv = a / g, ka = 1 / g.
    The firmware applies them to its Profile's velocity and acceleration (zero while the
    Profile is unlimited, as the loop leaves it), so they do not enter the prediction.
+   Off by default (``Target.feedforward``): with the Profile off they act on nothing, and
+   with a Profile the servos' FF1 / FF2 tracked the thesis sinusoid worse than the loop's
+   lead time on the twin, FF2 putting the PWM at its limit 10-80 % of the run
+   (docs/performance.md, "The servos' feed-forward against the loop's lead").
 5. Each gain to its register: P = 128 Kp / n, I = 65536 Ki dt / n, D = 16 Kd / (n dt),
    FF1 = 4 kv / (n dt), FF2 = 4 ka / (n dt^2) (n = 4096 / 2 pi ticks per rad, dt the
    firmware period; the e-manual's KpP = P / 128, KiP = I / 65536, KdP = D / 16, KFF = FF / 4
@@ -88,7 +92,8 @@ class Target:
     """What the gains aim at: bandwidth_hz [Hz] of the closed position loop,
     phase_margin_deg [deg] at least, overshoot_pct [%] at most for a step of step_rad [rad]
     (the run's 4 mm step is ~0.02 rad) using at most pwm_fraction of the PWM limit,
-    feedforward: suggest FF1 / FF2 (else 0), integral: suggest I (else 0, the sag at rest
+    feedforward: suggest FF1 / FF2 (else 0, the default: the loop's lead time is the
+    better feed-forward, module rule 4), integral: suggest I (else 0, the sag at rest
     left to the loop's gravity offset, app/control/gravity.py). Raises TuningError naming a
     field out of range."""
 
@@ -97,7 +102,7 @@ class Target:
     overshoot_pct: float = 5.0
     step_rad: float = 0.02
     pwm_fraction: float = 0.8
-    feedforward: bool = True
+    feedforward: bool = False
     integral: bool = True
 
     def __post_init__(self) -> None:

@@ -67,8 +67,17 @@ def thesis_reference(t: float) -> np.ndarray:
     )
 
 
-def command(shaft_rad: float, gains: PositionGains) -> MotionCommand:
-    """Hold `shaft_rad` [rad] with `gains` (all five registers)."""
+NO_PROFILE = (0.0, 0.0)  # Profile Velocity and Acceleration 0: the goal is a step (the loop's)
+
+
+def command(
+    shaft_rad: float, gains: PositionGains, profile: tuple[float, float] = NO_PROFILE
+) -> MotionCommand:
+    """Hold `shaft_rad` [rad] with `gains` (all five registers) and the firmware's
+    velocity-based `profile`: (Profile Velocity [rad/s], Profile Acceleration [rad/s^2]) of
+    the shaft, 0 unlimited. The Feedforward 1st/2nd gains act on the Profile's velocity and
+    acceleration (hardware/sim/xm430.py, the e-manual's position controller), so with no
+    Profile they act on nothing."""
     return replace(
         hold_command(shaft_rad),
         position_p=gains.p,
@@ -76,6 +85,8 @@ def command(shaft_rad: float, gains: PositionGains) -> MotionCommand:
         position_d=gains.d,
         feedforward_1st=gains.feedforward_1st,
         feedforward_2nd=gains.feedforward_2nd,
+        profile_velocity_rad_s=profile[0],
+        profile_acceleration_rad_s2=profile[1],
     )
 
 
@@ -89,13 +100,17 @@ def _offset(gains: JointGains, on: bool) -> GravityOffset | None:
 
 
 def _send(
-    twin: DeltaTwin, joints: np.ndarray, gains: JointGains, offset: GravityOffset | None
+    twin: DeltaTwin,
+    joints: np.ndarray,
+    gains: JointGains,
+    offset: GravityOffset | None,
+    profile: tuple[float, float] = NO_PROFILE,
 ) -> None:
     if offset is not None:
         joints = joints + offset.offset_rad(joints)
     ticks = np.round(twin.shafts_of_joints(joints) / RAD_PER_TICK)
     shafts = ticks * RAD_PER_TICK
-    twin.set_commands([command(float(t), g) for t, g in zip(shafts, gains, strict=True)])
+    twin.set_commands([command(float(t), g, profile) for t, g in zip(shafts, gains, strict=True)])
 
 
 def _encoder_joints(twin: DeltaTwin) -> np.ndarray:
@@ -122,13 +137,17 @@ def sinusoid(
     lead_s: float = 0.0,
     warmup_s: float = 1.0,
     gravity: bool = False,
+    profile: tuple[float, float] = NO_PROFILE,
 ) -> Tracking:
     """The thesis sinusoid tracked with `gains`, goals `lead_s` [s] ahead, measured over
     `seconds` [s] after `warmup_s` [s] (module docstring); `gravity`: the goals shifted by
-    the loop's gravity offset where the gains have no integral. Raises ValueError for a
-    negative time."""
+    the loop's gravity offset where the gains have no integral; `profile`: the servos'
+    velocity-based Profile (`command`; none, as the loop drives them, by default). Raises
+    ValueError for a negative time or profile."""
     if min(seconds, lead_s, warmup_s) < 0 or seconds == 0:
         raise ValueError("seconds, lead_s, warmup_s: must be >= 0 (seconds > 0)")
+    if min(profile) < 0:
+        raise ValueError(f"profile = {profile}: velocity and acceleration must be >= 0")
     gains = joint_gains(gains)
     twin, robot = DeltaTwin(), THESIS_DELTA
     offset = _offset(gains, gravity)
@@ -138,7 +157,7 @@ def sinusoid(
     errors, peak, saturated, steps = [], 0.0, 0, 0
     for k in range(round((seconds + warmup_s) * RATE_HZ)):
         q = robot.ik(thesis_reference(k / RATE_HZ + lead_s), near=q).joints
-        _send(twin, q, gains, offset)
+        _send(twin, q, gains, offset, profile)
         for _ in range(per_tick):
             twin.step()
             if twin.time_s < warmup_s:

@@ -101,7 +101,7 @@ def test_the_step_check_sees_overshoot_and_saturation():
 
 
 def test_the_feedforward_gains_are_the_models_velocity_and_acceleration_gains():
-    s = suggest(PLANT, Target(bandwidth_hz=10.0))
+    s = suggest(PLANT, Target(bandwidth_hz=10.0, feedforward=True))
     # PWM = (y'' + a y') / g: FF1 / 4 per (tick per period) of speed, FF2 / 4 per
     # (tick per period^2) of acceleration
     dt = 0.001
@@ -109,8 +109,9 @@ def test_the_feedforward_gains_are_the_models_velocity_and_acceleration_gains():
     ka = s.gains.feedforward_2nd / 4 * TICKS_PER_RAD * dt * dt
     assert kv == pytest.approx(PLANT.a / PLANT.g, rel=0.01)
     assert ka == pytest.approx(1 / PLANT.g, rel=0.01)
-    off = suggest(PLANT, Target(bandwidth_hz=10.0, feedforward=False))
+    off = suggest(PLANT, Target(bandwidth_hz=10.0))  # off by default: the loop's lead is
     assert (off.gains.feedforward_1st, off.gains.feedforward_2nd) == (0, 0)
+    assert (off.gains.p, off.gains.i, off.gains.d) == (s.gains.p, s.gains.i, s.gains.d)
 
 
 @pytest.mark.parametrize(

@@ -165,3 +165,22 @@ def test_what_is_offered_passes_what_it_claims_and_no_saturating_set_is_offered(
     if any("at_limit" not in c.verdict.failed for c in found.tried):
         assert "at_limit" not in v.failed
     assert all(g.d <= d_limit(found.target.pwm_fraction) for g in found.gains)
+
+
+@pytest.mark.slow  # four short twin runs
+def test_the_servos_feedforward_acts_only_through_the_profile():
+    # the e-manual's position controller: FF1 / FF2 multiply the Profile's velocity and
+    # acceleration; with the Profile off (the goal a step, as the loop drives the servos)
+    # there is none, so the gains change nothing
+    plain = PositionGains(p=1010)
+    ff = PositionGains(p=1010, feedforward_1st=708, feedforward_2nd=8900)
+    assert sinusoid(ff, seconds=0.5) == sinusoid(plain, seconds=0.5)
+    profile = (20.0, 350.0)  # rad/s, rad/s^2: ~3 times the path's peaks
+    assert sinusoid(ff, seconds=0.5, profile=profile) != sinusoid(
+        plain, seconds=0.5, profile=profile
+    )
+
+
+def test_a_negative_profile_is_refused():
+    with pytest.raises(ValueError, match="profile"):
+        sinusoid(PositionGains(), seconds=0.1, profile=(-1.0, 0.0))

@@ -34,7 +34,12 @@ class TargetIn(BaseModel):
     pwm_fraction: Annotated[
         float, Field(ge=0.05, le=1.0, description="peak PWM of the checked step, of the limit")
     ] = Target.pwm_fraction
-    feedforward: bool = Field(True, description="suggest Feedforward 1st / 2nd gains")
+    feedforward: bool = Field(
+        Target.feedforward,
+        description="suggest Feedforward 1st / 2nd gains (they act only through the "
+        "servo's Profile, which the loop leaves off; the loop's lead time is the default "
+        "feed-forward: docs/tuning.md)",
+    )
 
 
 class TuningRequest(BaseModel):
