@@ -3,7 +3,9 @@
 On a running server (--url): take control, turn torque on, start a tuning run
 (POST /api/tuning/run: the arm moves to the runs' start point, records a step and a chirp
 run, fits each joint's model K wn^2 / (s^2 + 2 zeta wn s + wn^2) e^{-sT}), show the
-progress, then the models and the suggested gains with what they are predicted to do.
+progress, then the models, the candidate gains checked on the twin (the thesis sinusoid
+plain and with the loop's lead, a 20 mm z step, rest at five points) and the suggested
+gains (the check's choice, with why) with what the model predicts of them.
 --apply makes the servos use them (POST /api/tuning/{run_id}/apply); --revert alone puts
 back the gains in use before the last apply (POST /api/tuning/revert).
 """
@@ -21,7 +23,7 @@ _EPILOG = (
     "Exit 0: gains suggested (and applied when asked) or reverted; 1: the run failed; "
     "2: bad input or the server refused; 130: Ctrl-C (the run is aborted: the arm holds)."
 )
-STAGES = ("planned", "moving", "step", "chirp", "fitting")
+STAGES = ("planned", "moving", "step", "chirp", "fitting", "checking")
 
 
 def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -95,7 +97,50 @@ def format_result(body: dict[str, Any]) -> str:
                     )
             if not predicted.get("meets_target", True):
                 lines.append("  (the target could not be met: the closest gains are shown)")
+    if body.get("checked"):
+        lines += format_checked(body["checked"])
     return "\n".join(lines)
+
+
+def _per_servo(gains: dict[str, dict[str, int]], key: str) -> str:
+    values = [gains[sid][key] for sid in sorted(gains, key=int)]
+    return str(values[0]) if len(set(values)) == 1 else "/".join(map(str, values))
+
+
+def _mm(values: list[float]) -> str:
+    return " / ".join(f"{v * 1e3:.2f}" for v in values)
+
+
+def format_checked(checked: dict[str, Any]) -> list[str]:
+    """The twin check for a person: a line per candidate (P, I, D per servo where they
+    differ; RMSE x / y / z in mm plain and with lead; PWM at its limit; step overshoot;
+    the worst error at rest; what it misses), which was chosen and why, and whether it
+    meets issue 21's goal."""
+    limits = checked["limits"]
+    ids = "/".join(sorted(checked["candidates"][0]["gains"], key=int))
+    lines = [
+        f"checked on the twin, gains per servo {ids} where they differ (lead "
+        f"{checked['lead_s'] * 1e3:g} ms, gravity offset "
+        f"{'on' if checked['gravity_compensation'] else 'off'}; goal: RMSE x, y < "
+        f"{limits['rmse_xy_m'] * 1e3:g} mm, z < {limits['rmse_z_m'] * 1e3:g} mm, PWM at its "
+        f"limit <= {limits['at_limit'] * 100:g} %, overshoot <= {limits['overshoot_pct']:g} %, "
+        f"rest < {limits['rest_m'] * 1e3:g} mm):"
+    ]
+    for c in checked["candidates"]:
+        g = c["gains"]
+        at_limit = max(c["plain"]["at_limit"], c["lead"]["at_limit"]) * 100
+        mark = "*" if c["candidate"] == checked["chosen"] else " "
+        lines.append(
+            f" {mark}{c['candidate']:>2}: P {_per_servo(g, 'p')}, I {_per_servo(g, 'i')}, "
+            f"D {_per_servo(g, 'd')}: RMSE plain {_mm(c['plain']['rmse_m'])} mm, lead "
+            f"{_mm(c['lead']['rmse_m'])} mm, at limit {at_limit:.1f} %, overshoot "
+            f"{c['overshoot_pct']:.1f} %, rest <= {max(c['rest_m']) * 1e3:.2f} mm; "
+            f"misses {', '.join(c['failed']) or 'nothing'}"
+        )
+    lines.append(f"chosen: candidate {checked['chosen']}: {checked['reason']}")
+    if not checked["met_goal"]:
+        lines.append("the suggested gains do NOT meet the goal on the twin (see what they miss)")
+    return lines
 
 
 def run(args: argparse.Namespace) -> int:

@@ -30,6 +30,10 @@ PM_min and an overshoot limit:
    plant along a path without error: PWM = (y'' + a y') / g, so kv = a / g, ka = 1 / g.
    The firmware applies them to its Profile's velocity and acceleration (zero while the
    Profile is unlimited, as the loop leaves it), so they do not enter the prediction.
+   Off by default (``Target.feedforward``): with the Profile off they act on nothing, and
+   with a Profile the servos' FF1 / FF2 tracked the thesis sinusoid worse than the loop's
+   lead time on the twin, FF2 putting the PWM at its limit 10-80 % of the run
+   (docs/performance.md, "The servos' feed-forward against the loop's lead").
 5. Each gain to its register: P = 128 Kp / n, I = 65536 Ki dt / n, D = 16 Kd / (n dt),
    FF1 = 4 kv / (n dt), FF2 = 4 ka / (n dt^2) (n = 4096 / 2 pi ticks per rad, dt the
    firmware period; the e-manual's KpP = P / 128, KiP = I / 65536, KdP = D / 16, KFF = FF / 4
@@ -53,6 +57,10 @@ PM_min and an overshoot limit:
    overshoot exceeds the limit, the PI zero moves down (wc / 80, / 160, / 320: a weaker
    I, a smaller residue); if none passes, or the step's peak PWM is over the target's
    headroom, wc is lowered by 15 % and the rule repeats.
+8. Once a lowered wc passes, the step between it and the last that failed is halved
+   (geometrically) three times: wc is then within 2 % of the boundary (1.176^(1/8)), not
+   15 % (the 15 % steps went from P 912 to P 1073 for the twin's joints with no D, and
+   missed the P ~1000 between that passes on the twin).
 """
 
 from __future__ import annotations
@@ -72,6 +80,7 @@ REGISTER_MAX = 16383  # Position P/I/D and Feedforward 1st/2nd gains: 0..16383 (
 INTEGRAL_RATIOS = (40.0, 80.0, 160.0, 320.0)  # the PI zero this far below the crossover
 SHRINK = 0.85  # the crossover's step down while a check fails
 TRIES = 40
+REFINE = 3  # halvings of the last step down (rule 8): 0.85^(1/8), a 2 % resolution
 
 
 class TuningError(ValueError):
@@ -83,7 +92,8 @@ class Target:
     """What the gains aim at: bandwidth_hz [Hz] of the closed position loop,
     phase_margin_deg [deg] at least, overshoot_pct [%] at most for a step of step_rad [rad]
     (the run's 4 mm step is ~0.02 rad) using at most pwm_fraction of the PWM limit,
-    feedforward: suggest FF1 / FF2 (else 0), integral: suggest I (else 0, the sag at rest
+    feedforward: suggest FF1 / FF2 (else 0, the default: the loop's lead time is the
+    better feed-forward, module rule 4), integral: suggest I (else 0, the sag at rest
     left to the loop's gravity offset, app/control/gravity.py). Raises TuningError naming a
     field out of range."""
 
@@ -92,7 +102,7 @@ class Target:
     overshoot_pct: float = 5.0
     step_rad: float = 0.02
     pwm_fraction: float = 0.8
-    feedforward: bool = True
+    feedforward: bool = False
     integral: bool = True
 
     def __post_init__(self) -> None:
@@ -268,11 +278,37 @@ class Suggestion:
     meets_target: bool
 
 
+def gains_at(plant: Plant, target: Target, crossover_hz: float) -> Suggestion:
+    """The rule's gains for `plant` at one crossover `crossover_hz` [Hz] (module rules
+    1-7 without the search over wc): the PI zero moved down while the predicted step
+    overshoots, and whether the result meets `target`."""
+    wc = 2 * math.pi * crossover_hz
+    d_cap = d_limit(target.pwm_fraction)
+    kv, ka = (plant.a / plant.g, 1.0 / plant.g) if target.feedforward else (0.0, 0.0)
+    kp = plant.a * wc / plant.g
+    result: Suggestion | None = None
+    for ratio in INTEGRAL_RATIOS:
+        ki = kp * wc / ratio if target.integral else 0.0
+        gains = registers(kp, ki, kp / plant.a, kv, ka)
+        gains = replace(gains, d=min(gains.d, d_cap))
+        prediction = predict(plant, gains, target.step_rad)
+        meets = (
+            prediction.overshoot_pct <= target.overshoot_pct
+            and prediction.phase_margin_deg >= target.phase_margin_deg - 1.0
+            and prediction.peak_pwm_fraction <= target.pwm_fraction
+        )
+        result = Suggestion(gains, crossover_hz, prediction, meets)
+        if meets or prediction.peak_pwm_fraction > target.pwm_fraction or not target.integral:
+            break
+    assert result is not None
+    return result
+
+
 def suggest(plant: Plant, target: Target = Target()) -> Suggestion:
     """Gains by the module's rule for `plant` and `target`, checked by `predict`; the
     highest crossover at or below the target's whose clipped registers keep the overshoot
-    within the limit and the margin over the floor. Raises TuningError for a plant that
-    is not positive and finite."""
+    within the limit and the margin over the floor, found to 2 % (rule 8). Raises
+    TuningError for a plant that is not positive and finite."""
     if not all(math.isfinite(x) for x in (plant.g, plant.a, plant.tau_s)):
         raise TuningError(f"plant {plant}: not finite")
     if plant.g <= 0 or plant.a <= 0 or plant.tau_s < 0:
@@ -282,26 +318,20 @@ def suggest(plant: Plant, target: Target = Target()) -> Suggestion:
     room = math.radians(90.0 - target.phase_margin_deg) - math.atan(1.0 / INTEGRAL_RATIOS[0])
     if plant.tau_s > 0:
         wc = min(wc, max(room, 0.0) / plant.tau_s)
-    result: Suggestion | None = None
-    d_cap = d_limit(target.pwm_fraction)
-    kv, ka = (plant.a / plant.g, 1.0 / plant.g) if target.feedforward else (0.0, 0.0)
-    for _ in range(TRIES):
-        kp = plant.a * wc / plant.g
-        for ratio in INTEGRAL_RATIOS:
-            ki = kp * wc / ratio if target.integral else 0.0
-            gains = registers(kp, ki, kp / plant.a, kv, ka)
-            gains = replace(gains, d=min(gains.d, d_cap))
-            prediction = predict(plant, gains, target.step_rad)
-            meets = (
-                prediction.overshoot_pct <= target.overshoot_pct
-                and prediction.phase_margin_deg >= target.phase_margin_deg - 1.0
-                and prediction.peak_pwm_fraction <= target.pwm_fraction
-            )
-            result = Suggestion(gains, wc / (2 * math.pi), prediction, meets)
-            if meets or prediction.peak_pwm_fraction > target.pwm_fraction:
-                break
-        if result is not None and result.meets_target:
+    failed_hz: float | None = None  # the lowest crossover tried that failed
+    result = gains_at(plant, target, wc / (2 * math.pi))
+    for _ in range(TRIES - 1):
+        if result.meets_target:
             break
-        wc *= SHRINK
-    assert result is not None
+        failed_hz = result.crossover_hz
+        result = gains_at(plant, target, failed_hz * SHRINK)
+    if result.meets_target and failed_hz is not None:  # rule 8: halve the last step
+        low, high = result.crossover_hz, failed_hz
+        for _ in range(REFINE):
+            middle = math.sqrt(low * high)
+            trial = gains_at(plant, target, middle)
+            if trial.meets_target:
+                low, result = middle, trial
+            else:
+                high = middle
     return result

@@ -3,24 +3,34 @@
 A ``TuningRun`` (its own thread, like app/calibration/procedure.py's) moves the arm to the
 runs' start point, records a step run and a chirp run through the run manager (the same
 ``POST /api/tests/step`` and ``/chirp`` paths, logs under the runs folder), fits each chosen
-joint's model from them (`identify.identify`, the Bode plot in ``bode.png``), and suggests
-gains for the target (`gains.suggest`, checked by `gains.predict` against the gains now in
-use). Applying writes the suggested gains of the tuned joints to the servos through the
-controller (the others keep theirs), into the config file's joint records when the server
-runs from one (written to the servos when it starts), and keeps the previous ones for
-`revert`.
+joint's model from them (`identify.identify`, the Bode plot in ``bode.png``), and checks
+the rule's candidate gains for the target on the twin (`twin_check.offer`: the thesis
+sinusoid plain and with the loop's lead, a z step, rest at five points, under the loop's
+lead time and gravity offset settings) before it suggests the one the check offers (the
+first to pass issue 21's limits, else the closest, saying so); `gains.predict` gives what
+the model predicts of it against the gains now in use. The check is tens of seconds of
+CPU: it runs in a worker process at a lower priority (app/programs/workers.py's
+``ProgramWorkers``, one slot, made for the check and closed after it), never in the
+server's process, so the 200 Hz loop is not held by it; an abort or the server stopping
+kills that worker at once. Applying writes the suggested gains of the tuned joints to the
+servos through the controller (the others keep theirs), into the config file's joint
+records when the server runs from one (written to the servos when it starts), and keeps
+the previous ones for `revert`.
 
 The model is identified under the gains in use when the run starts: it is a P-only loop's
 (`gains.Plant.of`), so a run is refused while tuned gains are in use (revert first).
 
-States: planned -> moving -> step -> chirp -> fitting -> done | failed (a fault, e-stop,
-torque off, a run that did not finish, a fit that failed: ``error`` says why) | aborted
+States: planned -> moving -> step -> chirp -> fitting -> checking -> done | failed (a
+fault, e-stop, torque off, a run that did not finish, a fit that failed, a twin check that
+did not come back: ``error`` says why; nothing unchecked is suggested) | aborted
 (``abort``: the motion, or the step or chirp run, stopped at once; the robot holds where
-it is); done -> applied.
+it is; a twin check in flight is killed); done -> applied.
 
-While a run is in progress it holds the controller's ``MotionOwner``
-(app/control/owner.py): nothing else moves the robot, not even between its step and chirp
-runs, until it ends or is aborted.
+While it moves the arm (planned, moving, step, chirp) a run holds the controller's
+``MotionOwner`` (app/control/owner.py): nothing else moves the robot, not even between its
+step and chirp runs, until it ends or is aborted. Once the chirp run is recorded the run
+needs the robot no more: it lets go of it before fitting and checking, which take no
+motion (the operator may move the arm meanwhile; another tuning run waits for this one).
 """
 
 from __future__ import annotations
@@ -44,11 +54,19 @@ from app.config import Settings
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
 from app.control.owner import Claim
+from app.programs.workers import (
+    ChecksBusy,
+    ChecksStopped,
+    ProgramWorkers,
+    WorkerError,
+    WorkerTimeout,
+)
 from app.runs.logs import read_csv_rows
 from app.runs.manager import RunManager
 from app.runs.paths import ChirpParams, StepParams
-from app.tuning.gains import Plant, Suggestion, Target, TuningError, predict, suggest
+from app.tuning.gains import Plant, Suggestion, Target, TuningError, predict
 from app.tuning.identify import JOINTS, IdentificationError, JointFit, identify
+from app.tuning.twin_check import Candidate, Offer, OfferJob, joint_gains, run_offer
 from hardware.bus import PositionGains
 from hardware.calibration import SECTION, save
 
@@ -60,7 +78,9 @@ MOVE_TIMEOUT_S = 60.0
 STOP_TIMEOUT_S = 5.0
 RUN_TIMEOUT_S = 120.0  # a starved twin runs slower than the wall clock
 POLL_S = 0.01
-RUNNING = ("planned", "moving", "step", "chirp", "fitting")  # the states abort stops
+RUNNING = ("planned", "moving", "step", "chirp", "fitting", "checking")  # abort stops these
+CHECK_TIMEOUT_S = 900.0  # the twin check's worker is killed beyond this (a loaded machine)
+TwinCheck = Callable[[OfferJob], Offer]
 
 
 def gains_out(gains: PositionGains) -> dict[str, int]:
@@ -76,6 +96,45 @@ def gains_out(gains: PositionGains) -> dict[str, int]:
 
 def _finite(values: dict[str, float]) -> dict[str, float | None]:
     return {k: (float(v) if math.isfinite(v) else None) for k, v in values.items()}
+
+
+def candidate_out(number: int, c: Candidate, servo_ids: tuple[int, ...]) -> dict[str, Any]:
+    """One checked candidate for the API: its number (1: the first tried), the variant of
+    the target the rule was given, the gains per servo id (all three legs: those not tuned
+    keep theirs) and the twin's figures (SI: m, fractions, %)."""
+    v = c.verdict
+    return {
+        "candidate": number,
+        "target": {
+            "pwm_fraction": c.target.pwm_fraction,
+            "overshoot_pct": c.target.overshoot_pct,
+            "integral": c.target.integral,
+        },
+        "gains": {str(sid): gains_out(g) for sid, g in zip(servo_ids, c.gains, strict=True)},
+        **{
+            kind: {"rmse_m": list(t.rmse_m), "peak_pwm": t.peak_pwm, "at_limit": t.at_limit}
+            for kind, t in (("plain", v.plain), ("lead", v.lead))
+        },
+        "overshoot_pct": v.overshoot_pct,
+        "rest_m": list(v.rest_m),
+        "failed": list(v.failed),
+        "passes": v.passes,
+    }
+
+
+def checked_out(offer: Offer, job: OfferJob, servo_ids: tuple[int, ...]) -> dict[str, Any]:
+    """What the twin check found, for the API: every candidate, the one chosen (its
+    number), why, whether it meets issue 21's goal, and the check's conditions."""
+    return {
+        "met_goal": offer.met,
+        "chosen": offer.chosen + 1,
+        "reason": offer.reason,
+        "lead_s": job.lead_s,
+        "gravity_compensation": job.gravity,
+        "seconds": job.seconds,
+        "limits": asdict(job.limits),
+        "candidates": [candidate_out(k + 1, c, servo_ids) for k, c in enumerate(offer.tried)],
+    }
 
 
 @dataclass
@@ -95,6 +154,8 @@ class TuningRun:
     fits: list[JointFit] = field(default_factory=list)
     suggestions: dict[int, Suggestion] = field(default_factory=dict)  # servo id -> suggestion
     predicted_now: dict[int, dict[str, float | None]] = field(default_factory=dict)
+    check: OfferJob | None = None  # the twin check asked for
+    offer: Offer | None = None  # what it found (the suggestions are its chosen gains)
     aborted: threading.Event = field(default_factory=threading.Event, repr=False)
 
     def advance(self, state: str, error: str | None = None) -> None:
@@ -134,6 +195,11 @@ class TuningRun:
                 }
                 for sid, s in self.suggestions.items()
             },
+            "checked": (
+                None
+                if self.offer is None or self.check is None
+                else checked_out(self.offer, self.check, self.servo_ids)
+            ),
             "files": sorted(p.name for p in self.folder.glob("*") if p.is_file()),
         }
 
@@ -149,9 +215,13 @@ class TuningManager:
         folder: Path,
         busy: Callable[[], str | None] = lambda: None,
         config_path: Path | None = None,
+        twin_check: TwinCheck | None = None,
     ) -> None:
         self.controller, self.runs, self.folder, self.busy = controller, runs, Path(folder), busy
         self.config_path = config_path
+        # the twin check of the candidates: None, in a worker process (`_check_in_worker`)
+        self.twin_check = twin_check
+        self._workers: ProgramWorkers | None = None  # the check's worker, while it runs
         self._runs: dict[str, TuningRun] = {}
         self._previous: list[dict[int, PositionGains]] = []  # what apply replaced, last on top
         self._thread: threading.Thread | None = None
@@ -165,7 +235,8 @@ class TuningManager:
     def abort(self, run_id: str) -> TuningRun:
         """Stop the run ``run_id`` now: the move or the step or chirp run stops (the robot
         holds where it is commanded), the run ends ``aborted`` and the robot is free for
-        other commands at once (its thread, if still fitting, moves nothing more).
+        other commands at once (its thread, if still fitting, moves nothing more); a twin
+        check in flight is killed (its worker process), and nothing is suggested.
 
         Raises:
             KeyError: no run ``run_id`` (404).
@@ -179,7 +250,9 @@ class TuningManager:
                 )
             run.aborted.set()
             run.state, run.error = "aborted", "aborted by the operator"
-            claim = self._claim
+            claim = self._claim  # None once the run has let go of the robot
+            if self._workers is not None:
+                self._workers.close()  # the check ends at once (ChecksStopped)
 
             def stop() -> None:
                 for recorded in run.runs.values():  # the step or chirp run, if one is running
@@ -239,7 +312,10 @@ class TuningManager:
             return run
 
     def close(self) -> None:
-        self._stop.set()
+        with self._lock:
+            self._stop.set()
+            if self._workers is not None:
+                self._workers.close()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
 
@@ -262,6 +338,7 @@ class TuningManager:
                 self._move_to_start(run)
                 run.advance(kind)
                 logs[kind] = self._record(run, kind, params)
+            self._let_go()  # no more motion: fitting and checking need no robot
             run.advance("fitting")
             chirp = (CHIRP.f0_hz, CHIRP.f1_hz, CHIRP.duration_s)
             fits, bodes = identify(
@@ -271,12 +348,9 @@ class TuningManager:
             from app.tuning.identify import bode_figure  # matplotlib's figure: only here
 
             bode_figure(fits, bodes, run.folder / "bode.png")
-            for fit in fits:
-                sid = run.servo(fit.joint)
-                plant = Plant.of(fit.model, run.current[sid].p)
-                run.suggestions[sid] = suggest(plant, run.target)
-                now = predict(plant, run.current[sid], run.target.step_rad)
-                run.predicted_now[sid] = _finite(now.as_dict())
+            self._suggest(run)
+            if not run.aborted.is_set():  # result.json before the state says done
+                self._save(run, state="done")
             run.advance("done")
         except (Stopped, IdentificationError, TuningError, GoalRejected, MotionRefused) as exc:
             run.advance("failed", str(exc))
@@ -284,8 +358,86 @@ class TuningManager:
             log.exception("tuning run %s failed", run.run_id)
             run.advance("failed", f"internal error: {exc!r}")
 
-    def _save(self, run: TuningRun) -> None:
-        (run.folder / "result.json").write_text(json.dumps(run.view(), indent=1))
+    def _suggest(self, run: TuningRun) -> None:
+        """The fitted joints' candidate gains checked on the twin (state ``checking``);
+        the suggestions are the gains the check offers, with the model's prediction of
+        them and of the gains in use. Raises Stopped when the check did not come back
+        (aborted, the server stopping, its worker killed or timed out)."""
+        plants = {f.joint: Plant.of(f.model, run.current[run.servo(f.joint)].p) for f in run.fits}
+        settings = self.controller.settings
+        run.check = OfferJob(
+            plants,
+            run.target,
+            current=joint_gains([run.current[sid] for sid in run.servo_ids]),
+            lead_s=settings.runs.feedforward_lead_s,
+            gravity=settings.control.gravity_compensation,
+        )
+        run.advance("checking")
+        if self.twin_check is not None:
+            offered = self.twin_check(run.check)
+        else:
+            offered = self._check_in_worker(run.check, run.aborted)
+        if run.aborted.is_set():  # while it checked: nothing is suggested
+            raise Stopped("aborted by the operator")
+        suggestions = {}
+        for joint, plant in plants.items():
+            sid = run.servo(joint)
+            s = offered.candidate.suggestions.get(joint)  # the rule's, for the chosen variant
+            if s is None or s.gains != offered.gains[joint - 1]:
+                raise TuningError(
+                    f"joint {joint}: the check offered {offered.gains[joint - 1]} without the "
+                    "rule's suggestion of it (internal error)"
+                )
+            suggestions[sid] = s
+            now = predict(plant, run.current[sid], run.target.step_rad)
+            run.predicted_now[sid] = _finite(now.as_dict())
+        run.offer, run.suggestions = offered, suggestions
+
+    def _check_in_worker(self, job: OfferJob, aborted: threading.Event) -> Offer:
+        """`twin_check.run_offer` in a worker process of its own (``ProgramWorkers``, one
+        slot, nice +10), killed by `abort` (which sets `aborted` under the same lock) or
+        `close`."""
+        workers = ProgramWorkers(self.controller.settings, slots=1, timeout_s=CHECK_TIMEOUT_S)
+        with self._lock:
+            if self._stop.is_set():
+                raise Stopped("the server is shutting down")
+            if aborted.is_set():
+                raise Stopped("aborted by the operator")
+            self._workers = workers
+        try:
+            return workers.call(run_offer, job)
+        except (ChecksStopped, ChecksBusy):  # closed while running, or before it started
+            raise Stopped(
+                "the twin check was stopped (the run aborted, or the server stopping): "
+                "nothing is suggested"
+            ) from None
+        except WorkerTimeout:
+            raise Stopped(
+                f"the twin check took longer than {CHECK_TIMEOUT_S:g} s: its worker was "
+                "stopped and nothing is suggested unchecked"
+            ) from None
+        except WorkerError:
+            raise Stopped(
+                "the twin check's worker process ended before answering (killed, or out of "
+                "memory): nothing is suggested unchecked"
+            ) from None
+        finally:
+            with self._lock:
+                self._workers = None
+            workers.close()
+
+    def _let_go(self) -> None:
+        """The run needs the robot no more: its claim ends (an abort then stops nothing
+        the operator started since)."""
+        with self._lock:
+            claim, self._claim = self._claim, None
+        if claim is not None:
+            self.controller.owner.release(claim)
+
+    def _save(self, run: TuningRun, state: str | None = None) -> None:
+        """The run's result.json (as it is, or as it will be in `state`)."""
+        body = run.view() | ({"state": state} if state is not None else {})
+        (run.folder / "result.json").write_text(json.dumps(body, indent=1))
 
     def _wait(self, run: TuningRun, what: str, until: Callable[[], bool], timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s

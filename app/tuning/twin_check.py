@@ -1,6 +1,7 @@
 """Gains checked on the MuJoCo twin before they are offered (issue 21's goal), simulated time.
 
-Three checks, each with the same gains written to the three servo models (IK goals
+Three checks, each with a gain set per joint written to the three servo models (one set
+for all, or one per joint in joint order; IK goals
 streamed at 200 Hz as Goal Position ticks, the firmware's 1 ms period, the physics'
 own time step; no wall clock, so the figures do not depend on the machine's load):
 
@@ -20,13 +21,14 @@ own time step; no wall clock, so the figures do not depend on the machine's load
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from app.control.gravity import GravityOffset, position_stiffness_nm_rad
-from app.tuning.gains import Plant, Target, d_limit, suggest
-from hardware.bus import PositionGains
+from app.control.gravity import GravityOffset, loop_stiffness_nm_rad
+from app.tuning.gains import Plant, Suggestion, Target, d_limit, suggest
+from hardware.bus import PositionGains, per_joint
 from hardware.dynamixel.control_table import RAD_PER_TICK
 from hardware.shaft_motion import MotionCommand
 from hardware.sim.twin import DeltaTwin, hold_command
@@ -43,6 +45,18 @@ REST_POINTS_M = (
     (0.05, 0.05, -0.29),
 )
 AT_LIMIT = 0.999  # a PWM at or above this fraction of the limit counts as saturated
+JOINTS = (1, 2, 3)
+FACTORY = PositionGains()  # the XM430's own gains (P 800, no I, D or feed-forward)
+
+JointGains = tuple[PositionGains, PositionGains, PositionGains]
+Gains = PositionGains | Sequence[PositionGains]
+
+
+def joint_gains(gains: Gains) -> JointGains:
+    """`gains` as one set per joint (1..3): a single set for all three, or three in joint
+    order. Raises ValueError for a sequence of another length."""
+    a, b, c = per_joint(gains, len(JOINTS))
+    return a, b, c
 
 
 def thesis_reference(t: float) -> np.ndarray:
@@ -53,8 +67,17 @@ def thesis_reference(t: float) -> np.ndarray:
     )
 
 
-def command(shaft_rad: float, gains: PositionGains) -> MotionCommand:
-    """Hold `shaft_rad` [rad] with `gains` (all five registers)."""
+NO_PROFILE = (0.0, 0.0)  # Profile Velocity and Acceleration 0: the goal is a step (the loop's)
+
+
+def command(
+    shaft_rad: float, gains: PositionGains, profile: tuple[float, float] = NO_PROFILE
+) -> MotionCommand:
+    """Hold `shaft_rad` [rad] with `gains` (all five registers) and the firmware's
+    velocity-based `profile`: (Profile Velocity [rad/s], Profile Acceleration [rad/s^2]) of
+    the shaft, 0 unlimited. The Feedforward 1st/2nd gains act on the Profile's velocity and
+    acceleration (hardware/sim/xm430.py, the e-manual's position controller), so with no
+    Profile they act on nothing."""
     return replace(
         hold_command(shaft_rad),
         position_p=gains.p,
@@ -62,24 +85,32 @@ def command(shaft_rad: float, gains: PositionGains) -> MotionCommand:
         position_d=gains.d,
         feedforward_1st=gains.feedforward_1st,
         feedforward_2nd=gains.feedforward_2nd,
+        profile_velocity_rad_s=profile[0],
+        profile_acceleration_rad_s2=profile[1],
     )
 
 
-def _offset(gains: PositionGains, on: bool) -> GravityOffset | None:
+def _offset(gains: JointGains, on: bool) -> GravityOffset | None:
     """The loop's gravity offset under `gains` (``[control] gravity_compensation``): none
-    where off or where the gains have an integral (app/control/gravity.py)."""
-    if not on or gains.i > 0:
+    where off; per joint, none where its gains have an integral (app/control/gravity.py's
+    `loop_stiffness_nm_rad`)."""
+    if not on or all(g.i > 0 for g in gains):
         return None
-    return GravityOffset(THESIS_DELTA, stiffness_nm_rad=position_stiffness_nm_rad(gains.p))
+    return GravityOffset(THESIS_DELTA, stiffness_nm_rad=loop_stiffness_nm_rad(gains))
 
 
 def _send(
-    twin: DeltaTwin, joints: np.ndarray, gains: PositionGains, offset: GravityOffset | None
+    twin: DeltaTwin,
+    joints: np.ndarray,
+    gains: JointGains,
+    offset: GravityOffset | None,
+    profile: tuple[float, float] = NO_PROFILE,
 ) -> None:
     if offset is not None:
         joints = joints + offset.offset_rad(joints)
     ticks = np.round(twin.shafts_of_joints(joints) / RAD_PER_TICK)
-    twin.set_commands([command(float(t * RAD_PER_TICK), gains) for t in ticks])
+    shafts = ticks * RAD_PER_TICK
+    twin.set_commands([command(float(t), g, profile) for t, g in zip(shafts, gains, strict=True)])
 
 
 def _encoder_joints(twin: DeltaTwin) -> np.ndarray:
@@ -101,18 +132,23 @@ class Tracking:
 
 
 def sinusoid(
-    gains: PositionGains,
+    gains: Gains,
     seconds: float = 3.0,
     lead_s: float = 0.0,
     warmup_s: float = 1.0,
     gravity: bool = False,
+    profile: tuple[float, float] = NO_PROFILE,
 ) -> Tracking:
     """The thesis sinusoid tracked with `gains`, goals `lead_s` [s] ahead, measured over
     `seconds` [s] after `warmup_s` [s] (module docstring); `gravity`: the goals shifted by
-    the loop's gravity offset where the gains have no integral. Raises ValueError for a
-    negative time."""
+    the loop's gravity offset where the gains have no integral; `profile`: the servos'
+    velocity-based Profile (`command`; none, as the loop drives them, by default). Raises
+    ValueError for a negative time or profile."""
     if min(seconds, lead_s, warmup_s) < 0 or seconds == 0:
         raise ValueError("seconds, lead_s, warmup_s: must be >= 0 (seconds > 0)")
+    if min(profile) < 0:
+        raise ValueError(f"profile = {profile}: velocity and acceleration must be >= 0")
+    gains = joint_gains(gains)
     twin, robot = DeltaTwin(), THESIS_DELTA
     offset = _offset(gains, gravity)
     q = robot.ik(thesis_reference(lead_s)).joints
@@ -121,7 +157,7 @@ def sinusoid(
     errors, peak, saturated, steps = [], 0.0, 0, 0
     for k in range(round((seconds + warmup_s) * RATE_HZ)):
         q = robot.ik(thesis_reference(k / RATE_HZ + lead_s), near=q).joints
-        _send(twin, q, gains, offset)
+        _send(twin, q, gains, offset, profile)
         for _ in range(per_tick):
             twin.step()
             if twin.time_s < warmup_s:
@@ -136,9 +172,10 @@ def sinusoid(
     return Tracking((float(rmse[0]), float(rmse[1]), float(rmse[2])), peak, saturated / steps)
 
 
-def step(gains: PositionGains, duration_s: float = 1.5, gravity: bool = False) -> float:
+def step(gains: Gains, duration_s: float = 1.5, gravity: bool = False) -> float:
     """The largest joint overshoot [%] of the 20 mm z step held `duration_s` [s]
     (module docstring); `gravity` as for `sinusoid`."""
+    gains = joint_gains(gains)
     twin, robot = DeltaTwin(), THESIS_DELTA
     offset = _offset(gains, gravity)
     q0 = robot.ik(HOME_M).joints
@@ -166,10 +203,11 @@ def _blend(s: float) -> float:
 
 
 def rest(
-    gains: PositionGains, move_s: float = 1.0, rest_s: float = 1.5, gravity: bool = False
+    gains: Gains, move_s: float = 1.0, rest_s: float = 1.5, gravity: bool = False
 ) -> list[float]:
     """The true platform's distance [m] from each of the five goals after the move and the
     rest (module docstring): a list of 5; `gravity` as for `sinusoid`."""
+    gains = joint_gains(gains)
     twin, robot = DeltaTwin(), THESIS_DELTA
     offset = _offset(gains, gravity)
     per_tick = _per_tick(twin)
@@ -234,7 +272,7 @@ def _tracking_fails(t: Tracking, limits: Limits) -> list[str]:
 
 
 def check(
-    gains: PositionGains,
+    gains: Gains,
     lead_s: float = 0.02,
     seconds: float = 3.0,
     limits: Limits = Limits(),
@@ -242,7 +280,8 @@ def check(
 ) -> Verdict:
     """All three checks of `gains` on the twin and the limits they miss (`Verdict`);
     `gravity`: with the loop's gravity offset (``[control] gravity_compensation``), which
-    acts only where the gains have no integral."""
+    acts only where the gains have no integral. `gains`: one set for all joints, or one
+    per joint."""
     plain = sinusoid(gains, seconds, gravity=gravity)
     lead = sinusoid(gains, seconds, lead_s, gravity=gravity)
     overshoot = step(gains, gravity=gravity)
@@ -260,14 +299,48 @@ def check(
 
 
 @dataclass(frozen=True)
-class Offer:
-    """The gains offered: `gains`, the `target` they were suggested for, their `verdict`
-    on the twin, and `tried`: (target, gains, verdict) of every candidate, in order."""
+class Candidate:
+    """One gain set checked on the twin: the `target` variant the rule was given, the
+    `gains` per joint (1..3; a joint not tuned keeps the gains it had), the twin's
+    `verdict`, and the rule's `suggestions` per tuned joint (gains and the model's
+    prediction of them)."""
 
-    gains: PositionGains
     target: Target
+    gains: JointGains
     verdict: Verdict
-    tried: tuple[tuple[Target, PositionGains, Verdict], ...]
+    suggestions: dict[int, Suggestion] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Offer:
+    """What the twin check offers: `tried`, every candidate checked, in order; `chosen`,
+    the index of the one offered in it; `reason`, why that one (the first to pass every
+    limit, or, when none did, the closest and what it misses)."""
+
+    tried: tuple[Candidate, ...]
+    chosen: int
+    reason: str
+
+    @property
+    def candidate(self) -> Candidate:
+        return self.tried[self.chosen]
+
+    @property
+    def gains(self) -> JointGains:
+        return self.candidate.gains
+
+    @property
+    def target(self) -> Target:
+        return self.candidate.target
+
+    @property
+    def verdict(self) -> Verdict:
+        return self.candidate.verdict
+
+    @property
+    def met(self) -> bool:
+        """Whether the offered gains pass every limit (issue 21's goal) on the twin."""
+        return self.verdict.passes
 
 
 # tighter and tighter D caps (gains.d_limit), down to none at 1.0
@@ -296,43 +369,99 @@ def _score(v: Verdict, limits: Limits) -> tuple[int, float]:
     return len(v.failed), excess(v, limits)
 
 
-def offer(
-    plant: Plant,
-    target: Target,
-    lead_s: float = 0.02,
-    seconds: float = 3.0,
-    limits: Limits = Limits(),
-    gravity: bool = False,
-) -> Offer:
-    """The first of `target`'s variants whose suggested gains (`gains.suggest`) pass every
-    limit on the twin (`check`): a tighter and tighter tick-noise D cap (pwm_fraction in
-    PWM_FRACTIONS at or above the target's; with no D, the model's overshoot allowance
-    widened by MODEL_SLACK), each with the integral and, with `gravity` (the loop's
-    gravity offset on), also without it (the offset then removes the sag); gains already
-    tried are skipped. If
-    none passes, the one missing the fewest limits, then the least `excess` over them; its
-    verdict names what it misses."""
-    tried: list[tuple[Target, PositionGains, Verdict]] = []
+def variants(target: Target, gravity: bool = False) -> list[Target]:
+    """The targets `offer` gives the rule, in order: a tighter and tighter tick-noise D cap
+    (pwm_fraction in PWM_FRACTIONS at or above the target's; with no D, the model's
+    overshoot allowance widened by MODEL_SLACK), each with the integral and, with
+    `gravity` (the loop's gravity offset on), also without it (the offset then removes
+    the sag)."""
     fractions = [f for f in PWM_FRACTIONS if f >= target.pwm_fraction] or [target.pwm_fraction]
     integrals = (True, False) if gravity else (target.integral,)
-    variants = []
+    out = []
     for fraction in fractions:
         slacks = MODEL_SLACK if d_limit(fraction) == 0 else (1.0,)
         for slack in slacks:
             overshoot = min(target.overshoot_pct * slack, 50.0)
             for integral in integrals:
-                variants.append(
+                out.append(
                     replace(
                         target, pwm_fraction=fraction, integral=integral, overshoot_pct=overshoot
                     )
                 )
-    for variant in variants:
-        gains = suggest(plant, variant).gains
-        if any(gains == g for _, g, _ in tried):
+    return out
+
+
+def _plants(plant: Plant | Mapping[int, Plant]) -> dict[int, Plant]:
+    plants = dict.fromkeys(JOINTS, plant) if isinstance(plant, Plant) else dict(plant)
+    if not plants or not set(plants) <= set(JOINTS):
+        raise ValueError(f"plants for joints {sorted(plants)}: one or more of {list(JOINTS)}")
+    return plants
+
+
+def offer(
+    plant: Plant | Mapping[int, Plant],
+    target: Target,
+    lead_s: float = 0.02,
+    seconds: float = 3.0,
+    limits: Limits = Limits(),
+    gravity: bool = False,
+    current: Gains = FACTORY,
+    check_fn: Callable[[JointGains, float, float, Limits, bool], Verdict] = check,
+) -> Offer:
+    """The first of `target`'s `variants` whose suggested gains pass every limit on the
+    twin (`check_fn`, `check` by default); else the one missing the fewest limits, then
+    the least `excess` over them, its verdict naming what it misses.
+
+    `plant`: one plant for all three joints, or a plant per joint tuned (1..3); a joint
+    without one keeps its `current` gains (one set for all, or one per joint). Each
+    candidate is the rule's gains (`gains.suggest`) for every tuned joint under one
+    variant, checked together on the twin; gain sets already tried are skipped. Raises
+    ValueError for plants of joints other than 1..3 or none."""
+    plants = _plants(plant)
+    kept = joint_gains(current)
+    tried: list[Candidate] = []
+    for variant in variants(target, gravity):
+        rule = {j: suggest(p, variant) for j, p in plants.items()}
+        gains = joint_gains([rule[j].gains if j in rule else kept[j - 1] for j in JOINTS])
+        if any(gains == c.gains for c in tried):
             continue
-        verdict = check(gains, lead_s, seconds, limits, gravity)
-        tried.append((variant, gains, verdict))
+        verdict = check_fn(gains, lead_s, seconds, limits, gravity)
+        tried.append(Candidate(variant, gains, verdict, rule))
         if verdict.passes:
-            return Offer(gains, variant, verdict, tuple(tried))
-    best = min(tried, key=lambda t: _score(t[2], limits))
-    return Offer(best[1], best[0], best[2], tuple(tried))
+            reason = (
+                f"the first of {len(tried)} tried to pass every limit on the twin (tried in "
+                "order: the rule's own target, then tighter D caps and, with no D, wider "
+                "model overshoot allowances)"
+            )
+            return Offer(tuple(tried), len(tried) - 1, reason)
+    best = min(range(len(tried)), key=lambda k: _score(tried[k].verdict, limits))
+    v = tried[best].verdict
+    reason = (
+        f"no candidate met the goal: of {len(tried)} tried, this one misses the fewest "
+        f"limits ({len(v.failed)}: {', '.join(v.failed)}), then by the least excess over "
+        f"them ({excess(v, limits):.2f}); offered as the closest"
+    )
+    return Offer(tuple(tried), best, reason)
+
+
+@dataclass(frozen=True)
+class OfferJob:
+    """Everything `offer` needs, picklable (a worker process runs it: `run_offer`): the
+    `plants` per tuned joint, the joints' `current` gains, the `target`, and the check's
+    conditions (the loop's `lead_s` [s], `seconds` [s] of sinusoid measured, `limits`,
+    `gravity`: the loop's gravity offset on)."""
+
+    plants: dict[int, Plant]
+    target: Target
+    current: JointGains = (FACTORY,) * 3
+    lead_s: float = 0.02
+    seconds: float = 3.0
+    limits: Limits = field(default_factory=Limits)
+    gravity: bool = False
+
+
+def run_offer(job: OfferJob) -> Offer:
+    """`offer` for `job` (a module-level function: what a worker process is handed)."""
+    return offer(
+        job.plants, job.target, job.lead_s, job.seconds, job.limits, job.gravity, job.current
+    )

@@ -34,7 +34,12 @@ class TargetIn(BaseModel):
     pwm_fraction: Annotated[
         float, Field(ge=0.05, le=1.0, description="peak PWM of the checked step, of the limit")
     ] = Target.pwm_fraction
-    feedforward: bool = Field(True, description="suggest Feedforward 1st / 2nd gains")
+    feedforward: bool = Field(
+        Target.feedforward,
+        description="suggest Feedforward 1st / 2nd gains (they act only through the "
+        "servo's Profile, which the loop leaves off; the loop's lead time is the default "
+        "feed-forward: docs/tuning.md)",
+    )
 
 
 class TuningRequest(BaseModel):
@@ -60,14 +65,62 @@ class ServoGains(BaseModel):
     ff2: int
 
 
+class TrackingOut(BaseModel):
+    """The thesis sinusoid on the twin: RMSE per axis (x, y, z) [m] of the FK of the
+    encoders against the path, peak PWM and the share of the run with some joint's PWM at
+    its limit (fractions)."""
+
+    rmse_m: list[float]
+    peak_pwm: float
+    at_limit: float
+
+
+class CandidateOut(BaseModel):
+    """One gain set checked on the twin (app/tuning/twin_check.py): its number (1: the
+    first tried), the target variant the rule was given (pwm_fraction: the D cap's
+    headroom; overshoot_pct: the model's allowance; integral), the gains per servo id
+    (the legs not tuned keep theirs), the sinusoid without (plain) and with (lead) the
+    loop's lead, the 20 mm z step's overshoot_pct [%], rest_m [m] at five points, and the
+    limits it misses (failed)."""
+
+    candidate: int
+    target: dict[str, Any]
+    gains: dict[str, ServoGains]
+    plain: TrackingOut
+    lead: TrackingOut
+    overshoot_pct: float
+    rest_m: list[float]
+    failed: list[str]
+    passes: bool
+
+
+class CheckedOut(BaseModel):
+    """What the twin check found before the gains were suggested: every candidate, in the
+    order tried; chosen: the number of the one suggested; met_goal: whether it passes every
+    limit (issue 21's goal: limits); reason: why it was chosen (with none passing, the
+    closest, and what it misses); the check's conditions (the loop's lead_s [s], its
+    gravity_compensation, seconds [s] of sinusoid measured)."""
+
+    met_goal: bool
+    chosen: int
+    reason: str
+    lead_s: float
+    gravity_compensation: bool
+    seconds: float
+    limits: dict[str, float]
+    candidates: list[CandidateOut]
+
+
 class TuningOut(BaseModel):
-    """A tuning run. state: planned, moving, step, chirp, fitting, done, failed (error
-    says why), aborted (POST .../abort), applied. model: per servo id, the fitted
-    K wn^2 / (s^2 + 2 zeta wn s + wn^2) e^{-sT} (gain, wn_rad_s, zeta, delay_s,
-    bandwidth_hz, rmse_rad); suggested: per servo id, the gains; predicted: per servo id,
-    the loop with the suggested and the current gains (crossover_hz, phase_margin_deg,
-    bandwidth_hz, peak_db, overshoot_pct, settling_s, peak_pwm_fraction,
-    static_error_pct)."""
+    """A tuning run. state: planned, moving, step, chirp, fitting, checking (the candidate
+    gains on the twin), done, failed (error says why), aborted (POST .../abort), applied.
+    model: per servo id, the fitted K wn^2 / (s^2 + 2 zeta wn s + wn^2) e^{-sT} (gain,
+    wn_rad_s, zeta, delay_s, bandwidth_hz, rmse_rad); suggested: per servo id, the gains
+    the twin check chose (checked); predicted: per servo id, the model's loop with the
+    suggested and the current gains (crossover_hz, phase_margin_deg, bandwidth_hz,
+    peak_db, overshoot_pct, settling_s, peak_pwm_fraction, static_error_pct; meets_target
+    against the chosen candidate's target); checked: the twin check (null until it is
+    done)."""
 
     run_id: str
     state: str
@@ -78,6 +131,7 @@ class TuningOut(BaseModel):
     model: dict[str, dict[str, Any]]
     suggested: dict[str, ServoGains]
     predicted: dict[str, dict[str, Any]]
+    checked: CheckedOut | None = None
     files: list[str]
 
 
@@ -101,8 +155,9 @@ def _run(tuning: TuningManager, run_id: str) -> TuningRun:
 async def start_tuning(
     body: TuningRequest, tuning: TuningDep, _c: ControllerDep, _: ControlClient
 ) -> dict[str, Any]:
-    """Move to the start point, record a step and a chirp run, fit each joint's model and
-    suggest gains (GET the run for its progress). 409 when the robot may not move (torque
+    """Move to the start point, record a step and a chirp run, fit each joint's model,
+    check the rule's candidate gains on the twin and suggest the one the check chose (GET
+    the run for its progress). 409 when the robot may not move (torque
     off, e-stop, a fault, another run, tuned gains in use); 422 naming the field."""
     try:
         target = Target(**body.target.model_dump())

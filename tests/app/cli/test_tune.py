@@ -1,9 +1,11 @@
 """``deltadash tune --url``: on a server (the in-process app, reached through the CLI's own
 HTTP helper): progress, the models and gains in plain units, --apply writing the servos'
-registers, --revert; bad input refused naming the field. The emulated bus answers fast;
-the run's identification itself is stood in for (its thread leaves a done run with the
-gains a known model gives), so what is tested here is the command line's part; the real
-run on the twin is tests/app/server/test_tuning_api.py's."""
+registers, --revert; bad input refused naming the field; the twin check's candidates and
+choice shown, and said when none met the goal. The emulated bus answers fast; the run's
+identification and its twin check are stood in for (its thread leaves a done run with
+the fit of a known model, and the check passes or fails gain sets as a test says), so
+what is tested here is the command line's part; the real run on the twin is
+tests/app/server/test_tuning_api.py's."""
 
 from __future__ import annotations
 
@@ -17,9 +19,10 @@ from fastapi.testclient import TestClient
 
 from app.cli import main
 from app.cli import run as cli_run
-from app.tuning.gains import Plant, Target, predict, suggest
+from app.tuning.gains import Plant, Target, suggest
 from app.tuning.identify import JointFit, JointModel
 from app.tuning.procedure import TuningManager, TuningRun, gains_out
+from app.tuning.twin_check import OfferJob, Tracking, Verdict, offer
 from hardware.bus import PositionGains
 from tests.support.app_client import make_client
 
@@ -27,16 +30,46 @@ URL = "http://testserver"
 MODEL = JointModel(1.0, 55.0, 0.75, 0.008)
 
 
+FAILING: set[PositionGains] = set()  # gain sets the stand-in twin check fails
+FAIL_ALL = {"on": False}
+PASSING = Tracking((0.001, 0.001, 0.003), 0.6, 0.0)
+
+
+def _stand_in_check(gains, lead_s, seconds, limits, gravity) -> Verdict:
+    failed = ("rest_m",) if FAIL_ALL["on"] or any(g in FAILING for g in gains) else ()
+    return Verdict(PASSING, PASSING, lead_s, 2.0, (1e-4, 2e-4, 1e-4, 1e-4, 3e-4), failed)
+
+
+def _twin_check(job: OfferJob):
+    return offer(
+        job.plants,
+        job.target,
+        job.lead_s,
+        job.seconds,
+        job.limits,
+        job.gravity,
+        job.current,
+        check_fn=_stand_in_check,
+    )
+
+
 def _identified(self: TuningManager, run: TuningRun) -> None:
-    """What a run's thread leaves (stands in for the step and chirp runs and the fit)."""
-    plant = Plant.of(MODEL)
-    for joint in run.joints:
-        sid = run.servo(joint)
-        run.fits.append(JointFit(joint, MODEL, 1e-3, 0.1, 500))
-        run.suggestions[sid] = suggest(plant, run.target)
-        run.predicted_now[sid] = predict(plant, PositionGains()).as_dict()
+    """What a run's thread leaves (stands in for the step and chirp runs and the fit; the
+    twin check's verdicts are `_stand_in_check`'s)."""
+    run.fits = [JointFit(joint, MODEL, 1e-3, 0.1, 500) for joint in run.joints]
+    self.twin_check = _twin_check
+    self._suggest(run)
     run.state = "done"
     self._save(run)
+
+
+@pytest.fixture(autouse=True)
+def _checks_pass():
+    FAILING.clear()
+    FAIL_ALL["on"] = False
+    yield
+    FAILING.clear()
+    FAIL_ALL["on"] = False
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +114,16 @@ def test_tune_prints_the_model_and_gains_and_applies_them(served, capsys):
     assert f"servo {ids[0]} (joint 1)" in out and f"servo {ids[2]} (joint 3)" in out
     assert f"servo {ids[1]} (joint 2)" not in out
     assert "wn 8.8 Hz" in out and "delay 8.0 ms" in out  # 55 rad/s, 8 ms: plain units
-    assert out.count(shown) == 2 and "predicted suggested" in out and "predicted now" in out
+    assert out.count(f"suggested: {shown}") == 2
+    assert "predicted suggested" in out and "predicted now" in out
+    # the twin check: its candidate, chosen, why, and the goal met
+    assert "checked on the twin, gains per servo 1/2/3 where they differ (lead 20 ms" in out
+    assert (
+        f" * 1: P {expected.p}/800/{expected.p}, I {expected.i}/0/{expected.i}, D {expected.d}/0/"
+        f"{expected.d}: RMSE plain 1.00 / 1.00 / 3.00 mm" in out
+    )
+    assert "chosen: candidate 1: the first of 1 tried to pass every limit" in out
+    assert "do NOT meet" not in out
     assert _registers(served) == [PositionGains()] * 3  # not applied without --apply
     assert served.get("/api/lease").json()["held"] is False  # control given back
 
@@ -117,3 +159,25 @@ def test_bad_input_is_refused_naming_the_field(served, capsys, args, field):
 def test_revert_with_nothing_applied_is_refused(served, capsys):
     assert main(["tune", "--url", URL, "--revert"]) == 2
     assert "revert" in capsys.readouterr().err
+
+
+def test_tune_suggests_the_checks_choice_never_a_set_it_failed(served, capsys):
+    rule = suggest(Plant.of(MODEL), Target()).gains
+    FAILING.add(rule)  # the rule's own first candidate fails on the twin
+    assert main(["tune", "--url", URL, "--joints", "2", "--json"]) == 0
+    body = json.loads(capsys.readouterr().out)
+    sid = str(served.app.state.controller.servo_ids[1])
+    checked = body["checked"]
+    first, chosen = checked["candidates"][0], checked["candidates"][checked["chosen"] - 1]
+    assert first["gains"][sid] == gains_out(rule) and first["failed"] == ["rest_m"]
+    assert checked["chosen"] > 1 and checked["met_goal"] and chosen["passes"]
+    assert body["suggested"][sid] == chosen["gains"][sid] != gains_out(rule)
+
+
+def test_tune_says_when_no_candidate_met_the_goal(served, capsys):
+    FAIL_ALL["on"] = True
+    assert main(["tune", "--url", URL, "--joints", "1"]) == 0  # the closest is still offered
+    out = capsys.readouterr().out
+    assert "no candidate met the goal" in out
+    assert "the suggested gains do NOT meet the goal on the twin" in out
+    assert "misses rest_m" in out

@@ -1,14 +1,18 @@
 """The tuning API (issue 21): its refusals, apply and revert reaching the servos' registers
-(the emulated bus: real packets, the emulator's control tables), and one whole run on the
-twin (identify, suggest, apply, revert)."""
+(the emulated bus: real packets, the emulator's control tables), the suggested gains being
+the twin check's choice (a stand-in check: fast), an abort killing a real check's worker
+process, and one whole run on the twin (identify, check, suggest, apply, revert)."""
 
 from __future__ import annotations
+
+import threading
 
 import pytest
 
 from app.tuning.gains import Plant, Target, predict, suggest
-from app.tuning.identify import JointModel
+from app.tuning.identify import JointFit, JointModel
 from app.tuning.procedure import TuningRun, gains_out
+from app.tuning.twin_check import OfferJob, Tracking, Verdict, offer
 from hardware.bus import PositionGains
 from hardware.dynamixel.control_table import Reg
 from tests.support.app_client import make_client, torque_on
@@ -52,6 +56,130 @@ def _done_run(client, joints=(1, 3)) -> TuningRun:
         run.predicted_now[ids[joint - 1]] = predict(plant, PositionGains()).as_dict()
     manager._runs[run.run_id] = run
     return run
+
+
+def _fitted_run(client, joints=(1, 3), name="fitted") -> TuningRun:
+    """A run as its thread leaves it after the fit (the step and chirp runs stood in for):
+    two joints of different models."""
+    manager = client.app.state.tuning
+    ids = tuple(client.app.state.controller.servo_ids)
+    run_id = f"tune-test-{name}"
+    folder = manager.folder / run_id
+    folder.mkdir(parents=True, exist_ok=True)
+    gains = client.app.state.controller.gains
+    run = TuningRun(run_id, joints, Target(), ids, gains, folder, state="fitting")
+    for joint, wn in zip(joints, (55.0, 70.0), strict=False):
+        run.fits.append(JointFit(joint, JointModel(1.0, wn, 0.75, 0.008), 1e-3, 0.1, 500))
+    manager._runs[run.run_id] = run
+    return run
+
+
+CALM = Tracking((0.001, 0.001, 0.003), 0.6, 0.0)
+
+
+class StandInCheck:
+    """The twin check with `offer`'s own choice but stand-in verdicts: the first `fail`
+    gain sets it is asked about fail (at_limit), the others pass. Records the jobs."""
+
+    def __init__(self, fail: int) -> None:
+        self.fail, self.asked, self.jobs = fail, [], []
+
+    def verdict(self, gains, lead_s, seconds, limits, gravity) -> Verdict:
+        self.asked.append(gains)
+        failed = ("at_limit",) if len(self.asked) <= self.fail else ()
+        return Verdict(CALM, CALM, lead_s, 1.0, (1e-4,) * 5, failed)
+
+    def __call__(self, job: OfferJob):
+        self.jobs.append(job)
+        return offer(
+            job.plants,
+            job.target,
+            job.lead_s,
+            job.seconds,
+            job.limits,
+            job.gravity,
+            job.current,
+            check_fn=self.verdict,
+        )
+
+
+def test_the_suggested_gains_are_the_twin_checks_choice_never_a_failed_set(client):
+    manager = client.app.state.tuning
+    run = _fitted_run(client)
+    ids = run.servo_ids
+    check = StandInCheck(fail=2)
+    manager.twin_check = check
+    try:
+        manager._suggest(run)
+    finally:
+        manager.twin_check = None
+    run.state = "done"
+    body = ok_json(client.get(f"/api/tuning/{run.run_id}"))
+    (job,) = check.jobs
+    assert set(job.plants) == {1, 3} and job.current[1] == PositionGains()
+    assert job.lead_s == client.app.state.settings.runs.feedforward_lead_s
+    checked = body["checked"]
+    assert checked["met_goal"] and checked["chosen"] == 3
+    failed = checked["candidates"][:2]
+    chosen = checked["candidates"][2]
+    assert all(c["failed"] == ["at_limit"] and not c["passes"] for c in failed)
+    assert chosen["passes"] and "first of 3 tried to pass" in checked["reason"]
+    # suggested: the chosen candidate's gains for the tuned servos, none of a failed one
+    assert body["suggested"] == {sid: chosen["gains"][sid] for sid in (str(ids[0]), str(ids[2]))}
+    for c in failed:
+        assert all(body["suggested"][sid] != c["gains"][sid] for sid in body["suggested"])
+    assert chosen["gains"][str(ids[1])] == FACTORY  # not tuned: checked with its own gains
+    # the prediction is of the suggested gains, for the chosen candidate's target
+    plant = Plant.of(JointModel(1.0, 55.0, 0.75, 0.008))
+    target = Target(**{**vars(Target()), **chosen["target"]})
+    assert body["predicted"][str(ids[0])]["suggested"]["overshoot_pct"] == pytest.approx(
+        predict(plant, suggest(plant, target).gains).overshoot_pct
+    )
+    # what apply writes is what the check chose
+    take_lease(client)
+    torque_on(client)
+    applied = ok_json(client.post(f"/api/tuning/{run.run_id}/apply"))
+    assert applied["gains"] == chosen["gains"]
+    ok_json(client.post("/api/tuning/revert"))
+
+
+@pytest.mark.slow  # a worker process started, then killed
+def test_an_abort_while_checking_kills_the_checks_worker_and_suggests_nothing(client):
+    from app.calibration.procedure import Stopped
+
+    manager = client.app.state.tuning
+    run = _fitted_run(client, joints=(1, 2, 3), name="abort")
+    ended: list[BaseException] = []
+
+    def thread() -> None:  # the run's thread from its fit on (the real check, in a worker)
+        try:
+            manager._suggest(run)
+        except BaseException as exc:
+            ended.append(exc)
+
+    worker = threading.Thread(target=thread, daemon=True)
+    worker.start()
+
+    def processes() -> list | None:
+        workers = manager._workers
+        executor = workers._executors[0] if workers is not None else None
+        found = list(getattr(executor, "_processes", None) or {})
+        return [executor._processes[pid] for pid in found] if found else None
+
+    started = wait_for(processes, "the twin check's worker process to start", 120.0)
+    assert run.state == "checking"
+    take_lease(client)
+    body = ok_json(client.post(f"/api/tuning/{run.run_id}/abort"))
+    assert body["state"] == "aborted"
+    wait_for(lambda: not worker.is_alive(), "the run's thread to end after the abort", 60.0)
+    wait_for(
+        lambda: not any(p.is_alive() for p in started), "the check's worker to be killed", 60.0
+    )
+    (exc,) = ended
+    assert isinstance(exc, Stopped) and "nothing is suggested" in str(exc), exc
+    body = ok_json(client.get(f"/api/tuning/{run.run_id}"))
+    assert body["state"] == "aborted" and body["suggested"] == {} and body["checked"] is None
+    assert manager._workers is None
 
 
 def test_status_shows_the_factory_gains_per_servo(client):
@@ -149,8 +277,8 @@ def test_a_run_not_done_cannot_be_applied(client):
 PATIENT = {"stale_feedback_s": 5.0, "following_error_time_s": 5.0}
 
 
-@pytest.mark.slow  # a step and a chirp run on the twin
-def test_a_run_on_the_twin_identifies_suggests_applies_and_reverts(tmp_path):
+@pytest.mark.slow  # a step and a chirp run on the twin, then the twin check's candidates
+def test_a_run_on_the_twin_identifies_checks_suggests_applies_and_reverts(tmp_path):
     with make_client(tmp_path, backend="sim", safety=PATIENT) as twin:
         take_lease(twin)
         torque_on(twin)
@@ -170,12 +298,23 @@ def test_a_run_on_the_twin_identifies_suggests_applies_and_reverts(tmp_path):
         assert body["state"] == "done", body
         ids = [str(i) for i in twin.app.state.controller.servo_ids]
         assert set(body["model"]) == set(body["suggested"]) == set(body["predicted"]) == set(ids)
+        # checked on the twin (in a worker process) before it was suggested
+        checked = body["checked"]
+        chosen = checked["candidates"][checked["chosen"] - 1]
+        assert body["suggested"] == chosen["gains"]
+        assert chosen["passes"] == checked["met_goal"]
+        if checked["met_goal"]:  # the first to pass: every one tried before it failed
+            assert checked["chosen"] == len(checked["candidates"])
+            assert not any(c["passes"] for c in checked["candidates"][:-1])
+        else:
+            assert checked["reason"].startswith("no candidate met the goal"), checked
+        assert checked["lead_s"] == twin.app.state.settings.runs.feedforward_lead_s
         for sid in ids:
             model, predicted = body["model"][sid], body["predicted"][sid]
             assert 4.0 < model["bandwidth_hz"] < 15.0, model  # the factory loop's
-            assert predicted["meets_target"], predicted
+            assert predicted["meets_target"], predicted  # the chosen candidate's target
             after, before = predicted["suggested"], predicted["current"]
-            assert after["overshoot_pct"] <= 5.0
+            assert after["overshoot_pct"] <= chosen["target"]["overshoot_pct"]
             assert after["bandwidth_hz"] > before["bandwidth_hz"], predicted
         assert {"bode.png", "result.json"} <= set(body["files"])
         png = twin.get(f"/api/tuning/{run_id}/bode.png")
