@@ -15,13 +15,19 @@ class GoalRejected(ValueError):
 
     ``goal`` (3,) [m] is the refused point when a point the gate takes near it can be
     offered (the server computes one that passes every check: app/server/sections.py
-    ``nearest``); ``reason`` is the message without the nearest point.
+    ``nearest``), at the wrist angle ``phi`` [rad] the goal was asked at; ``reason`` is the
+    message without the nearest point.
     """
 
     def __init__(
-        self, reason: str, nearest: np.ndarray | None = None, goal: np.ndarray | None = None
+        self,
+        reason: str,
+        nearest: np.ndarray | None = None,
+        goal: np.ndarray | None = None,
+        phi: float = 0.0,
     ) -> None:
         self.reason = reason
+        self.phi = phi
         if nearest is not None:
             mm = ", ".join(f"{v:.4f}" for v in nearest)
             reason = f"{reason}; nearest reachable point [{mm}] m"

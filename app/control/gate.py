@@ -104,7 +104,7 @@ class Gate:
             if self.tool.length_m > 0.0:
                 platform = ", ".join(f"{v * 1e3:.1f}" for v in self.platform(goal, phi))
                 reason += f" (the platform centre would be at [{platform}] mm)"
-            raise GoalRejected(reason, self.nearest(goal, phi), goal=goal)
+            raise GoalRejected(reason, self.nearest(goal, phi), goal=goal, phi=phi)
         return goal
 
     def clamp_point(self, point: np.ndarray, phi: float = 0.0) -> np.ndarray:
@@ -152,18 +152,18 @@ class Gate:
         joints, ok = self.robot.ik(platform, near=near)
         if not ok:
             raise GoalRejected(
-                "position_m: no joint solution", self.nearest(point, phi), goal=point
+                "position_m: no joint solution", self.nearest(point, phi), goal=point, phi=phi
             )
         try:
             return self.check_joints(joints)
         except GoalRejected as exc:
             knee_out = self.robot.ik(platform).joints
             if np.array_equal(knee_out, joints):
-                raise GoalRejected(exc.reason, goal=point) from None
+                raise GoalRejected(exc.reason, goal=point, phi=phi) from None
         try:
             return self.check_joints(knee_out)
         except GoalRejected as exc:
-            raise GoalRejected(exc.reason, goal=point) from None
+            raise GoalRejected(exc.reason, goal=point, phi=phi) from None
 
     def check_joints(self, joints: np.ndarray) -> np.ndarray:
         """Joint limits and the singularity margin; returns ``joints`` or raises."""

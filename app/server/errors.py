@@ -72,13 +72,14 @@ def _field_errors(exc: RequestValidationError) -> str:
 
 async def _offer(request: Request, exc: GoalRejected) -> tuple[str, dict[str, Any]]:
     """The 422's words and ``nearest_m``: for a refused goal (``exc.goal``) a point the gate
-    accepts (sections.nearest, workspace, joint limits and margins; computed in a worker
-    thread, it takes tens of ms), else the exception's own ``nearest`` if any."""
+    accepts at the goal's wrist angle (sections.nearest, workspace, joint limits and
+    margins; computed in a worker thread, it takes tens of ms), else the exception's own
+    ``nearest`` if any."""
     controller = getattr(request.app.state, "controller", None)
     if exc.goal is None or controller is None:
         nearest = None if exc.nearest is None else [float(v) for v in exc.nearest]
         return str(exc), {"nearest_m": nearest}
-    point = await asyncio.to_thread(sections.nearest, controller.gate, exc.goal)
+    point = await asyncio.to_thread(sections.nearest, controller.gate, exc.goal, exc.phi)
     mm = ", ".join(f"{v:.4f}" for v in point)
     return f"{exc.reason}; nearest reachable point [{mm}] m", {"nearest_m": point.tolist()}
 

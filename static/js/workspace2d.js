@@ -32,7 +32,11 @@ const views = {
 };
 // robot: the tool tip (the point goals are for); platform: its centre, drawn too when a tool
 // offset is set; phi: the wrist angle a goal from here keeps [rad]
-const seen = { robot: null, platform: null, phi: 0, goal: null, typed: null, inside: true, nearest: null };
+// typedPhi: the wrist angle of the typed goal [rad] (the form's φ; 0 without a wrist)
+const seen = {
+  robot: null, platform: null, phi: 0, goal: null, typed: null, typedPhi: 0, inside: true, nearest: null,
+};
+const PHI_STEP_RAD = Math.PI / 180; // a new section when the wrist's goal turned a degree
 let drawnKey = "";
 let lastDraw = 0;
 let drawTimer = null;
@@ -49,12 +53,18 @@ function levelOf(view) {
   return seen.robot ? seen.robot[view.levelAxis] : view.fallback;
 }
 
+// With a tool off the wrist's axis the accepted region of tips turns with the wrist: the
+// sections are cut at the angle a goal from here keeps (the wrist's goal).
 async function fetchSection(view) {
   const level = Number((Math.round(levelOf(view) / LEVEL_STEP_M) * LEVEL_STEP_M).toFixed(3));
-  if (view.loading || (view.section && Math.abs(view.section.at_m - level) < 1e-4)) return;
+  const phi = wrist.enabled ? Math.round(seen.phi / PHI_STEP_RAD) * PHI_STEP_RAD : 0;
+  const same = view.section && Math.abs(view.section.at_m - level) < 1e-4 &&
+    Math.abs((view.section.phi_rad || 0) - phi) < PHI_STEP_RAD / 2;
+  if (view.loading || same) return;
   view.loading = true;
   try {
     const query = new URLSearchParams({ plane: view.plane, at_m: String(level) });
+    if (wrist.enabled) query.set("phi_rad", phi.toFixed(6));
     view.section = await get(`/api/workspace/section?${query}`);
     view.image = sectionImage(view.section);
     view.error = null;
@@ -270,11 +280,21 @@ function typedGoal() {
   return values.every(Number.isFinite) ? values : null;
 }
 
+// The typed goal's wrist angle [rad]: the form's φ [deg] (0 without a wrist), null when it
+// is not a number.
+function typedPhi() {
+  if (!wrist.enabled) return 0;
+  const text = String(document.getElementById("goal-form").elements.phi?.value ?? "").trim().replace(",", ".");
+  const value = text === "" ? NaN : Number(text) * Math.PI / 180;
+  return Number.isFinite(value) ? value : null;
+}
+
 async function checkTyped() {
   const goal = typedGoal();
+  const phi = typedPhi();
   const ask = ++typedAsked;
   const button = document.getElementById("ws-go-nearest");
-  if (!goal || goal.some((v) => Math.abs(v) > 1)) {
+  if (!goal || phi === null || goal.some((v) => Math.abs(v) > 1)) {
     Object.assign(seen, { typed: null, inside: true, nearest: null });
     button.hidden = true;
     setText("ws-typed", goal ? "the typed goal is over 1 m away: not shown" : "–");
@@ -283,9 +303,13 @@ async function checkTyped() {
   }
   try {
     const [x, y, z] = goal.map(String);
-    const answer = await get(`/api/workspace/nearest?${new URLSearchParams({ x_m: x, y_m: y, z_m: z })}`);
+    const query = new URLSearchParams({ x_m: x, y_m: y, z_m: z });
+    if (wrist.enabled) query.set("phi_rad", phi.toFixed(6)); // the tip's region at its angle
+    const answer = await get(`/api/workspace/nearest?${query}`);
     if (ask !== typedAsked) return; // the operator typed on meanwhile
-    Object.assign(seen, { typed: rounded(goal), inside: answer.inside, nearest: answer.nearest_m });
+    Object.assign(seen, {
+      typed: rounded(goal), typedPhi: phi, inside: answer.inside, nearest: answer.nearest_m,
+    });
     button.hidden = answer.inside;
     button.dataset.nearest = JSON.stringify(answer.nearest_m);
     setText("ws-typed", answer.inside ? `${mmText(goal)} mm: inside the workspace` :
@@ -305,7 +329,8 @@ function typedChanged() {
 function goNearest() {
   const nearest = JSON.parse(document.getElementById("ws-go-nearest").dataset.nearest || "null");
   if (!nearest) return;
-  const body = wrist.enabled ? { position_m: nearest, phi_rad: seen.phi } : { position_m: nearest };
+  // at the typed goal's angle: the point was found for the tip at that angle
+  const body = wrist.enabled ? { position_m: nearest, phi_rad: seen.typedPhi } : { position_m: nearest };
   command("/api/goal", body)
     .then(() => {
       showMessage(`Going to the nearest reachable point ${mmText(nearest)} mm`);

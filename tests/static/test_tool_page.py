@@ -13,6 +13,7 @@ import math
 import re
 from collections.abc import Iterator
 from typing import Any
+from urllib.parse import parse_qsl, urlsplit
 
 import pytest
 
@@ -36,6 +37,7 @@ TOOL_ENV = {
 }
 STEP_RAD = math.radians(5)  # wrist.js PHI_STEP_DEG
 PHI_TOL_RAD = 0.01
+DEGREE = math.radians(0.5) + 1e-6  # the 2D view cuts its sections at whole degrees
 
 
 @pytest.fixture(scope="module")
@@ -48,6 +50,7 @@ def tooled(tmp_path_factory) -> Iterator[Server]:
 def page(tooled: Server) -> Iterator[Any]:
     def listen(page: Any) -> None:
         page.goals = []  # every POST /api/goal body the page sent, in order
+        page.workspace = []  # every GET /api/workspace/... query the page sent, parsed
         page.on("request", lambda r: record_goal(page, r))
 
     with dashboard_page(tooled, stub_scene=False, on_page=listen) as page:
@@ -57,6 +60,9 @@ def page(tooled: Server) -> Iterator[Any]:
 def record_goal(page: Any, request: Any) -> None:
     if request.method == "POST" and request.url.endswith("/api/goal"):
         page.goals.append(json.loads(request.post_data))
+    url = urlsplit(request.url)
+    if url.path.startswith("/api/workspace/"):
+        page.workspace.append((url.path, dict(parse_qsl(url.query))))
 
 
 def status(server: Server) -> dict:
@@ -132,6 +138,18 @@ def test_go_to_with_a_typed_phi_turns_the_wrist_there(page: Any, tooled: Server)
     assert body["phi_rad"] == pytest.approx(want, abs=1e-12)
     assert status(tooled)["goal"]["phi_rad"] == pytest.approx(want, abs=1e-12)
     wait_for(lambda: text(page, "#phi-goal") == "20.5°", "the page showing the goal's phi")
+    # the 2D view checked the typed tip at its own angle, and cuts at the goal's angle now
+    # (to a degree): the tips' region turns with the wrist
+    asked = lambda path: [float(q.get("phi_rad", "nan")) for p, q in page.workspace if p == path]  # noqa: E731
+    assert any(abs(phi - want) < 1e-5 for phi in asked("/api/workspace/nearest")), page.workspace
+    wait_for(
+        lambda: (
+            page.evaluate("0") == 0
+            and any(abs(phi - want) <= DEGREE for phi in asked("/api/workspace/section"))
+        ),
+        "a section cut at the goal's angle",
+        seen=lambda: page.workspace[-4:],
+    )
 
 
 def step_and_wait(page: Any, server: Server, press: Any, sign: int, what: str) -> None:

@@ -463,6 +463,7 @@ class WorkspaceSectionOut(_Out):
 
     plane: str = Field(description="xy | xz | yz")
     at_m: float = Field(description="the level used, rounded to 1 mm [m]")
+    phi_rad: float = Field(0.0, description="the wrist angle used, rounded to 1 deg [rad]")
     axes: list[str] = Field(description="the names of u, v and the level's axis, e.g. x, y, z")
     u_m: list[float] = Field(description="cell centres along u [m]")
     v_m: list[float] = Field(description="cell centres along v [m]")
