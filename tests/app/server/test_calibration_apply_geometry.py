@@ -16,6 +16,8 @@ from app.calibration.fit import fit, plan
 from app.calibration.procedure import CalibrationRun
 from app.config import load_settings
 from app.server import sections
+from app.server.api.runs import WaypointsRequest
+from app.world.drone_sim import DroneSimParams
 from kinematics import THESIS_DELTA, PerLegRotaryDelta
 from tests.support.app_client import make_client, torque_on
 from tests.support.lease import take_lease
@@ -70,6 +72,18 @@ def _section(client) -> np.ndarray:
     return np.array([[c == "1" for c in row] for row in body["reachable"]])
 
 
+def _to(point) -> str:
+    """A program that goes straight to ``point`` [m] (millimetres, base frame)."""
+    x, y, z = (1e3 * v for v in point)
+    return f"G21 G90\nG1 X{x:.4f} Y{y:.4f} Z{z:.4f} F600\n"
+
+
+def _program(client, gcode: str) -> dict:
+    """POST /api/programs/check from 60 mm above the program's end: the report."""
+    start = [0.0, 0.0, float(gcode.split("Z")[1].split()[0]) * 1e-3 + 0.06]
+    return ok_json(client.post("/api/programs/check", json={"gcode": gcode, "start_m": start}))
+
+
 def _bottom(client) -> np.ndarray:
     """The lowest goal the nominal robot accepts below the centre, 0.3 mm inside it."""
     lowest = np.array(_nearest(client, [0.0, 0.0, -0.9])["nearest_m"])
@@ -102,6 +116,11 @@ def test_a_geometry_fit_becomes_the_model_of_every_route_and_nothing_moves(clien
         np.testing.assert_allclose(getattr(fitted, name), getattr(SHORT_RODS, name), atol=1e-7)
     before = _status(client)
     section_before = _section(client)
+    gcode = _to(bottom)
+    assert _program(client, gcode)["ok"] is True  # the nominal robot takes the program
+    waypoints = {"points_m": [[0.0, 0.0, -0.30], bottom.tolist()], "times_s": [0.0, 2.0]}
+    nominal = client.app.state.controller.model
+    client.app.state.runs.plan(WaypointsRequest(**waypoints).params(), nominal)  # and the run
 
     applied = ok_json(client.post("/api/calibration/cal-geometry/apply"))
     assert applied["parameters_applied"] == "geometry"
@@ -131,6 +150,17 @@ def test_a_geometry_fit_becomes_the_model_of_every_route_and_nothing_moves(clien
     assert section.sum() < section_before.sum()  # shorter rods: a smaller workspace
     expected = sections.section(client.app.state.controller.gate, "xz", 0.0).reachable
     np.testing.assert_array_equal(section, expected)
+
+    # a program's check and a run's feasibility check are the fitted robot's
+    report = _program(client, gcode)
+    assert not report["ok"] and {v["kind"] for v in report["violations"]} >= {"workspace"}
+    response = client.post("/api/tests/waypoints", json=waypoints)
+    assert response.status_code == 422 and "outside the workspace" in response.text
+    assert _status(client)["mode"] == "idle"
+    # hold-in-world clamps its goals with the gate of the model in use
+    world = client.app.state.world
+    hold = world.hold_source(np.zeros(3), world.provider(DroneSimParams()), False)
+    assert hold.gate.robot is client.app.state.controller.robot and not hold.gate.inside(bottom)
 
     # the config file holds the legs, read back as the same robot
     assert applied["config_written"] == str(config)
