@@ -254,5 +254,5 @@ def _apply(url: str, run_id: str, headers: dict[str, str], args: argparse.Namesp
     robot = None
     if args.parameters == "geometry":
         legs = {name: model[f"{name}_m"] for name in ("L", "l", "R", "r")}
-        robot = PerLegRotaryDelta(**legs)
+        robot = PerLegRotaryDelta(**legs, angles_rad=model["angles_rad"])
     return _write(args.write, body["joint_offsets_rad"], robot)

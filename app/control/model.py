@@ -49,12 +49,18 @@ class RobotModel:
 
     def describe(self) -> dict[str, Any]:
         """The model for the API: kind, version, origin and, for a rotary Delta, each leg's
-        L, l, R, r [m] (equal for a symmetric one)."""
+        L, l, R, r [m] (equal for a symmetric one) and base angle [rad]."""
         robot = self.robot
         kind = {RotaryDelta: "symmetric", PerLegRotaryDelta: "per-leg"}.get(type(robot), "linear")
         body: dict[str, Any] = {"kind": kind, "version": self.version, "origin": self.origin}
         if isinstance(robot, RotaryDelta | PerLegRotaryDelta):
             body |= {f"{name}_m": list(leg_values(robot, name)) for name in ("L", "l", "R", "r")}
+            legs = (
+                robot
+                if isinstance(robot, PerLegRotaryDelta)
+                else PerLegRotaryDelta.from_symmetric(robot)
+            )
+            body["angles_rad"] = list(legs.angles_rad)
         return body
 
 

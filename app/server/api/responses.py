@@ -442,6 +442,9 @@ class RobotModelOut(_Out):
     l_m: list[float] | None = None
     R_m: list[float] | None = None
     r_m: list[float] | None = None
+    angles_rad: list[float] | None = Field(
+        None, description="each leg's base direction about z [rad] (0, 120, 240 deg nominal)"
+    )
 
 
 class InfoOut(_Out):
