@@ -206,3 +206,39 @@ def test_gravity_compensation_follows_the_new_robot() -> None:
     assert loop.gravity.robot == SHORT_RODS.nominal()
     after = loop.gravity.offset_rad(np.array(HOME_RAD))
     assert np.all(np.isfinite(after)) and not np.array_equal(before, after)
+
+
+def test_a_jog_that_has_arrived_ends_at_the_apply_and_one_still_going_refuses_it() -> None:
+    """A goal (POST /api/goal) is a jog, which holds its point once there: the arm rests,
+    so the apply goes, the jog ends and the servos keep their goal. On the way it is
+    refused."""
+    loop, bus, clock = _holding()
+    goal = np.array([0.02, 0.01, -0.25])
+    loop.set_goal(goal)
+    _tick(loop, clock, 3)
+    assert loop.snapshot().mode == "jog"
+    future = loop.use_model(SHORT_RODS, (0.0, 0.0, 0.0), "calibration cal-test")
+    loop.step()
+    with pytest.raises(MotionRefused, match="a jog is running"):
+        future.result(timeout=0)
+    _tick(loop, clock, 400)  # arrived
+    held = bus.position.copy()
+    np.testing.assert_allclose(held, THESIS_DELTA.ik(goal).joints, atol=1e-9)
+    _apply(loop, SHORT_RODS)
+    _tick(loop, clock, 5)
+    assert loop.snapshot().mode == "idle" and loop.model.version == 1
+    np.testing.assert_array_equal(bus.position, held)  # nothing moved
+    np.testing.assert_allclose(loop.snapshot().goal_m, SHORT_RODS.fk(held).points, atol=1e-12)
+
+
+def test_refused_while_the_arm_still_settles_onto_a_moves_goal() -> None:
+    """A move ended with its last joints still ahead (the speed limit held them back: the
+    loop steps on to them, state.settle_rad); the arm is still moving."""
+    loop, _, _ = _holding()
+    loop.state.settle_rad = np.add(HOME_RAD, 0.01)
+    future = loop.use_model(SHORT_RODS, OFFSETS, "calibration cal-test")
+    loop.step()
+    with pytest.raises(MotionRefused, match="still settling"):
+        future.result(timeout=0)
+    assert loop.model.version == 0
+    np.testing.assert_array_equal(loop.joint_offsets_rad, 0.0)
