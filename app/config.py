@@ -13,6 +13,9 @@ Example file::
     R = 0.0844
     r = 0.038
 
+    [robot.legs]                          # optional: each leg its own (a geometry calibration)
+    lower_link_m = [0.2438, 0.2426, 0.2431]
+
     [tool]
     offset_m = [0.0, 0.0, -0.05]
 
@@ -74,8 +77,54 @@ class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+Triple = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+
+# per-leg fields of [robot.legs] and the PerLegRotaryDelta field each one sets
+_LEGS = {
+    "upper_link_m": "L",
+    "lower_link_m": "l",
+    "base_radius_m": "R",
+    "platform_radius_m": "r",
+    "base_angles_rad": "angles_rad",
+}
+
+
+class LegSettings(_Section):
+    """``[robot.legs]``: each leg its own geometry (a rotary Delta's, leg order), as a
+    geometry calibration found it (POST /api/calibration/{run_id}/apply writes it).
+
+    A field left out is [robot]'s value for every leg. Distinct names, not L and l:
+    environment variables ignore case. Joint offsets are not here: they are the joints'
+    zero offsets (``[[hardware.joints]]``).
+    """
+
+    upper_link_m: Triple | None = Field(None, description="L per leg [m] (robot.L)")
+    lower_link_m: Triple | None = Field(None, description="l per leg [m] (robot.l)")
+    base_radius_m: Triple | None = Field(None, description="R per leg [m] (robot.R)")
+    platform_radius_m: Triple | None = Field(None, description="r per leg [m] (robot.r)")
+    base_angles_rad: Triple | None = Field(
+        None, description="direction of each leg's base position about z [rad] (0, 120, 240 deg)"
+    )
+
+    @classmethod
+    def of(cls, robot: PerLegRotaryDelta) -> LegSettings:
+        """The section that describes ``robot``'s legs (its joint offsets are not kept)."""
+        return cls(**{key: getattr(robot, name) for key, name in _LEGS.items()})
+
+    def values(self) -> dict[str, Triple]:
+        """The PerLegRotaryDelta fields given here (L, l, R, r, angles_rad), three values
+        each."""
+        given = {_LEGS[key]: value for key, value in self.model_dump().items()}
+        return {name: value for name, value in given.items() if value is not None}
+
+
 class RobotSettings(_Section):
-    """Geometry [m]; defaults are the thesis robot (eq. 4.11)."""
+    """Geometry [m]; defaults are the thesis robot (eq. 4.11).
+
+    With ``[robot.legs]`` the controller's model is the per-leg one it describes
+    (``build``); L, l, R, r stay the drawing's values (``symmetric``), which the simulated
+    robot's ``[hardware.sim]`` true values default to.
+    """
 
     type: Literal["rotary", "linear"] = Field("rotary", description="rotary or linear Delta")
     L: float = Field(0.1558, description="upper link length [m] (rotary)")
@@ -83,20 +132,33 @@ class RobotSettings(_Section):
     R: float = Field(0.0844, description="base radius to the motor axis / rail [m]")
     r: float = Field(0.038, description="platform radius [m]")
     incline_rad: float = Field(math.pi / 2, description="rail angle above the base [rad] (linear)")
+    legs: LegSettings | None = Field(
+        None,
+        description="per-leg geometry of a rotary Delta (a geometry calibration writes it); "
+        "none: every leg is L, l, R, r",
+    )
 
     @model_validator(mode="after")
     def _buildable(self) -> RobotSettings:
         try:
-            self.build()
+            self.symmetric()
         except DeltaError as exc:
             raise ValueError(str(exc)) from exc
-        return self
+        return self  # the legs are checked by Settings, which names their field in full
 
-    def build(self) -> RotaryDelta | LinearDelta:
-        """The kinematics object these settings describe."""
+    def symmetric(self) -> RotaryDelta | LinearDelta:
+        """The robot of L, l, R, r (every leg alike): the drawing, without ``legs``."""
         if self.type == "linear":
             return LinearDelta(l=self.l, R=self.R, r=self.r, incline=self.incline_rad)
         return RotaryDelta(L=self.L, l=self.l, R=self.R, r=self.r)
+
+    def build(self) -> RotaryDelta | PerLegRotaryDelta | LinearDelta:
+        """The kinematics object these settings describe: the per-leg robot of ``legs``
+        when given, else the symmetric one."""
+        robot = self.symmetric()
+        if self.legs is None or not isinstance(robot, RotaryDelta):
+            return robot
+        return PerLegRotaryDelta.from_symmetric(robot, **self.legs.values())
 
 
 class GainSettings(_Section):
@@ -168,8 +230,6 @@ def _default_joints() -> list[JointSettings]:
     return [JointSettings(servo_id=i) for i in (1, 2, 3)]
 
 
-Triple = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
-
 # per-leg fields of [hardware.sim] and the PerLegRotaryDelta field each one sets
 _TRUE_LEGS = {
     "true_upper_link_m": "L",
@@ -184,7 +244,9 @@ class SimSettings(_Section):
 
     The controller keeps ``[robot]`` and ``[[hardware.joints]]``; the twin is built from
     these (each leg its own values, leg order), so a calibration has something to find
-    (docs/calibration.md). The defaults are the exact twin.
+    (docs/calibration.md). The defaults are the exact twin of [robot]'s L, l, R, r (the
+    drawing, never ``[robot.legs]``: what a calibration believes does not change the
+    robot that was built).
     """
 
     true_joint_offsets_rad: Triple = Field(
@@ -515,8 +577,24 @@ class Settings(BaseSettings):
         return self
 
     @model_validator(mode="after")
+    def _legs_buildable(self) -> Settings:
+        if self.robot.legs is None:
+            return self
+        if self.robot.type != "rotary":
+            raise ValueError(
+                "robot.legs: per-leg geometry is for rotary Deltas "
+                f"(robot.type is {self.robot.type!r})"
+            )
+        try:
+            self.robot.build()
+        except DeltaError as exc:  # name the field: l[0] is lower_link_m's first value
+            field = {v: k for k, v in _LEGS.items()}.get(str(exc).split("[")[0])
+            raise ValueError(f"robot.legs{'.' + field if field else ''}: {exc}") from exc
+        return self
+
+    @model_validator(mode="after")
     def _twin_buildable(self) -> Settings:
-        robot = self.robot.build()
+        robot = self.robot.symmetric()  # the twin's truth is around the drawing's values
         if isinstance(robot, RotaryDelta):
             self.hardware.sim.true_robot(robot)  # raises naming the field
         return self

@@ -158,14 +158,33 @@ def save(path: str | Path, calibrations: Sequence[JointCalibration]) -> None:
     """Write the joint records into `path`, keeping every other section of the file and
     each record's other keys (a servo's ``gains``), matched by servo id."""
     path = Path(path)
-    config: dict[str, Any] = {}
-    if path.exists():
-        with open(path, "rb") as file:
-            config = tomllib.load(file)
+    write_config(path, merge_joints(read_config(path), calibrations))
+
+
+def read_config(path: str | Path) -> dict[str, Any]:
+    """The parsed TOML file at `path`; empty when there is none yet."""
+    path = Path(path)
+    if not path.exists():
+        return {}
+    with open(path, "rb") as file:
+        return tomllib.load(file)
+
+
+def merge_joints(config: dict[str, Any], calibrations: Sequence[JointCalibration]) -> dict:
+    """`config` (a parsed TOML mapping, changed in place and returned) with the joint
+    records of `calibrations` in ``[[hardware.joints]]``, each record's other keys (a
+    servo's ``gains``) kept, matched by servo id."""
     section = config.setdefault(SECTION, {})
     before = {j.get("servo_id"): j for j in section.get("joints", []) if isinstance(j, dict)}
     section["joints"] = [{**before.get(cal.servo_id, {}), **asdict(cal)} for cal in calibrations]
+    return config
+
+
+def write_config(path: str | Path, config: dict[str, Any]) -> None:
+    """Write `config` as TOML to `path`, atomically: a crash mid-write never leaves a half
+    config."""
+    path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
     with open(tmp, "wb") as file:
         tomli_w.dump(config, file)
-    tmp.replace(path)  # atomic: a crash mid-write never leaves a half config
+    tmp.replace(path)

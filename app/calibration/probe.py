@@ -380,25 +380,26 @@ at each touch of the plate."""
 
 
 def twin_probe(
-    true_robot: PerLegRotaryDelta | None,
-    nominal: PerLegRotaryDelta,
+    truth: PerLegRotaryDelta,
+    model: Callable[[], PerLegRotaryDelta],
     offsets_in_use: Callable[[], np.ndarray],
     noise_m: float = PROBE_NOISE_M,
 ) -> Touch:
     """The twin's probe: touches computed from its true model (``simulate_touches``).
 
-    true_robot: the twin's true geometry ([hardware.sim], ``SimSettings.true_robot``);
-    None for the exact twin (the nominal one). offsets_in_use: the joint offsets the
-    controller applies now [rad] (3,): it reads q = raw + a while the mechanism turns by
-    raw + o_true, so the true model in the controller's terms has offsets o_true - a.
+    truth: the twin's true geometry ([hardware.sim], ``SimSettings.true_robot``; the
+    drawing's robot for the exact twin). model: the controller's model in use now, which
+    it descends in (a geometry calibration's apply changes it). offsets_in_use: the joint
+    offsets the controller applies now [rad] (3,): it reads q = raw + a while the
+    mechanism turns by raw + o_true, so the true model in the controller's terms has
+    offsets o_true - a.
     """
-    truth = true_robot if true_robot is not None else nominal
 
     def touch(xy: np.ndarray, plate_z: float, seed: int) -> np.ndarray:
         applied = np.asarray(offsets_in_use(), dtype=float)
         offsets = np.array(truth.joint_offsets_rad) - applied
         here = truth.with_values(joint_offsets_rad=tuple(float(v) for v in offsets))
-        return simulate_touches(here, nominal, xy, plate_z, noise_m, seed)
+        return simulate_touches(here, model(), xy, plate_z, noise_m, seed)
 
     return touch
 

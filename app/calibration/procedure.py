@@ -56,11 +56,12 @@ from app.calibration.probe import (
     probe_points,
     write_touches,
 )
+from app.config import LegSettings
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
 from app.control.owner import Claim
 from app.control.state import Snapshot
-from hardware.calibration import JointCalibration, save
+from hardware.calibration import JointCalibration, merge_joints, read_config, write_config
 from hardware.encoder import RAD_PER_TICK
 from kinematics import PerLegRotaryDelta, RotaryDelta
 
@@ -104,6 +105,10 @@ class CalibrationRun:
     plate_z_m: float | None = None
     fit_plate_z: bool = False
     probe_xy: np.ndarray | None = field(default=None, repr=False)  # (poses, 2) [m]
+    # what the run is fitted against: the controller's model and joint offsets at its start
+    nominal: PerLegRotaryDelta | None = field(default=None, repr=False)
+    model_version: int = 0
+    offsets_at_start_rad: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)
     aborted: threading.Event = field(default_factory=threading.Event, repr=False)
     created_unix_s: float = field(default_factory=time.time)
 
@@ -193,13 +198,13 @@ class CalibrationManager:
         self.controller.stop_any().result(timeout=STOP_TIMEOUT_S)
 
     def nominal(self) -> PerLegRotaryDelta:
-        robot = self.controller.robot
-        if not isinstance(robot, RotaryDelta):
-            raise CalibrationError("robot.type: calibration models rotary Deltas only")
-        return PerLegRotaryDelta.from_symmetric(robot)
+        """The controller's model in use now as a per-leg one (what a run is fitted
+        against: after a geometry apply, the fitted legs)."""
+        return per_leg(self.controller.robot)
 
     def _allowed(self, joints: np.ndarray) -> np.ndarray:
-        gate, robot = self.controller.gate, self.controller.robot
+        gate = self.controller.model.gate  # one model for every check
+        robot = gate.robot
         ok = np.zeros(len(joints), dtype=bool)
         points = robot.fk(joints).points
         for k, q in enumerate(joints):
@@ -270,9 +275,11 @@ class CalibrationManager:
                 raise MotionRefused(other)
             snap = self.controller.snapshot()
             _require_motion(snap)
+            model, offsets = self.controller.model, self.controller.joint_offsets_rad
+            nominal = per_leg(model.robot)
             xy = None
             if source == "motion":
-                chosen = plan(self.nominal(), poses, parameters, allowed=self._allowed)
+                chosen = plan(nominal, poses, parameters, allowed=self._allowed)
             elif source == "probe":
                 chosen, xy = self._plan_probe(poses, parameters, plate_z_m, fit_plate_z)
             else:
@@ -291,6 +298,8 @@ class CalibrationManager:
                     fit_plate_z,
                     xy,
                 )
+                run.nominal, run.model_version = nominal, model.version
+                run.offsets_at_start_rad = offsets
                 self._runs[run_id] = run
                 self._stop.clear()
                 self._claim = claim
@@ -368,7 +377,8 @@ class CalibrationManager:
             holdout = len(run.plan.holdout_joints)
             joints, measured = np.array(run.joints), np.array(run.measured)
             write_pairs(run.folder / "pairs.csv", joints, measured, holdout)
-            result = fit(self.nominal(), joints, measured, holdout, run.parameters)
+            assert run.nominal is not None
+            result = fit(run.nominal, joints, measured, holdout, run.parameters)
             run.result = result
             from app.calibration.report import write_report  # matplotlib: only when needed
 
@@ -391,9 +401,8 @@ class CalibrationManager:
             holdout = len(run.plan.holdout_joints)
             plate = np.full(len(joints), run.plate_z_m)
             write_touches(run.folder / "touches.csv", joints, plate, holdout)
-            result = probe_fit(
-                self.nominal(), joints, plate, holdout, run.parameters, run.fit_plate_z
-            )
+            assert run.nominal is not None
+            result = probe_fit(run.nominal, joints, plate, holdout, run.parameters, run.fit_plate_z)
             run.result = result
             from app.calibration.report import write_report  # matplotlib: only when needed
 
@@ -470,38 +479,101 @@ class CalibrationManager:
 
     # ---- apply ----
     def apply(self, run_id: str, settings_joints: list[JointCalibration]) -> dict[str, Any]:
-        """Make the controller use the run's joint offsets and write them to the config file
-        when one is in use; the body says what was done.
+        """Make the controller use the run's result and write it to the config file when
+        one is in use; the body says what was done.
+
+        An ``offsets`` run: the joint offsets (added to those in use). A ``geometry`` run:
+        the offsets and each leg's fitted L, l, R, r as the controller's robot model (its
+        gate, IK, FK and everything that reads them), written as ``[robot.legs]``. Nothing
+        moves (``Controller.use_model``).
 
         Raises:
-            MotionRefused: the run is not done (refused, failed, running), it fitted
-                per-leg geometry, which the controller's symmetric model cannot use, or a
-                motion is running (409).
+            MotionRefused: the run is not done (refused, failed, running), it was fitted
+                against another model or other joint offsets than those in use now (a
+                calibration applied since), or a motion is running (409).
         """
         run = self._runs[run_id]
-        if run.state == "refused":
-            raise MotionRefused(f"run {run_id} was refused: {run.error}")
-        if run.state == "applied":
-            raise MotionRefused(f"run {run_id} is applied already")
-        if run.state != "done" or run.result is None:
-            raise MotionRefused(f"run {run_id} is {run.state}: only a done run can be applied")
-        if run.parameters != "offsets":
-            raise MotionRefused(
-                "parameters: a geometry fit cannot be applied: the controller uses the "
-                "symmetric model (one L, l, R, r); run with parameters 'offsets' to apply "
-                "joint offsets (the fitted per-leg geometry is in the report)"
-            )
-        fitted = np.array(run.result.robot.joint_offsets_rad)
-        total = self.controller.joint_offsets_rad + fitted
-        in_use = self.controller.set_joint_offsets(total).result(timeout=5.0)
-        written = None
-        if self.config_path is not None:
-            joints = offsets_into_zero_ticks(settings_joints, total)
-            save(self.config_path, joints)
-            written = str(self.config_path)
-        run.state = "applied"
+        with self._lock:  # one apply at a time: each checks what the last one left
+            if run.state == "refused":
+                raise MotionRefused(f"run {run_id} was refused: {run.error}")
+            if run.state == "applied":
+                raise MotionRefused(f"run {run_id} is applied already")
+            if run.state != "done" or run.result is None:
+                raise MotionRefused(f"run {run_id} is {run.state}: only a done run can be applied")
+            if run.source == "probe" and run.parameters == "geometry":
+                raise MotionRefused(
+                    "parameters: a probe's touch heights cannot pin the legs' geometry "
+                    "(see unobservable_combinations): its geometry is not applied; apply "
+                    "offsets from a probe run, or fit geometry with motion capture"
+                )
+            model = self.controller.model
+            in_use = self.controller.joint_offsets_rad
+            if model.version != run.model_version or not np.array_equal(
+                in_use, run.offsets_at_start_rad
+            ):
+                raise MotionRefused(
+                    f"run {run_id} was fitted against the robot model and joint offsets in "
+                    f"use when it started; a calibration applied since changed them (model "
+                    f"from {model.origin}): calibrate again"
+                )
+            fitted = run.result.robot
+            total = in_use + np.array(fitted.joint_offsets_rad)
+            robot = None
+            if run.parameters == "geometry":
+                robot = fitted.with_values(joint_offsets_rad=(0.0, 0.0, 0.0))
+                applied = self.controller.use_model(robot, total, f"calibration {run_id}")
+                applied.result(timeout=APPLY_TIMEOUT_S)
+                offsets = self.controller.joint_offsets_rad.tolist()
+            else:
+                offsets = self.controller.set_joint_offsets(total).result(timeout=5.0)
+            written = None
+            if self.config_path is not None:
+                write_calibration(self.config_path, settings_joints, total, robot)
+                written = str(self.config_path)
+            run.state = "applied"
         self._save(run)
-        return {"run_id": run_id, "joint_offsets_rad": in_use, "config_written": written}
+        return {
+            "run_id": run_id,
+            "parameters_applied": run.parameters,
+            "joint_offsets_rad": offsets,
+            "robot": self.controller.model.describe(),
+            "config_written": written,
+        }
+
+
+APPLY_TIMEOUT_S = 5.0
+
+
+def per_leg(robot: Any) -> PerLegRotaryDelta:
+    """``robot`` (the controller's model) as a per-leg one: a symmetric rotary Delta's
+    equal legs, or the per-leg robot itself.
+
+    Raises:
+        CalibrationError: for a linear Delta.
+    """
+    if isinstance(robot, PerLegRotaryDelta):
+        return robot
+    if not isinstance(robot, RotaryDelta):
+        raise CalibrationError("robot.type: calibration models rotary Deltas only")
+    return PerLegRotaryDelta.from_symmetric(robot)
+
+
+def write_calibration(
+    path: Path,
+    joints: list[JointCalibration],
+    offsets_rad: Any,
+    robot: PerLegRotaryDelta | None = None,
+) -> None:
+    """Write an applied calibration into the TOML file ``path``, keeping everything else:
+    ``offsets_rad`` [rad] (3,) as the joints' new zero offsets (``offsets_into_zero_ticks``
+    of ``joints``, the records the server started with) and, for a geometry fit, ``robot``'s
+    legs as ``[robot.legs]`` (app/config.py ``LegSettings``), read back at start. One
+    atomic write: the file never holds the offsets of one fit and the legs of another."""
+    config = merge_joints(read_config(path), offsets_into_zero_ticks(joints, offsets_rad))
+    if robot is not None:
+        section = config.setdefault("robot", {})
+        section["legs"] = {k: list(v) for k, v in LegSettings.of(robot).model_dump().items()}
+    write_config(path, config)
 
 
 def _judge(run: CalibrationRun, result: FitResult) -> None:

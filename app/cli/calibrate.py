@@ -12,9 +12,10 @@ touch heights alone, saying which parameter combinations heights cannot pin
 (--fit-plate-z also fits an error of the stated height). The simulated robot has a probe.
 
 --write CONFIG saves the fitted joint offsets as new zero offsets in the config's
-[[hardware.joints]] (with --url the server's controller uses them at once too, through
-POST /api/calibration/{run_id}/apply). A fit worse than the current model on the held-out
-poses is never written, nor a per-leg geometry fit (the config's robot is symmetric).
+[[hardware.joints]] and, for --parameters geometry, each leg's fitted L, l, R, r as its
+[robot.legs] (with --url the server's controller uses them at once too, through POST
+/api/calibration/{run_id}/apply). A fit worse than the current model on the held-out
+poses is never written.
 """
 
 from __future__ import annotations
@@ -130,22 +131,14 @@ def format_result(body: dict[str, Any]) -> str:
 def _offline(args: argparse.Namespace) -> int:
     from app.calibration.fit import CalibrationError, fit
     from app.calibration.pairs import read_pairs
+    from app.calibration.procedure import per_leg
     from app.config import ConfigError, load_settings
-    from kinematics import PerLegRotaryDelta, RotaryDelta
 
     try:
-        settings = load_settings(args.config)
-        robot = settings.robot.build()
-        if not isinstance(robot, RotaryDelta):
-            raise CalibrationError("robot.type: calibration models rotary Deltas only")
+        settings = load_settings(args.config)  # with [robot.legs]: a fit from those legs
+        nominal = per_leg(settings.robot.build())
         pairs = read_pairs(args.from_csv)
-        result = fit(
-            PerLegRotaryDelta.from_symmetric(robot),
-            pairs.joints,
-            pairs.measured,
-            pairs.holdout,
-            args.parameters,
-        )
+        result = fit(nominal, pairs.joints, pairs.measured, pairs.holdout, args.parameters)
     except (ConfigError, CalibrationError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -169,7 +162,8 @@ def _offline(args: argparse.Namespace) -> int:
     }
     code = _show(body, args.json)
     if code == 0 and args.write:
-        code = _write(args.write, args.parameters, body["parameters"]["joint_offsets_rad"])
+        robot = result.robot if args.parameters == "geometry" else None
+        code = _write(args.write, body["parameters"]["joint_offsets_rad"], robot)
     return code
 
 
@@ -178,27 +172,21 @@ def _show(body: dict[str, Any], as_json: bool) -> int:
     return 0 if body["state"] in ("done", "applied") else 1
 
 
-def _write(config: str, parameters: str, offsets_rad: list[float]) -> int:
-    """Save ``offsets_rad`` into CONFIG's joint zero offsets (relative to what it holds)."""
-    from app.calibration.procedure import offsets_into_zero_ticks
+def _write(config: str, offsets_rad: list[float], robot: Any = None) -> int:
+    """Save ``offsets_rad`` into CONFIG's joint zero offsets (relative to what it holds)
+    and, for a geometry fit, ``robot``'s legs (a PerLegRotaryDelta) as [robot.legs]."""
+    from app.calibration.procedure import write_calibration
     from app.config import ConfigError, load_settings
-    from app.server.backends import _calibrations
-    from hardware.calibration import save
 
-    if parameters != "offsets":
-        print(
-            "error: --write: a geometry fit is not written (the config's robot is symmetric); "
-            "calibrate with --parameters offsets to save joint offsets",
-            file=sys.stderr,
-        )
-        return 2
     try:
         settings = load_settings(config if Path(config).exists() else None)
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    save(config, offsets_into_zero_ticks(list(_calibrations(settings)), offsets_rad))
-    print(f"joint zero offsets written to {config}", file=sys.stderr)
+    joints = [joint.calibration() for joint in settings.hardware.joints]
+    write_calibration(Path(config), joints, offsets_rad, robot)
+    what = "joint zero offsets" + (" and [robot.legs]" if robot is not None else "")
+    print(f"{what} written to {config}", file=sys.stderr)
     return 0
 
 
@@ -253,10 +241,18 @@ def _remote(args: argparse.Namespace) -> int:
 def _apply(url: str, run_id: str, headers: dict[str, str], args: argparse.Namespace) -> int:
     """POST apply; the server writes its own config when it has one, else we write --write."""
     from app.cli import run as cli_run
+    from kinematics import PerLegRotaryDelta
 
     body = cli_run._http(f"{url}/api/calibration/{run_id}/apply", "POST", None, headers)
     print(f"applied: the controller uses joint offsets {body['joint_offsets_rad']} rad")
+    model = body.get("robot") or {}
+    if model.get("kind") == "per-leg":
+        print(f"applied: the controller's robot has per-leg geometry ({model['origin']})")
     if body.get("config_written"):
         print(f"the server wrote {body['config_written']}", file=sys.stderr)
         return 0
-    return _write(args.write, args.parameters, body["joint_offsets_rad"])
+    robot = None
+    if args.parameters == "geometry":
+        legs = {name: model[f"{name}_m"] for name in ("L", "l", "R", "r")}
+        robot = PerLegRotaryDelta(**legs, angles_rad=model["angles_rad"])
+    return _write(args.write, body["joint_offsets_rad"], robot)

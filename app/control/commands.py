@@ -21,11 +21,11 @@ from app.config import Settings
 from app.control.errors import GoalRejected, MotionRefused
 from app.control.gate import Gate
 from app.control.loop_state import LoopState
+from app.control.model import Robot, RobotModel
 from app.control.sources import GoalSource, JogSource, Limits, MoveSource, WristAxis
 from app.control.state import Fault
 from hardware.bus import ServoBus
 from hardware.errors import BusError
-from kinematics import LinearDelta, RotaryDelta
 
 log = logging.getLogger(__name__)
 MAX_FAULT_CAUSES = 20  # distinct causes kept in the fault list; older ones are dropped
@@ -33,7 +33,9 @@ MAX_FAULT_CAUSES = 20  # distinct causes kept in the fault list; older ones are 
 
 @dataclass(frozen=True)
 class CommandContext:
-    """What commands read and never change: the robot, its gate and the configured limits.
+    """What commands read and never change: the robot model (its gate) and the configured
+    limits. The controller replaces the whole context when a calibration changes the model
+    (app/control/model.py); a command reads the one it was handed.
 
     jog_limits: per-axis Cartesian limits of jogs and Cartesian moves [m/s, m/s^2, m/s^3];
     joint_speed_rad_s: the joint speed limit that joint-space moves are scaled from;
@@ -45,8 +47,7 @@ class CommandContext:
         (None: no wrist).
     """
 
-    robot: RotaryDelta | LinearDelta
-    gate: Gate
+    model: RobotModel
     servo_ids: tuple[int, ...]
     period_s: float
     jog_limits: Limits
@@ -55,6 +56,16 @@ class CommandContext:
     hold_timeout_s: float = 0.15
     torque_on_slack_rad: float = 0.2
     wrist_limits: Limits | None = None
+
+    @property
+    def robot(self) -> Robot:
+        """The robot's kinematics (the model's)."""
+        return self.model.robot
+
+    @property
+    def gate(self) -> Gate:
+        """The gate every goal passes (the model's)."""
+        return self.model.gate
 
     @classmethod
     def from_settings(cls, settings: Settings) -> CommandContext:
@@ -74,8 +85,7 @@ class CommandContext:
         )
         jog = settings.jog
         return cls(
-            robot,
-            gate,
+            RobotModel(gate),
             tuple(j.servo_id for j in joints),
             period_s,
             Limits(jog.max_velocity_m_s, jog.max_acceleration_m_s2, jog.max_jerk_m_s3),

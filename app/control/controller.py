@@ -28,9 +28,11 @@ from app.config import Settings
 from app.control import commands, held_jog
 from app.control.commands import CommandContext, record_fault
 from app.control.errors import GoalRejected, MotionRefused
+from app.control.gate import Gate
 from app.control.gravity import GravityOffset, gravity_offset, loop_stiffness_nm_rad
 from app.control.joint_offsets import OffsetBus, set_offsets
 from app.control.loop_state import LoopState
+from app.control.model import Robot, RobotModel, dynamics_robot
 from app.control.owner import MotionOwner
 from app.control.safety import servo_faults
 from app.control.sources import GoalSource, Setpoint
@@ -75,9 +77,9 @@ class Controller:
         tick_clock: TickClock | None = None,
     ) -> None:
         self.settings = settings
-        self.ctx = CommandContext.from_settings(settings)
-        self.robot, self.gate = self.ctx.robot, self.ctx.gate
-        self.servo_ids, self.period_s = self.ctx.servo_ids, self.ctx.period_s
+        # the robot model and the limits; replaced whole by use_model (app/control/model.py)
+        self._ctx = CommandContext.from_settings(settings)
+        self.servo_ids, self.period_s = self._ctx.servo_ids, self._ctx.period_s
         self.bus, self.backend = bus, backend
         # with a wrist the loop drives the legs through WristBus, the wrist riding along in
         # the same sync read and write (app/control/wrist.py); ``bus`` stays the whole bus
@@ -89,7 +91,9 @@ class Controller:
         self.gravity: GravityOffset | None = None
         if settings.control.gravity_compensation:
             self.gravity = gravity_offset(
-                self.robot, settings.control.payload_kg, wrist=settings.wrist.enabled
+                dynamics_robot(self.robot),
+                settings.control.payload_kg,
+                wrist=settings.wrist.enabled,
             )
         # joint positions read and goals written through calibration's joint offsets
         self.joint_bus = OffsetBus(self.servos)
@@ -160,6 +164,39 @@ class Controller:
                 return f"torque off at exit failed: {exc}"
         return None
 
+    # ---- the robot model: one owner, read when used (app/control/model.py) ----
+    @property
+    def ctx(self) -> CommandContext:
+        """What commands read: the model in use and the limits (replaced, never changed)."""
+        return self._ctx
+
+    @property
+    def model(self) -> RobotModel:
+        """The robot model in use: its gate, robot, version and origin. Read it once where
+        the robot and the gate must agree."""
+        return self._ctx.model
+
+    @property
+    def robot(self) -> Robot:
+        """The robot's kinematics in use (the model's)."""
+        return self._ctx.model.robot
+
+    @property
+    def gate(self) -> Gate:
+        """The gate in use (the model's): every goal passes it."""
+        return self._ctx.model.gate
+
+    def _checked(self, model: RobotModel) -> CommandContext:
+        """The context, in the control thread, if ``model`` (what a goal was checked
+        against, in the caller's thread) is still the one in use; else MotionRefused."""
+        ctx = self._ctx
+        if ctx.model is not model:
+            raise MotionRefused(
+                f"the robot model changed since this was checked ({ctx.model.origin} in "
+                f"use now): send it again"
+            )
+        return ctx
+
     @property
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
@@ -196,10 +233,13 @@ class Controller:
     def set_goal(self, point: Any, phi_rad: float = 0.0) -> Future:
         """Jog target: the tool tip [m] at wrist angle ``phi_rad`` [rad], checked strictly
         (a tip whose platform point is outside the workspace is refused with the nearest)."""
-        phi = self.gate.check_phi(phi_rad)
-        goal = self.gate.check_point(point, phi)
-        self.gate.solve(goal, self._near_measured(), phi)
-        return self.submit_motion(lambda: commands.jog_to(self.state, self.ctx, goal, phi_rad=phi))
+        model = self.model
+        phi = model.gate.check_phi(phi_rad)
+        goal = model.gate.check_point(point, phi)
+        model.gate.solve(goal, self._near_measured(), phi)
+        return self.submit_motion(
+            lambda: commands.jog_to(self.state, self._checked(model), goal, phi_rad=phi)
+        )
 
     def jog(self, delta_m: Any, speed_m_s: float | None = None) -> Future:
         """Relative jog step [m] from what the loop commands when the step runs (not from a
@@ -233,24 +273,36 @@ class Controller:
     ) -> Future:
         """Smooth move-to a tip [m] at ``phi_rad`` (Cartesian or joint-space path) or to
         joint angles."""
+        model = self.model
         target, joint_space = commands.check_move(
-            self.gate, point, joints, joint_space, self._near_measured(), phi_rad
+            model.gate, point, joints, joint_space, self._near_measured(), phi_rad
         )
         phi = float(phi_rad)  # checked by check_move
         return self.submit_motion(
-            lambda: commands.move(self.state, self.ctx, target, duration_s, joint_space, phi)
+            lambda: commands.move(
+                self.state, self._checked(model), target, duration_s, joint_space, phi
+            )
         )
 
     def run_source(
-        self, source: GoalSource, expected_start_m: np.ndarray, tolerance_m: float = 2e-3
+        self,
+        source: GoalSource,
+        expected_start_m: np.ndarray,
+        tolerance_m: float = 2e-3,
+        model: RobotModel | None = None,
     ) -> Future:
         """Hand the loop a planned source that starts at ``expected_start_m`` [m].
 
-        The plan was checked from that point; if the robot has moved since, it is refused.
+        The plan was checked from that point, against ``model`` (None: the one in use when
+        it starts); if the robot has moved since, or another model is in use, it is refused.
         """
-        return self.submit_motion(
-            lambda: commands.run_source(self.state, source, expected_start_m, tolerance_m)
-        )
+
+        def start() -> str:
+            if model is not None:
+                self._checked(model)
+            return commands.run_source(self.state, source, expected_start_m, tolerance_m)
+
+        return self.submit_motion(start)
 
     def stop_source(self, source: GoalSource) -> Future:
         """Stop ``source`` if it is still the active one; the robot holds where it is."""
@@ -322,20 +374,61 @@ class Controller:
     def set_joint_offsets(self, offsets_rad: Any) -> Future:
         """Joint offsets [rad] (3,) from calibration, added to every joint read from now on
         (app/control/joint_offsets.py); refused while a motion runs."""
-
-        def tip_commanded(platform: np.ndarray) -> np.ndarray:
-            state = self.state
-            phi = state.phi_rad if state.phi_commanded_rad is None else state.phi_commanded_rad
-            return self.gate.tip(platform, phi)
-
-        def tip_measured(platform: np.ndarray) -> np.ndarray:
-            return self.gate.tip(platform, self._phi_measured())
-
         return self.submit_motion(
             lambda: set_offsets(
-                self.state, self.robot, self.joint_bus, offsets_rad, tip_measured, tip_commanded
+                self.state,
+                self.robot,
+                self.joint_bus,
+                offsets_rad,
+                self._tip_measured,
+                self._tip_commanded,
             )
         )
+
+    def use_model(self, robot: Robot, offsets_rad: Any, origin: str) -> Future:
+        """The robot's kinematics from now on (a geometry calibration's apply), with joint
+        offsets ``offsets_rad`` [rad] (3,) in place of those in use. The Future holds the
+        RobotModel now in use.
+
+        Nothing moves: the servos keep their goal ticks, and what the loop read and
+        commanded is recomputed in the new model (joints shifted by the offsets' change,
+        points by the new FK), so the held goal is the new model's point of the same
+        joints. The next motion starts from the measured position. Refused while a motion
+        runs, or a procedure holds the robot (MotionRefused in the Future, nothing changed).
+        The new gate is built here, in the caller's thread: its first workspace projection
+        takes tens to hundreds of ms, which the tick must not wait for.
+        """
+        current = self.model
+        new = current.replaced(robot, origin)
+        offsets = np.array(offsets_rad, dtype=np.float64)
+
+        def swap() -> RobotModel:
+            if self._ctx.model is not current:
+                raise MotionRefused(
+                    f"the robot model changed meanwhile ({self._ctx.model.origin}): apply again"
+                )
+            # the offsets first (refused while a motion runs, before anything changes),
+            # with the new robot's FK for what the loop read and commands
+            set_offsets(
+                self.state, robot, self.joint_bus, offsets, self._tip_measured, self._tip_commanded
+            )
+            self._ctx = dataclasses.replace(self._ctx, model=new)
+            if self.gravity is not None:
+                self.gravity = dataclasses.replace(self.gravity, robot=dynamics_robot(robot))
+            self.state.notice = f"robot model from {origin}; " + (self.state.notice or "")
+            return new
+
+        return self.submit_motion(swap)
+
+    def _tip_commanded(self, platform: np.ndarray) -> np.ndarray:
+        """The tool tip [m] of a platform point at the commanded wrist angle."""
+        state = self.state
+        phi = state.phi_rad if state.phi_commanded_rad is None else state.phi_commanded_rad
+        return self.gate.tip(platform, phi)
+
+    def _tip_measured(self, platform: np.ndarray) -> np.ndarray:
+        """The tool tip [m] of a platform point at the measured wrist angle."""
+        return self.gate.tip(platform, self._phi_measured())
 
     def set_gains(self, gains: dict[int, PositionGains]) -> Future:
         """Position gains per leg servo id (app/tuning), written to the servos in the

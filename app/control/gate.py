@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from app.control.errors import GoalRejected
-from kinematics import DeltaError, LinearDelta, RotaryDelta, Tool
+from kinematics import DeltaError, LinearDelta, PerLegRotaryDelta, RotaryDelta, Tool
 
 FAR_M = 10.0  # goals beyond this are scaled back before projecting (still refused)
 
@@ -38,12 +38,14 @@ class Gate:
     wrist_min_rad / wrist_max_rad: the wrist's limits [rad] (None: no wrist, phi stays 0);
     wrist_max_step_rad: largest wrist change per tick [rad] (its speed * period).
     tool: the tool whose tip the goals are (the platform centre by default).
+    robot: a symmetric rotary or linear Delta, or a rotary one whose legs each have their
+    own geometry (a geometry calibration's, app/control/model.py).
 
     Points in and out are tool tips (3,) [m] in the base frame, at wrist angle ``phi``
     [rad] (0 without a wrist); the workspace, ceiling and IK apply to the platform centre.
     """
 
-    robot: RotaryDelta | LinearDelta
+    robot: RotaryDelta | PerLegRotaryDelta | LinearDelta
     joint_min_rad: tuple[float, float, float]
     joint_max_rad: tuple[float, float, float]
     margin_m: float

@@ -19,6 +19,7 @@ import numpy as np
 
 from app.control.errors import MotionRefused
 from app.control.loop_state import LoopState
+from app.control.sources import JogSource
 from hardware.bus import JointState, ServoBus
 
 
@@ -55,7 +56,9 @@ def set_offsets(
 ) -> list[float]:
     """Use ``offsets_rad`` (3,) [rad] from now on (control thread), holding the arm where it
     is: what the loop read and commanded is shifted by the change, so the goal written to
-    the servos stays the same ticks. Refused while a motion runs (MotionRefused).
+    the servos stays the same ticks. Refused while a motion runs or the arm still settles
+    onto a move's goal (MotionRefused); a jog that has arrived at its goal (not held) only
+    holds it, so it ends here and the servos hold the same goal.
     ``tip_measured`` / ``tip_commanded``: the tool tip [m] of a platform point (3,) at the
     measured / commanded wrist angle (the platform itself without a tool): the loop's points
     and goal are tips.
@@ -65,10 +68,22 @@ def set_offsets(
     new = np.asarray(offsets_rad, dtype=np.float64)
     if new.shape != (3,) or not np.isfinite(new).all():
         raise ValueError(f"joint_offsets_rad: expected 3 finite numbers, got {offsets_rad!r}")
-    if state.source is not None:
+    arrived = (
+        isinstance(state.source, JogSource)
+        and state.source.at_rest
+        and state.hold_velocity_m_s is None  # a held jog's next heartbeat moves it again
+    )
+    if state.source is not None and not arrived:
         raise MotionRefused(
             f"a {state.source.name} is running: joint offsets change only while the arm rests"
         )
+    if state.settle_rad is not None:  # a finished move's last steps, at the speed limit
+        raise MotionRefused(
+            "the arm is still settling onto its last goal: joint offsets change only while "
+            "the arm rests"
+        )
+    if arrived:  # a jog at its goal only holds it: it ends, the servos hold the same goal
+        state.source = None
     delta = new - bus.offsets_rad
     bus.offsets_rad = new
     if state.joints is not None:

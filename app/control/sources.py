@@ -117,6 +117,9 @@ class WristAxis:
     limits: Limits
 
 
+AT_REST = 1e-9  # a jog this close to its target, this slow, has arrived [m, m/s, m/s^2]
+
+
 class JogSource:
     """Follows an operator target along a jerk-limited path recomputed every tick.
 
@@ -144,6 +147,15 @@ class JogSource:
     @property
     def braking(self) -> bool:
         return self._inp.control_interface == ControlInterface.Velocity
+
+    @property
+    def at_rest(self) -> bool:
+        """The jog has arrived: at its target, not braking, with no speed or acceleration
+        left (it only holds the point from now on); to ruckig's rounding, 1e-9 in SI."""
+        inp = self._inp
+        off = np.subtract(inp.current_position, inp.target_position)
+        motion = np.concatenate([off, inp.current_velocity, inp.current_acceleration])
+        return not self.braking and bool(np.all(np.abs(motion) < AT_REST))
 
     @property
     def aim_m(self) -> np.ndarray:

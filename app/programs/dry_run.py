@@ -9,8 +9,10 @@ tick the error is the goal minus the forward kinematics of the encoder angles th
 reports, as a run's log records it (thesis Table 6.1: goal - FK), so the prediction is
 comparable with the run's own per-line figures (``stats.program.lines``).
 
-The twin is the server's simulated robot (``backend = "sim"``) with this config's design
-and calibrations; it predicts what the model knows (servo lag, gravity, the links'
+The twin is the server's simulated robot (``backend = "sim"``) with this config's
+calibrations, built exactly as the controller's model (the gate's robot: a geometry
+calibration's per-leg one once applied) believes the robot is; it predicts what the model
+knows (servo lag, gravity, the links'
 inertia), not a real robot's friction or backlash. A program that turns the wrist (A
 words) plays its legs at the planned phi, the wrist taken to follow its plan exactly (the
 twin here has the three legs; the tip is measured at the planned phi).
@@ -30,9 +32,10 @@ import numpy as np
 from app.config import Settings
 from app.control.commands import CommandContext
 from app.control.errors import GoalRejected
+from app.control.gate import Gate
 from app.programs.check import CheckedProgram
 from hardware.sim import SimBus, SimBusConfig, TwinConfig
-from kinematics import RotaryDelta
+from kinematics import PerLegRotaryDelta, RotaryDelta
 
 SETTLE_S = 0.5  # the arm held at the start first, as a robot holding before a run is
 
@@ -83,16 +86,26 @@ def line_errors(lines: np.ndarray, error: np.ndarray) -> list[LineError]:
     return out
 
 
-def _bus(settings: Settings) -> SimBus:
-    robot = settings.robot.build()
-    if not isinstance(robot, RotaryDelta):
+def _bus(settings: Settings, robot: Any) -> SimBus:
+    """A headless twin built as ``robot`` (the controller's model) is."""
+    if isinstance(robot, PerLegRotaryDelta):
+        twin_robot, true_robot = robot.nominal(), robot
+    elif isinstance(robot, RotaryDelta):
+        twin_robot, true_robot = robot, None
+    else:
         raise DryRunRefused("robot.type: the twin models rotary Deltas only")
     joints = tuple(j.calibration() for j in settings.hardware.joints)
-    twin = TwinConfig(robot=robot, joints=joints)
+    twin = TwinConfig(robot=twin_robot, joints=joints, true_robot=true_robot)
     return SimBus(SimBusConfig(twin=twin, realtime=False, torque_on_at_start=True))
 
 
-def dry_run(checked: CheckedProgram, settings: Settings, *, feedforward: bool = False) -> DryRun:
+def dry_run(
+    checked: CheckedProgram,
+    settings: Settings,
+    *,
+    feedforward: bool = False,
+    gate: Gate | None = None,
+) -> DryRun:
     """Play ``checked``'s path on a headless twin and predict its tracking error.
 
     Args:
@@ -101,6 +114,7 @@ def dry_run(checked: CheckedProgram, settings: Settings, *, feedforward: bool = 
         settings: the robot, calibrations, loop rate and limits (the server's).
         feedforward: command the point ``[runs] feedforward_lead_s`` ahead, as a run with
             feed-forward does (the error is still goal - FK).
+        gate: the limits and robot model in force (the controller's; None: the config's).
 
     Returns:
         DryRun: the error per line (only lines with motion or a dwell: the samples spent
@@ -118,8 +132,9 @@ def dry_run(checked: CheckedProgram, settings: Settings, *, feedforward: bool = 
             f"{limit_s:g} s (programs.dry_run_max_s); check it without the dry run"
         )
     ctx = CommandContext.from_settings(settings)
-    robot, gate, period_s = ctx.robot, ctx.gate, ctx.period_s
-    bus = _bus(settings)
+    gate = gate or ctx.gate
+    robot, period_s = gate.robot, ctx.period_s
+    bus = _bus(settings, robot)
     if not path.segments:  # nothing moves
         return DryRun(report.ok, 0.0, [], [0.0, 0.0, 0.0], 0.0)
     # the loop's ticks after the start: tick k plays t = k dt (TrajectorySource.next)

@@ -34,6 +34,7 @@ import numpy as np
 
 from app.control.branch import follow_branch
 from app.control.gate import Gate
+from app.control.model import dynamics_robot
 from kinematics import RotaryDelta
 from kinematics.dynamics import MassModel, inverse_dynamics_joints
 from kinematics.sizing import RPM_PER_RAD_S, Servo
@@ -274,12 +275,15 @@ def verify_path(
     )
 
     worst_ratio: float | None = None
-    if limits.servo is not None and limits.mass is not None and isinstance(robot, RotaryDelta):
+    dynamics = dynamics_robot(robot)  # a per-leg robot's torques: its legs' mean (model.py)
+    if limits.servo is not None and limits.mass is not None and isinstance(dynamics, RotaryDelta):
         ratio = np.zeros(len(p))
         torque = np.zeros_like(p)
         if good.size:
             with np.errstate(all="ignore"):
-                tau = inverse_dynamics_joints(robot, limits.mass, joints[good], qd[good], qdd[good])
+                tau = inverse_dynamics_joints(
+                    dynamics, limits.mass, joints[good], qd[good], qdd[good]
+                )
                 available = limits.servo.torque_at(np.abs(qd[good]) * RPM_PER_RAD_S)
                 r = np.abs(tau) / available
             r = np.nan_to_num(r, nan=np.inf, posinf=np.inf)

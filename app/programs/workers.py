@@ -112,7 +112,7 @@ def run_dry_run(job: CheckJob, feedforward: bool) -> tuple[CheckedProgram, DryRu
     """The check, then the dry run on the worker's own headless twin (raises
     ProgramError or DryRunRefused)."""
     checked = run_check(job)
-    return checked, dry_run(checked, job.settings, feedforward=feedforward)
+    return checked, dry_run(checked, job.settings, feedforward=feedforward, gate=job.gate)
 
 
 def _start_worker(settings: Settings) -> None:

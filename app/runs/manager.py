@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.control.errors import GoalRejected, MotionRefused
+from app.control.model import RobotModel
 from app.control.sources import Progressing
 from app.runs.feasibility import check_path
 from app.runs.logs import RunLog
@@ -45,6 +46,7 @@ class PreparedRun:
     lead_s: float
     source: TrajectorySource
     start_m: np.ndarray
+    model: RobotModel | None = None  # what it was checked against (refused under another)
 
 
 class RunManager:
@@ -95,8 +97,10 @@ class RunManager:
     def get(self, run_id: str) -> Run | None:
         return self._runs.get(run_id)
 
-    def plan(self, params: TimedPath):
-        """(plan, start point, start joints) from where the robot is; GoalRejected if infeasible."""
+    def plan(self, params: TimedPath, model: RobotModel | None = None):
+        """(plan, start point) from where the robot is, checked against ``model`` (None: the
+        controller's model in use); GoalRejected if infeasible."""
+        model = model or self.controller.model
         snap = self.controller.snapshot()
         # the command is the robot's point only while it holds it (torque on, no stop); a
         # relaxed or stopped arm is where it is measured (it starts from there: resync)
@@ -120,7 +124,7 @@ class RunManager:
             )
         times, points = plan.sample(period_s)
         phi = self._check_wrist(plan, times)
-        check_path(self.controller.gate, times, points, snap.joints_measured_rad, phi)
+        check_path(model.gate, times, points, snap.joints_measured_rad, phi)
         return plan, start
 
     def _check_wrist(self, plan, times: np.ndarray) -> np.ndarray | None:
@@ -162,17 +166,24 @@ class RunManager:
         return self.launch(self.prepare(params, kind, record))
 
     def prepare(
-        self, params: TimedPath, kind: str, record: dict[str, Any] | None = None
+        self,
+        params: TimedPath,
+        kind: str,
+        record: dict[str, Any] | None = None,
+        model: RobotModel | None = None,
     ) -> PreparedRun:
         """Plan and check a run from where the robot is now; nothing moves. The slow half of
         :meth:`start`, so a caller can decide, after it, whether the run is still wanted.
         ``record``: the parameters saved in run.json (default: the path's own fields, for
-        the dataclass paths; a G-code program saves its text instead)."""
+        the dataclass paths; a G-code program saves its text instead). ``model``: the
+        robot model the run was checked against (a program's check, in a worker; None:
+        the one in use now); the run is refused if another is in use when it starts."""
         self._refuse_if_busy()
-        plan, start = self.plan(params)
+        model = model or self.controller.model
+        plan, start = self.plan(params, model)
         lead = self.controller.settings.runs.feedforward_lead_s if params.feedforward else 0.0
         saved = asdict(params) if record is None else record  # type: ignore[call-overload]
-        return PreparedRun(kind, saved, lead, TrajectorySource(plan, lead), start)
+        return PreparedRun(kind, saved, lead, TrajectorySource(plan, lead), start, model)
 
     def launch(self, prepared: PreparedRun) -> Run:
         """Start and record a prepared run. The loop refuses it if the robot has left the
@@ -180,14 +191,17 @@ class RunManager:
         with self._lock:
             self._refuse_if_busy()
             p = prepared
-            return self._launch(p.kind, p.params, p.lead_s, p.source, p.start_m)
+            return self._launch(p.kind, p.params, p.lead_s, p.source, p.start_m, p.model)
 
-    def start_source(self, kind: str, params: dict[str, Any], source: Any) -> Run:
+    def start_source(
+        self, kind: str, params: dict[str, Any], source: Any, model: RobotModel | None = None
+    ) -> Run:
         """Record a run of a ready-made source that starts smoothly from wherever the robot
-        is (e.g. hold-in-world, which blends in), so no start point is checked."""
+        is (e.g. hold-in-world, which blends in), so no start point is checked; refused if
+        ``model`` (what the source was built on; None: not checked) is no longer in use."""
         with self._lock:
             self._refuse_if_busy()
-            return self._launch(kind, params, 0.0, source, None)
+            return self._launch(kind, params, 0.0, source, None, model)
 
     def busy(self) -> str | None:
         """Why another motion may not start now (a run in progress), or None."""
@@ -203,7 +217,13 @@ class RunManager:
             raise MotionRefused(f"run {self._active[0].run_id} is in progress; abort it first")
 
     def _launch(
-        self, kind: str, params: dict[str, Any], lead: float, source: Any, start: np.ndarray
+        self,
+        kind: str,
+        params: dict[str, Any],
+        lead: float,
+        source: Any,
+        start: np.ndarray | None,
+        model: RobotModel | None = None,
     ) -> Run:
         run = self._new_run(kind, params, lead)
         metadata = {
@@ -219,7 +239,8 @@ class RunManager:
             run.write()  # the record exists from the start: a crash leaves it "running"
             tolerance = math.inf if start is None else 0.002
             expected = np.zeros(3) if start is None else start
-            self.controller.run_source(source, expected, tolerance).result(timeout=START_TIMEOUT_S)
+            started = self.controller.run_source(source, expected, tolerance, model)
+            started.result(timeout=START_TIMEOUT_S)
         except BaseException:
             self.controller.remove_listener(recorder.on_tick)
             recorder.discard()
@@ -269,6 +290,8 @@ class RunManager:
         settings = self.controller.settings
         conditions = {
             "robot": settings.robot.model_dump(),
+            # the model the loop used (a geometry calibration's legs, once applied)
+            "robot_model": self.controller.model.describe(),
             "backend": self.controller.backend,
             "loop_rate_hz": settings.loop.rate_hz,
             "feedforward_lead_s": lead_s,

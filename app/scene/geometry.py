@@ -1,6 +1,7 @@
 """Pure geometry the 3D scene draws: robot links, the legs' workspace tori, the reachable volume.
 
-No viser here: every function maps a robot (``RotaryDelta`` / ``LinearDelta``) and joint
+No viser here: every function maps a robot (``RotaryDelta``, ``PerLegRotaryDelta`` whose
+legs each have their own geometry, or ``LinearDelta``) and joint
 values to NumPy arrays in the base frame [m], so the drawing is testable against the
 kinematics. Conventions as everywhere: base frame, z up, the platform works at z < 0.
 """
@@ -12,7 +13,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from kinematics import LinearDelta, RotaryDelta
+from app.control.model import Robot, leg_values
+from kinematics import LinearDelta
 
 LEG_ANGLES_RAD = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)
 ROD_SPACING_OF_R = 0.45  # parallelogram rod spacing as a share of the platform radius r
@@ -55,10 +57,10 @@ def radial(leg: int) -> np.ndarray:
     return np.array([math.cos(a), math.sin(a), 0.0])
 
 
-def robot_lines(robot: RotaryDelta | LinearDelta, joints_rad: Any) -> RobotLines:
+def robot_lines(robot: Robot, joints_rad: Any) -> RobotLines:
     """Link segments for joints (3,) [rad or m]; NaN everywhere if FK fails."""
     hips, knees, ankles = robot.leg_points(np.asarray(joints_rad, dtype=np.float64))
-    half = 0.5 * ROD_SPACING_OF_R * max(robot.r, 0.01)
+    half = 0.5 * ROD_SPACING_OF_R * max(*leg_values(robot, "r"), 0.01)
     offsets = np.stack([tangent(i) * half for i in range(3)])[:, None, :]  # (3, 1, 3)
     upper = np.stack([hips, knees], axis=1)  # (3, 2, 3)
     rod_a = np.stack([knees + offsets[:, 0], ankles + offsets[:, 0]], axis=1)
@@ -66,13 +68,17 @@ def robot_lines(robot: RotaryDelta | LinearDelta, joints_rad: Any) -> RobotLines
     return RobotLines(upper, np.stack([rod_a, rod_b], axis=1))
 
 
-def torus_spec(robot: RotaryDelta | LinearDelta, leg: int) -> TorusSpec:
-    """Thesis Table 4.1 for leg ``leg``: centre Rbar (cos a, sin a, 0), axis, radii L and l."""
-    centre = robot.Rbar * radial(leg)
+def torus_spec(robot: Robot, leg: int) -> TorusSpec:
+    """Thesis Table 4.1 for leg ``leg``: centre Rbar (cos a, sin a, 0), axis, radii L and l
+    (each leg's own, and its own base angle a, for a per-leg robot)."""
     if isinstance(robot, LinearDelta):
         rail = np.asarray(robot._rail(leg), dtype=np.float64)
-        return TorusSpec(centre, rail, 0.0, float(robot.l))
-    return TorusSpec(centre, tangent(leg), float(robot.L), float(robot.l))
+        return TorusSpec(robot.Rbar * radial(leg), rail, 0.0, float(robot.l))
+    a = getattr(robot, "angles_rad", LEG_ANGLES_RAD)[leg]
+    Rbar = leg_values(robot, "R")[leg] - leg_values(robot, "r")[leg]
+    centre = Rbar * np.array([math.cos(a), math.sin(a), 0.0])
+    axis = np.array([-math.sin(a), math.cos(a), 0.0])
+    return TorusSpec(centre, axis, leg_values(robot, "L")[leg], leg_values(robot, "l")[leg])
 
 
 def _grid_faces(rows: int, cols: int) -> np.ndarray:
@@ -129,7 +135,7 @@ def cylinder_below(spec: TorusSpec, depth_m: float, steps: int = 48) -> tuple[np
     return vertices[used], faces.reshape(-1, 3)
 
 
-def torus_mesh(robot: RotaryDelta | LinearDelta, leg: int) -> tuple[np.ndarray, np.ndarray]:
+def torus_mesh(robot: Robot, leg: int) -> tuple[np.ndarray, np.ndarray]:
     """The lower half of leg ``leg``'s workspace boundary, vertices (V, 3) [m], faces (F, 3)."""
     spec = torus_spec(robot, leg)
     if isinstance(robot, LinearDelta):

@@ -80,7 +80,6 @@ class GoalView:
         self.access = access  # who may drag the goal (token, lease); None: anyone
         self.store = store  # where saved points are kept across restarts (None: not kept)
         self.controller = controller
-        self.gate = controller.gate
         # with a wrist the gizmo turns about z (phi, within these limits [rad]); else None
         wrist = controller.settings.wrist
         self.phi_limits = (wrist.min_angle_rad, wrist.max_angle_rad) if wrist.enabled else None
@@ -121,6 +120,12 @@ class GoalView:
         if store is not None:
             self.saved = load_points(store)
             self._draw_saved()
+
+    @property
+    def gate(self):
+        """The controller's gate in use (a calibration's apply replaces it): read, never
+        kept, so a drag is clamped by the robot model the loop uses."""
+        return self.controller.gate
 
     def _start_point(self, snap: Snapshot) -> np.ndarray:
         for point in (snap.goal_m, snap.point_commanded_m, snap.point_measured_m):

@@ -14,8 +14,9 @@ from typing import Any
 import numpy as np
 import viser
 
+from app.control.model import Robot, leg_values
 from app.scene.geometry import LEG_ANGLES_RAD, radial, robot_lines
-from kinematics import LinearDelta, RotaryDelta, Tool
+from kinematics import LinearDelta, Tool
 
 LEG_COLOURS = ((222, 76, 64), (64, 168, 90), (60, 112, 214))
 GHOST_COLOUR = (175, 180, 190)
@@ -50,7 +51,7 @@ class RobotView:
     def __init__(
         self,
         server: viser.ViserServer,
-        robot: RotaryDelta | LinearDelta,
+        robot: Robot,
         root: str = "/robot",
         ghost: bool = False,
         tool: Tool | None = None,
@@ -78,7 +79,8 @@ class RobotView:
             segment_colours(light, True),
             thickness=0.003 if ghost else 0.006,
         )
-        disc = _disc(robot.r + 0.012, corners=3 if robot.r < 0.02 else 6)
+        r = max(leg_values(robot, "r"))
+        disc = _disc(r + 0.012, corners=3 if r < 0.02 else 6)
         self.platform = scene.add_mesh_simple(
             f"{root}/platform",
             disc[0],
@@ -119,7 +121,7 @@ class RobotView:
     def _add_base(self, scene: Any) -> None:
         """Base plate and servos (rotary) or rails (linear): static, drawn once."""
         robot = self.robot
-        vertices, faces = _disc(robot.R + 0.03)
+        vertices, faces = _disc(max(leg_values(robot, "R")) + 0.03)
         self._static.append(
             scene.add_mesh_simple(
                 f"{self.root}/base",
@@ -129,10 +131,10 @@ class RobotView:
                 side="double",
             )
         )
-        if isinstance(robot, RotaryDelta):
+        if not isinstance(robot, LinearDelta):
             for i, angle in enumerate(LEG_ANGLES_RAD):
                 # The shaft sits near the case's outer end, so the case reaches inwards.
-                centre = (robot.R - 0.012) * radial(i) + [0, 0, 0.003]
+                centre = (leg_values(robot, "R")[i] - 0.012) * radial(i) + [0, 0, 0.003]
                 self._static.append(
                     scene.add_box(
                         f"{self.root}/servo_{i}",
@@ -156,6 +158,12 @@ class RobotView:
                 f"{self.root}/rails", np.asarray(rails), (90, 94, 104), thickness=0.008
             )
         )
+
+    def use_robot(self, robot: Robot) -> None:
+        """Draw the links of ``robot`` from now on (the controller's model changed: a
+        geometry calibration applied); the next update redraws the pose."""
+        self.robot = robot
+        self._joints = None
 
     def update(self, joints: Any, phi_rad: float = 0.0) -> bool:
         """Draw the pose for ``joints`` (3,) [rad or m] and, with a wrist, the wrist angle
@@ -238,6 +246,6 @@ def heading_arrow(centre: Any, phi_rad: float, length_m: float) -> np.ndarray:
     )
 
 
-def platform_centre(robot: RotaryDelta | LinearDelta, joints: Any) -> np.ndarray:
+def platform_centre(robot: Robot, joints: Any) -> np.ndarray:
     """The platform centre [m] as drawn: mean of the rods' lower ends (= FK point)."""
     return robot_lines(robot, joints).rods[:, :, 1].mean(axis=(0, 1))

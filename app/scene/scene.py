@@ -19,6 +19,7 @@ import numpy as np
 import viser
 
 from app.control.authority import Authority, is_loopback
+from app.control.model import reach_m
 from app.scene.access import SceneAccess
 from app.scene.goal_store import FILE_NAME as POINTS_FILE
 from app.scene.goal_view import GoalView
@@ -74,17 +75,13 @@ class Scene:
         """Serve the scene and start the display thread (blocks ~0.5 s while meshing)."""
         server = viser.ViserServer(host=self.host, port=self.port, label="deltadash", verbose=False)
         self.server = server
-        settings, robot = self.controller.settings, self.controller.robot
+        settings, model = self.controller.settings, self.controller.model
+        robot = model.robot
         self._frame_camera(server)
         server.scene.add_frame("/base_frame", axes_length=0.05, axes_radius=0.002)
-        tool = self.controller.gate.tool
-        self.workspace = WorkspaceView(
-            server,
-            robot,
-            settings.limits.workspace_margin_m,
-            settings.limits.z_max_m,
-            tool_offset_m=tool.offset_m,
-        )
+        tool = model.gate.tool
+        self._model_version = model.version
+        self.workspace = self._workspace_view(server, model)
         lowest = float(self.workspace.mesh.vertices[:, 2].min()) + min(tool.offset_m[2], 0.0)
         floor = lowest - 0.02
         server.scene.add_grid(
@@ -105,9 +102,30 @@ class Scene:
         self._thread = threading.Thread(target=self._run, name="deltadash-scene", daemon=True)
         self._thread.start()
 
+    def _workspace_view(self, server: viser.ViserServer, model: Any) -> WorkspaceView:
+        """The tori and reachable volume of ``model`` (the controller's robot model), with
+        the gate's margin and ceiling (meshing takes ~0.5 s)."""
+        gate = model.gate
+        return WorkspaceView(
+            server, model.robot, gate.margin_m, gate.z_max_m, tool_offset_m=gate.tool.offset_m
+        )
+
+    def _follow_model(self, server: viser.ViserServer) -> None:
+        """A calibration's apply replaced the controller's robot model: draw the links and
+        the workspace of the new one (the display thread; the volume is meshed again)."""
+        model = self.controller.model
+        if model.version == self._model_version:
+            return
+        self._model_version = model.version
+        self.robot.use_robot(model.robot)
+        self.ghost.use_robot(model.robot)
+        tori, volume = self.workspace.tori_visible, self.workspace.volume_visible
+        self.workspace.remove()
+        self.workspace = self._workspace_view(server, model)
+        self.workspace.tori_visible, self.workspace.volume_visible = tori, volume
+
     def _frame_camera(self, server: viser.ViserServer) -> None:
-        robot = self.controller.robot
-        reach = robot.R + getattr(robot, "L", 0.0) + robot.l
+        reach = reach_m(self.controller.robot)
         server.initial_camera.position = (0.75 * reach, -0.95 * reach, 0.05 * reach)
         server.initial_camera.look_at = (-0.1 * reach, 0.1 * reach, -0.45 * reach)
         server.initial_camera.up = (0.0, 0.0, 1.0)
@@ -171,6 +189,7 @@ class Scene:
         """One display frame from the controller's latest snapshot, sent as one batch."""
         snap = self.controller.snapshot()
         assert self.server is not None
+        self._follow_model(self.server)
         with self.server.atomic():
             self.robot.update(snap.joints_measured_rad, snap.phi_rad)
             commanded = np.isfinite(snap.joints_commanded_rad).all()

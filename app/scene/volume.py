@@ -12,7 +12,8 @@ from typing import NamedTuple
 import numpy as np
 from skimage.measure import marching_cubes
 
-from kinematics import LinearDelta, RotaryDelta
+from app.control.model import Robot, reach_m
+from kinematics import LinearDelta
 
 
 class VolumeMesh(NamedTuple):
@@ -23,15 +24,13 @@ class VolumeMesh(NamedTuple):
     spacing_m: float
 
 
-def floor_m(robot: RotaryDelta | LinearDelta, z_max_m: float) -> float | None:
+def floor_m(robot: Robot, z_max_m: float) -> float | None:
     """Lowest z drawn [m]: a linear Delta's volume is unbounded downwards, so cut it one
     parallelogram length below the ceiling; a rotary one closes by itself (None)."""
-    return None if isinstance(robot, RotaryDelta) else z_max_m - robot.l - robot.R
+    return z_max_m - robot.l - robot.R if isinstance(robot, LinearDelta) else None
 
 
-def volume_field(
-    robot: RotaryDelta | LinearDelta, points: np.ndarray, margin_m: float, z_max_m: float
-) -> np.ndarray:
+def volume_field(robot: Robot, points: np.ndarray, margin_m: float, z_max_m: float) -> np.ndarray:
     """<= 0 where the gate accepts a point (workspace with margin, below z_max) [m].
 
     points: (*, 3) [m]. For a linear Delta the drawn floor (see floor_m) closes it.
@@ -41,9 +40,9 @@ def volume_field(
     return field if floor is None else np.maximum(field, floor - points[..., 2])
 
 
-def _extent(robot: RotaryDelta | LinearDelta) -> float:
+def _extent(robot: Robot) -> float:
     """A length [m] beyond which nothing is reachable in x, y (and depth for rotary)."""
-    return robot.R + getattr(robot, "L", 0.0) + robot.l
+    return reach_m(robot)
 
 
 def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> tuple[np.ndarray, tuple[int, ...]]:
@@ -68,7 +67,7 @@ def _bounds(robot, margin_m: float, z_max_m: float) -> tuple[np.ndarray, np.ndar
 
 
 def reachable_volume(
-    robot: RotaryDelta | LinearDelta, margin_m: float, z_max_m: float, step_m: float = 0.006
+    robot: Robot, margin_m: float, z_max_m: float, step_m: float = 0.006
 ) -> VolumeMesh:
     """Closed surface of the accepted volume, vertices on the boundary to about step_m / 10."""
     lo, hi = _bounds(robot, margin_m, z_max_m)

@@ -3,17 +3,18 @@
 The tori are drawn as their lower halves (the platform never goes above the base, thesis
 ch. 4.1), translucent, in each leg's colour; the reachable volume is the gate's own
 workspace (margin and ceiling from the config), so what the operator sees is exactly where
-jog goals are clamped to. Both are static: built once, toggled, removed.
+jog goals are clamped to. Both are static: built once, toggled, removed (and built again
+by the scene when a calibration changes the controller's robot model).
 """
 
 from __future__ import annotations
 
 import viser
 
+from app.control.model import Robot
 from app.scene.geometry import torus_mesh
 from app.scene.robot_view import LEG_COLOURS
 from app.scene.volume import VolumeMesh, reachable_volume
-from kinematics import LinearDelta, RotaryDelta
 
 VOLUME_COLOUR = (110, 190, 230)
 
@@ -26,7 +27,7 @@ class WorkspaceView:
     def __init__(
         self,
         server: viser.ViserServer,
-        robot: RotaryDelta | LinearDelta,
+        robot: Robot,
         margin_m: float,
         z_max_m: float,
         root: str = "/workspace",

@@ -24,7 +24,7 @@ from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 
 from app.calibration.probe import Touch, twin_probe
-from app.calibration.procedure import CalibrationManager
+from app.calibration.procedure import CalibrationManager, per_leg
 from app.config import Settings
 from app.control.authority import Authority
 from app.control.controller import Controller
@@ -84,12 +84,13 @@ def begin_shutdown(app: FastAPI) -> None:
 
 def _twin_probe(settings: Settings, controller: Controller) -> Touch | None:
     """The simulated robot's probe (touches from its true model), None on real hardware."""
-    robot = controller.robot
-    if settings.hardware.backend != "sim" or not isinstance(robot, RotaryDelta):
+    drawing = settings.robot.symmetric()  # the twin is built around it (backends._twin)
+    if settings.hardware.backend != "sim" or not isinstance(drawing, RotaryDelta):
         return None
-    true_robot = settings.hardware.sim.true_robot(robot)
-    nominal = PerLegRotaryDelta.from_symmetric(robot)
-    return twin_probe(true_robot, nominal, lambda: controller.joint_offsets_rad)
+    truth = settings.hardware.sim.true_robot(drawing) or PerLegRotaryDelta.from_symmetric(drawing)
+    return twin_probe(
+        truth, lambda: per_leg(controller.robot), lambda: controller.joint_offsets_rad
+    )
 
 
 def create_app(

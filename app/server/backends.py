@@ -54,7 +54,9 @@ def _twin(settings: Settings) -> ServoBus:
     """The simulated robot (hardware/sim) for this config's rotary Delta."""
     from hardware.sim import ProcessSimBus, SimBus, SimBusConfig, TwinConfig
 
-    robot = settings.robot.build()
+    # built as drawn ([robot] L, l, R, r) or wrong on purpose ([hardware.sim]); never as a
+    # calibration believes it is ([robot.legs], the controller's model only)
+    robot = settings.robot.symmetric()
     if not isinstance(robot, RotaryDelta):
         raise ValueError("robot.type: the simulator models rotary Deltas; use backend 'emulated'")
     sim = settings.hardware.sim

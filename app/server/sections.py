@@ -23,6 +23,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from app.control.gate import FAR_M, Gate
+from app.control.model import reach_m
 
 Plane = Literal["xy", "xz", "yz"]
 AXES: dict[str, tuple[int, int, int]] = {"xy": (0, 1, 2), "xz": (0, 2, 1), "yz": (1, 2, 0)}
@@ -203,7 +204,7 @@ def extent(gate: Gate) -> tuple[np.ndarray, np.ndarray]:
     Tool tips: the platform's box moved by the tool offset; with a wrist, the box of every
     wrist angle (the platform's widened by the offset's sideways length: the tip circles the
     platform centre as the wrist turns)."""
-    reach = gate.robot.R + getattr(gate.robot, "L", 0.0) + gate.robot.l
+    reach = reach_m(gate.robot)
     top = min(gate.z_max_m, 0.0)
     offset = gate.tip(np.zeros(3))
     lower = np.array([-reach, -reach, top - 2.0 * reach]) + offset

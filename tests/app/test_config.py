@@ -87,3 +87,39 @@ def test_a_wrong_key_names_its_dotted_path(tmp_path, text, field):
 def test_a_missing_config_file_is_an_error_not_the_defaults(tmp_path):
     with pytest.raises(ConfigError, match="cannot read config"):
         load_settings(tmp_path / "absent.toml")
+
+
+def test_robot_legs_give_a_per_leg_robot_and_without_them_nothing_changes(tmp_path, monkeypatch):
+    """[robot.legs] (what a geometry calibration writes) is the controller's model; a leg
+    value left out is [robot]'s; L, l, R, r stay the drawing (``symmetric``)."""
+    from kinematics import PerLegRotaryDelta, RotaryDelta
+
+    assert type(load_settings().robot.build()) is RotaryDelta
+    path = tmp_path / "robot.toml"
+    path.write_text("[robot]\nl = 0.244\n[robot.legs]\nupper_link_m = [0.156, 0.1555, 0.1558]\n")
+    robot = load_settings(path).robot
+    assert robot.build() == PerLegRotaryDelta.from_symmetric(
+        RotaryDelta(0.1558, 0.244, 0.0844, 0.038), L=(0.156, 0.1555, 0.1558)
+    )
+    assert robot.symmetric() == RotaryDelta(0.1558, 0.244, 0.0844, 0.038)
+    monkeypatch.setenv("DELTADASH_ROBOT__LEGS__LOWER_LINK_M", "[0.2441, 0.2432, 0.2425]")
+    assert load_settings().robot.build().l == (0.2441, 0.2432, 0.2425)
+
+
+@pytest.mark.parametrize(
+    ("legs", "field"),
+    [
+        ({"lower_link_m": [0.1, 0.243, 0.243]}, "robot.legs.lower_link_m: l[0] = 0.1 m"),
+        ({"platform_radius_m": [0.03, 0.09, 0.03]}, "robot.legs.platform_radius_m: r[1]"),
+        ({"base_radius_m": [0.08, 0.08]}, "robot.legs.base_radius_m"),
+        ({"upper_link": [0.15, 0.15, 0.15]}, "robot.legs.upper_link"),
+    ],
+)
+def test_bad_robot_legs_name_the_field(legs, field):
+    with pytest.raises(ConfigError, match=field.replace("[", r"\[")):
+        load_settings(robot={"legs": legs})
+
+
+def test_robot_legs_are_for_rotary_deltas():
+    with pytest.raises(ConfigError, match="robot.legs: per-leg geometry is for rotary"):
+        load_settings(robot={"type": "linear", "legs": {"lower_link_m": [0.3, 0.3, 0.3]}})

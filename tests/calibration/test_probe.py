@@ -217,9 +217,13 @@ class _Idle:
     robot = THESIS_DELTA
 
     def __init__(self) -> None:
+        from types import SimpleNamespace
+
         from app.control.owner import MotionOwner
 
         self.owner = MotionOwner()  # nobody holds the robot
+        self.model = SimpleNamespace(robot=THESIS_DELTA, version=0)  # the config's
+        self.joint_offsets_rad = np.zeros(3)
 
     def snapshot(self):
         from types import SimpleNamespace

@@ -36,7 +36,6 @@ def _run(tmp_path, parameters: str, state: str) -> tuple[CalibrationManager, Cal
 @pytest.mark.parametrize(
     ("parameters", "state", "message"),
     [
-        ("geometry", "done", "geometry fit cannot be applied"),
         ("offsets", "refused", "refused"),
         ("offsets", "moving", "only a done run"),
         ("offsets", "failed", "only a done run"),
@@ -46,6 +45,43 @@ def _run(tmp_path, parameters: str, state: str) -> tuple[CalibrationManager, Cal
 def test_apply_refuses_with_the_reason(tmp_path, parameters, state, message) -> None:
     manager, _ = _run(tmp_path, parameters, state)
     with pytest.raises(MotionRefused, match=message):
+        manager.apply("cal-x", [])
+
+
+class InUse:
+    """A controller whose model or joint offsets are not those a run was fitted against;
+    fails the test if apply changes anything on it."""
+
+    def __init__(self, version: int, offsets_rad) -> None:
+        from types import SimpleNamespace
+
+        self.model = SimpleNamespace(version=version, origin="calibration cal-y")
+        self.joint_offsets_rad = np.array(offsets_rad, dtype=float)
+
+    def __getattr__(self, name):
+        raise AssertionError(f"apply used controller.{name} for a run it must refuse")
+
+
+@pytest.mark.parametrize("parameters", ["offsets", "geometry"])
+@pytest.mark.parametrize(("version", "offsets_rad"), [(1, (0.0, 0.0, 0.0)), (0, (0.01, 0.0, 0.0))])
+def test_apply_refuses_a_run_fitted_against_another_model(
+    tmp_path, parameters, version, offsets_rad
+) -> None:
+    """A calibration applied since the run started (another geometry, or other joint
+    offsets): the run's fit is relative to what was in use then, so it is not applied."""
+    manager, run = _run(tmp_path, parameters, "done")
+    manager.controller = InUse(version, offsets_rad)  # type: ignore[assignment]
+    with pytest.raises(MotionRefused, match="calibrate again"):
+        manager.apply("cal-x", [])
+    assert run.state == "done"
+
+
+def test_a_probe_runs_geometry_is_not_applied(tmp_path) -> None:
+    """Touch heights leave combinations of the legs unpinned (docs/calibration.md): a
+    probe run's geometry is refused, naming why."""
+    manager, run = _run(tmp_path, "geometry", "done")
+    run.source = "probe"
+    with pytest.raises(MotionRefused, match="probe's touch heights cannot pin"):
         manager.apply("cal-x", [])
 
 

@@ -32,6 +32,7 @@ def resting_manager(folder, start_m=REST_M, **runs) -> RunManager:
         period_s=ctx.period_s,
         settings=config,
         gate=ctx.gate,
+        model=ctx.model,
         owner=MotionOwner(),
     )
     return RunManager(controller, folder)  # type: ignore[arg-type]

@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from app.calibration.fit import CalibrationError
 from app.calibration.procedure import CalibrationManager, CalibrationRun
 from app.server.api.deps import CalibrationDep, ControlClient, ControllerDep, SettingsDep
-from app.server.backends import _calibrations
+from app.server.api.responses import RobotModelOut
 from app.server.errors import CONTROL, INVALID, NOT_FOUND
 
 router = APIRouter(tags=["calibration"])
@@ -125,7 +125,9 @@ class CalibrationOut(BaseModel):
 
 class CalibrationApplied(BaseModel):
     run_id: str
+    parameters_applied: str = Field(description="offsets, or geometry (offsets and legs)")
     joint_offsets_rad: list[float] = Field(description="the offsets the controller now uses")
+    robot: RobotModelOut = Field(description="the robot model the controller now uses")
     config_written: str | None = Field(description="the config file written, if one is in use")
 
 
@@ -205,12 +207,16 @@ def get_calibration_run(run_id: str, calibration: CalibrationDep) -> dict[str, A
 async def apply_calibration(
     run_id: str, calibration: CalibrationDep, settings: SettingsDep, _: ControlClient
 ) -> dict[str, Any]:
-    """The controller uses the fitted joint offsets from now on; written to the config file
-    when the server runs from one. 409 for a run not done (refused: worse on held-out
-    poses), a geometry fit (the controller's model is symmetric), or a motion running."""
+    """The controller uses the fitted joint offsets from now on and, for a geometry fit,
+    each leg's fitted L, l, R, r as its robot model (IK, FK, the gate's workspace, limits
+    and singularity margin, jogs, runs, programs, hold-in-world, the workspace views);
+    nothing moves. Written to the config file when the server runs from one (the joints'
+    zero offsets, and ``[robot.legs]`` for geometry). 409 for a run not done (refused:
+    worse on held-out poses), one fitted against a model no longer in use (a calibration
+    applied since), a motion running or another procedure holding the robot."""
     _run(calibration, run_id)
-    joints = list(_calibrations(settings))
-    return await asyncio.to_thread(calibration.apply, run_id, joints)
+    legs = [joint.calibration() for joint in settings.hardware.joints]  # not the wrist
+    return await asyncio.to_thread(calibration.apply, run_id, legs)
 
 
 @router.get(

@@ -64,9 +64,12 @@ def _viser_port(scene: Scene | None) -> int | None:
 
 
 @router.get("/api/info", response_model=InfoOut)
-def get_info(settings: SettingsDep, scene: SceneDep, estop_port: EstopPortDep) -> dict[str, Any]:
+def get_info(
+    settings: SettingsDep, scene: SceneDep, estop_port: EstopPortDep, controller: ControllerDep
+) -> dict[str, Any]:
     """Viser and e-stop ports, token requirement and the limits the page shows beside its
-    controls; the tool offset and the wrist (the page shows phi only with one)."""
+    controls; the tool offset and the wrist (the page shows phi only with one); the robot
+    model in use."""
     wrist = settings.wrist
     return {
         "viser_port": _viser_port(scene),
@@ -85,6 +88,7 @@ def get_info(settings: SettingsDep, scene: SceneDep, estop_port: EstopPortDep) -
             "min_rad": wrist.min_angle_rad if wrist.enabled else None,
             "max_rad": wrist.max_angle_rad if wrist.enabled else None,
         },
+        "robot": controller.model.describe(),
     }
 
 
@@ -97,8 +101,9 @@ def peak_joint_speed(controller: Controller, params: SinusoidParams) -> float | 
     read as hundreds of rad/s.
     """
     times = np.arange(0.0, params.duration_s, controller.period_s)
-    platform = controller.gate.platform(sinusoid_points(params, times))  # a tip's path
-    joints, ok = controller.robot.ik(platform)
+    gate = controller.gate  # read once: its robot is the one it checks
+    platform = gate.platform(sinusoid_points(params, times))  # a tip's path
+    joints, ok = gate.robot.ik(platform)
     if times.size < 2 or not ok.any():
         return None
     speed = np.abs(np.diff(joints, axis=0)) / controller.period_s

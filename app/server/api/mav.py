@@ -125,9 +125,10 @@ async def post_hold(
         raise GoalRejected("position_m: required with frame 'world'")
     provider = world.provider(DroneSimParams() if body.source == "simulated" else None)
     goal = None if body.frame == "current" else np.asarray(body.position_m)
+    model = controller.model  # the source is built on it (refused if it changes meanwhile)
     source = world.hold_source(goal, provider, body.latency_compensation, body.heading_rad)
     # the hold mode blends in from wherever the robot is: no start point to check
-    started = controller.run_source(source, np.zeros(3), tolerance_m=math.inf)
+    started = controller.run_source(source, np.zeros(3), tolerance_m=math.inf, model=model)
     await asyncio.wait_for(asyncio.wrap_future(started), 2.0)
     return Accepted(result={"goal_world_m": source.goal_world.tolist()})
 
@@ -137,8 +138,9 @@ async def post_hold_test(body: HoldTestRequest, world: WorldDep, runs: RunsDep, 
     """Hold the current tool position in the world under a simulated drifting drone, as a run
     with world-frame stats (stats.world.{x,y,z}) and the time the goal spent outside."""
     provider = world.provider(body.drone())
+    model = runs.controller.model  # the source is built on it (refused if it changes)
     source = world.hold_source(None, provider, body.latency_compensation)
     source.duration_s = body.duration_s + source.approach_s
     params = {**body.model_dump(), "drone": asdict(body.drone())}
-    run = await asyncio.to_thread(runs.start_source, "hold", params, source)
+    run = await asyncio.to_thread(runs.start_source, "hold", params, source, model)
     return {"run_id": run.run_id}

@@ -34,6 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from app.control.commands import require_motion
 from app.control.errors import MotionRefused
+from app.control.model import RobotModel
 from app.programs.check import CheckedProgram
 from app.programs.dry_run import DryRunRefused
 from app.programs.errors import ProgramError
@@ -233,11 +234,13 @@ def _unavailable(exc: WorkerError) -> JSONResponse:
 
 
 def _job(
-    body: ProgramRequest, controller, settings, from_robot: bool
+    body: ProgramRequest, controller, settings, from_robot: bool, model: RobotModel | None = None
 ) -> tuple[CheckJob, list[str]]:
     """The check's inputs from ``start_m`` or where the robot is (always there with
-    ``from_robot``: a run starts where the robot is), and the notes to add."""
+    ``from_robot``: a run starts where the robot is), and the notes to add; the gate is
+    ``model``'s (None: the robot model in use now)."""
     given = body.start_m is not None and not from_robot
+    model = model or controller.model  # before where the robot is: never newer than it
     start, near = (np.asarray(body.start_m), None) if given else _start(controller)
     notes = []
     if start is None:
@@ -247,7 +250,7 @@ def _job(
     job = CheckJob(
         body.gcode,
         settings,
-        gate=controller.gate,
+        gate=model.gate,
         start_m=start,
         work_offset_m=body.work_offset_m,
         near=near,
@@ -264,10 +267,12 @@ def _check(
     settings,
     workers: ProgramWorkers,
     from_robot: bool = False,
+    model: RobotModel | None = None,
 ) -> tuple[CheckedProgram, list[str]] | JSONResponse:
-    """The check in a worker process (blocks this thread until it answers); the 422 of
-    an unreadable program, the 503 of a check that did not come back."""
-    job, notes = _job(body, controller, settings, from_robot)
+    """The check in a worker process (blocks this thread until it answers), against
+    ``model`` (None: the one in use); the 422 of an unreadable program, the 503 of a check
+    that did not come back."""
+    job, notes = _job(body, controller, settings, from_robot, model)
     try:
         return workers.check(job), notes
     except ProgramError as exc:
@@ -337,7 +342,10 @@ async def run_program(
     controller = runs.controller
     _require_motion(controller)  # torque off, e-stop, fault: said as such, before the check
     controller.owner.check()  # a calibration or tuning holds the robot: before the check too
-    checked = await asyncio.to_thread(_check, body, controller, controller.settings, workers, True)
+    model = controller.model  # the run is refused if another is in use when it starts
+    checked = await asyncio.to_thread(
+        _check, body, controller, controller.settings, workers, True, model
+    )
     if isinstance(checked, JSONResponse):
         return checked
     program = checked[0]
@@ -380,4 +388,4 @@ async def run_program(
         "feedforward": body.feedforward,
     }
     path = replace(program.path, feedforward=body.feedforward)
-    return await start_run(request, runs, path, "program", record)
+    return await start_run(request, runs, path, "program", record, model)

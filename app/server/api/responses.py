@@ -431,6 +431,22 @@ class WristInfo(_Out):
     max_rad: float | None = Field(description="highest wrist angle [rad]; null without a wrist")
 
 
+class RobotModelOut(_Out):
+    """The robot model the controller uses (app/control/model.py): symmetric (one L, l,
+    R, r), per-leg (a geometry calibration's) or linear; each leg's lengths [m]."""
+
+    kind: str = Field(description="symmetric, per-leg or linear")
+    version: int = Field(description="0: the config's model; +1 per geometry applied since")
+    origin: str = Field(description="config, or the calibration run it came from")
+    L_m: list[float] | None = None
+    l_m: list[float] | None = None
+    R_m: list[float] | None = None
+    r_m: list[float] | None = None
+    angles_rad: list[float] | None = Field(
+        None, description="each leg's base direction about z [rad] (0, 120, 240 deg nominal)"
+    )
+
+
 class InfoOut(_Out):
     """Facts the dashboard cannot read from status."""
 
@@ -452,6 +468,10 @@ class InfoOut(_Out):
         "zeros without a tool: the tip is the platform centre)"
     )
     wrist: WristInfo
+    robot: RobotModelOut = Field(
+        description="the robot model the controller uses now (a geometry calibration's "
+        "apply changes it)"
+    )
 
 
 class WorkspaceSectionOut(_Out):

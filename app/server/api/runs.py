@@ -15,6 +15,7 @@ from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from app.control.errors import GoalRejected, MotionRefused
+from app.control.model import RobotModel
 from app.runs.describe import describe
 from app.runs.logs import MEDIA_TYPE as MCAP_MEDIA_TYPE
 from app.runs.logs import read_messages
@@ -162,13 +163,14 @@ async def start_run(
     params: TimedPath,
     kind: str,
     record: dict[str, Any] | None = None,
+    model: RobotModel | None = None,
 ) -> dict:
     """Plan and check in a worker thread (other requests go on meanwhile), then start only
     if the answer can still reach the caller: in time, and to a client still connected.
-    ``record``: the parameters saved in run.json (default: ``params``' fields)."""
+    ``record``: the parameters saved in run.json (default: ``params``' fields); ``model``:
+    the robot model a check before this one used (None: the one in use now)."""
     began = time.monotonic()
-    args = (params, kind) if record is None else (params, kind, record)
-    prepared = await asyncio.to_thread(runs.prepare, *args)
+    prepared = await asyncio.to_thread(runs.prepare, params, kind, record, model)
     took_s, limit_s = time.monotonic() - began, runs.controller.settings.runs.plan_timeout_s
     if took_s > limit_s:
         raise PlanningTimeout(

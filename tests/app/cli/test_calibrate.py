@@ -70,13 +70,36 @@ def test_write_moves_the_zero_offsets_by_the_fitted_angles(tmp_path, capsys) -> 
         assert math.isclose(new.to_rad(2000), old.to_rad(2000) + offset, abs_tol=RAD_PER_TICK)
 
 
-def test_geometry_is_not_written(tmp_path, capsys) -> None:
-    _pairs(tmp_path / "pairs.csv", noise_m=0.0)
+def test_geometry_is_written_as_the_robot_legs_and_read_back(tmp_path, capsys) -> None:
+    """A geometry fit's --write: the legs go to [robot.legs] and the offsets to the zero
+    offsets; the config read back builds the fitted robot (the true one, from exact pairs)."""
+    true = NOMINAL.with_values(
+        joint_offsets_rad=tuple(OFFSETS),
+        L=(0.1560, 0.1555, 0.1558),
+        l=(0.2440, 0.2425, 0.2430),
+        R=(0.0844, 0.0850, 0.0841),
+    )
+    chosen = plan(NOMINAL, 40, "geometry")
+    write_pairs(
+        tmp_path / "pairs.csv",
+        chosen.joints,
+        FRAME.from_base(true.fk(chosen.joints).points),
+        len(chosen.holdout_joints),
+    )
     config = tmp_path / "robot.toml"
+    config.write_text("[server]\nhttp_port = 8123\n")  # other sections must survive
+    before = _calibrations(load_settings(config))
     args = ["calibrate", "--from-csv", str(tmp_path / "pairs.csv"), "--parameters", "geometry"]
-    assert main([*args, "--write", str(config)]) == 2
-    assert "geometry fit is not written" in capsys.readouterr().err
-    assert not config.exists()
+    assert main([*args, "--write", str(config)]) == 0
+    assert "[robot.legs] written" in capsys.readouterr().err
+    settings = load_settings(config)
+    assert settings.server.http_port == 8123
+    robot = settings.robot.build()
+    assert isinstance(robot, PerLegRotaryDelta) and robot.joint_offsets_rad == (0.0, 0.0, 0.0)
+    for name in ("L", "l", "R", "r"):
+        np.testing.assert_allclose(getattr(robot, name), getattr(true, name), atol=1e-6)
+    for old, new, offset in zip(before, _calibrations(settings), OFFSETS, strict=True):
+        assert math.isclose(new.to_rad(2000), old.to_rad(2000) + offset, abs_tol=RAD_PER_TICK)
 
 
 def test_a_bad_csv_exits_2_naming_line_and_column(tmp_path, capsys) -> None:

@@ -123,3 +123,23 @@ def test_environment_settings_are_honoured(capsys, monkeypatch):
     )
     assert main(["fk", "20", "20", "20"]) == 2
     assert "joint 1 = 20.000 deg" in capsys.readouterr().err
+
+
+def test_a_config_with_robot_legs_gives_the_per_leg_ik_and_fk(tmp_path, capsys):
+    """ik and fk with a config a geometry calibration wrote ([robot.legs]) use its robot."""
+    import json
+
+    import numpy as np
+
+    from kinematics import THESIS_DELTA, PerLegRotaryDelta
+
+    legs = PerLegRotaryDelta.from_symmetric(THESIS_DELTA, l=(0.2440, 0.2425, 0.2430))
+    config = tmp_path / "robot.toml"
+    config.write_text("[robot.legs]\nlower_link_m = [0.2440, 0.2425, 0.2430]\n")
+    assert main(["ik", "0.02", "0", "-0.24", "--si", "--json", "--config", str(config)]) == 0
+    joints = json.loads(capsys.readouterr().out)["joints_rad"]
+    np.testing.assert_allclose(joints, legs.ik([0.02, 0.0, -0.24]).joints, atol=1e-12)
+    assert not np.allclose(joints, THESIS_DELTA.ik([0.02, 0.0, -0.24]).joints, atol=1e-4)
+    assert main(["fk", *map(str, joints), "--si", "--json", "--config", str(config)]) == 0
+    point = json.loads(capsys.readouterr().out)["point_m"]
+    np.testing.assert_allclose(point, [0.02, 0.0, -0.24], atol=1e-12)
