@@ -117,6 +117,10 @@ class WristAxis:
     limits: Limits
 
 
+AT_REST = 1e-9  # a jog's offset from its target [m], speed [m/s] and acceleration [m/s^2]
+# below this stands still: ruckig ends a path within rounding of its target
+
+
 class JogSource:
     """Follows an operator target along a jerk-limited path recomputed every tick.
 
@@ -144,6 +148,15 @@ class JogSource:
     @property
     def braking(self) -> bool:
         return self._inp.control_interface == ControlInterface.Velocity
+
+    @property
+    def at_rest(self) -> bool:
+        """The jog has reached its target and stands there (no speed, no acceleration, to
+        ruckig's rounding: ``AT_REST``): it holds a point, it does not move the arm."""
+        inp = self._inp
+        off = np.subtract(inp.current_position, inp.target_position)
+        motion = np.concatenate([off, inp.current_velocity, inp.current_acceleration])
+        return not self.braking and bool(np.abs(motion).max() <= AT_REST)
 
     @property
     def aim_m(self) -> np.ndarray:
