@@ -7,6 +7,7 @@ emulated bus and on the twin, whose record rises towards its goal."""
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -300,6 +301,30 @@ def step_and_check(client, servo_id: int, step_rad: float) -> dict:
 def test_a_step_on_the_emulated_bus_rises_towards_its_goal(resting):
     step_and_check(resting, 2, math.radians(3.0))
     ok_json(resting.post("/api/goal", json={"position_m": list(HOME)}))
+
+
+@pytest.mark.slow  # a step run on the emulated bus, stopped
+def test_an_estop_during_a_step_ends_it_and_its_answer_says_so(resting):
+    answers: list = []
+    body = {"step_rad": math.radians(3.0), "duration_s": 5.0}
+    asking = threading.Thread(
+        target=lambda: answers.append(resting.post("/api/servos/2/step", json=body)),
+        daemon=True,
+    )
+    asking.start()
+
+    def running() -> bool:
+        runs = ok_json(resting.get("/api/runs"))
+        return any(r["kind"] == "joint-step" and r["state"] == "running" for r in runs)
+
+    wait_for(running, "the step's run to start", seen=lambda: answers)
+    ok_json(resting.post("/api/estop"))
+    wait_for(lambda: answers, "the step's answer", 60.0)
+    answer = ok_json(answers[0])
+    assert answer["state"] == "aborted" and answer["reason"] == "e-stop", answer["reason"]
+    assert len(answer["t_s"]) == len(answer["measured_rad"])  # what it recorded until then
+    assert ok_json(resting.get(f"/api/runs/{answer['run_id']}"))["state"] == "aborted"
+    ok_json(resting.post("/api/reset"))
 
 
 @pytest.mark.slow  # the twin in its process, a step run on it
