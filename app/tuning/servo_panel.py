@@ -43,8 +43,9 @@ MIN_STEP_RAD = math.radians(0.5)  # smaller is a few encoder ticks (0.088 deg ea
 STEP_AT_S = 0.2  # the rest recorded before the step [s]
 RAMP_FRACTION = 0.9  # the goal climbs at this share of the joint speed limit
 REST_SPEED_RAD_S = 0.05  # every joint slower than this: the arm rests [rad/s]
-STALE_MS = 50.0  # no fresh read for longer: the arm's state is not known to step from [ms]
-# (one stale tick is ordinary on the twin, whose time may not advance between two reads)
+STALE_SHARE = 0.5  # no fresh read for this share of safety.stale_feedback_s (the loop's
+# fault): the arm's state is not known to step from (a few stale ticks are ordinary on a
+# loaded twin, whose time may not advance between two reads)
 REST_GOAL_M = 1e-6  # a jog this close to its goal stands at it [m]
 SETTLE_FRACTION = 0.05  # settled: within 5 % of the measured change (at least one tick)
 RISE = (0.1, 0.9)  # the rise time is from 10 % to 90 % of the measured change
@@ -80,7 +81,8 @@ def plan_joint_step(
         )
     snap = controller.snapshot()
     _require_motion(snap)
-    if snap.stale and snap.feedback_age_ms > STALE_MS:
+    stale_ms = STALE_SHARE * controller.settings.safety.stale_feedback_s * 1e3
+    if snap.stale and snap.feedback_age_ms > stale_ms:
         raise MotionRefused(
             f"the servos' state is stale (no fresh read for {snap.feedback_age_ms:.0f} ms): "
             "check the bus, then step again"

@@ -1,22 +1,24 @@
 """The servo panel's step without a robot: the joint step as a timed path (its tips give
 the joints back through IK, it climbs within the loop's joint speed limit and passes the
 gate's batch check, a step beyond a joint limit does not), and the step figures of known
-responses (a first-order lag, an underdamped second order, one that did not follow)."""
+responses (a first-order lag, an underdamped second order, one that did not follow); a step
+planned only from a fresh rest."""
 
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
 
 from app.config import load_settings
-from app.control.errors import GoalRejected
+from app.control.errors import GoalRejected, MotionRefused
 from app.control.gate import Gate
 from app.runs.feasibility import check_path
 from app.runs.paths import JointStepParams
 from app.runs.trajectories import plan_sinusoid
-from app.tuning.servo_panel import RAD_PER_TICK, step_figures
+from app.tuning.servo_panel import RAD_PER_TICK, plan_joint_step, step_figures
 from kinematics import THESIS_DELTA
 
 PERIOD_S = 0.005
@@ -134,3 +136,65 @@ def test_a_joint_that_did_not_follow_has_no_rise_and_says_so():
     assert figures["steady_error_rad"] == pytest.approx(0.05, abs=1e-3)
     empty = step_figures(np.zeros(0), np.zeros(0), np.zeros(0))
     assert set(empty.values()) == {None}
+
+
+class StandIn:
+    """What plan_joint_step reads of a controller: its snapshot, servo ids, gate, robot and
+    settings (no loop, no bus)."""
+
+    def __init__(self, **snap) -> None:
+        from app.control.state import Snapshot
+
+        joints = THESIS_DELTA.ik(HOME).joints
+        base = {
+            "mode": "idle",
+            "torque": True,
+            "joints_commanded_rad": joints,
+            "point_commanded_m": HOME,
+            "goal_m": HOME,
+            "velocity_rad_s": np.zeros(3),
+        }
+        self.snap = Snapshot(**{**base, **snap})
+        self.servo_ids = (11, 12, 13)
+        self.gate, self.robot = _gate(), THESIS_DELTA
+        self.settings = load_settings()
+
+    def snapshot(self):
+        return self.snap
+
+
+def test_a_step_is_planned_from_the_commanded_joints_of_the_servos_joint():
+    params = plan_joint_step(StandIn(), 12, math.radians(2.0), 1.5)
+    assert params.joint == 2 and params.duration_s == 1.5
+    assert params.start_rad == pytest.approx(THESIS_DELTA.ik(HOME).joints)
+    assert params.ramp_rad_s == pytest.approx(0.9 * SPEED)
+    np.testing.assert_allclose(params.derivatives(np.array(0.0), 0), HOME, atol=1e-12)
+    with pytest.raises(KeyError):
+        plan_joint_step(StandIn(), 4, 0.02, 1.0)
+
+
+@pytest.mark.parametrize(
+    ("snap", "words"),
+    [
+        ({"torque": False}, "torque is off"),
+        ({"estopped": True}, "e-stop is active"),
+        ({"stale": True, "feedback_age_ms": 300.0}, "stale (no fresh read for 300 ms)"),
+        ({"mode": "test"}, "a test is running"),
+        ({"mode": "jog", "goal_m": HOME + [0.0, 0.0, 0.01]}, "on its way to its goal"),
+        ({"velocity_rad_s": np.array([0.0, 0.0, 0.2])}, "moving (joint 3 at 11.5 deg/s)"),
+        ({"joints_commanded_rad": np.full(3, np.nan)}, "no commanded joints"),
+    ],
+)
+def test_a_step_starts_only_from_a_fresh_rest(snap, words):
+    with pytest.raises(MotionRefused, match=re.escape(words)):
+        plan_joint_step(StandIn(**snap), 12, 0.02, 1.0)
+
+
+def test_a_few_stale_ticks_are_no_reason_to_refuse():
+    plan_joint_step(StandIn(stale=True, feedback_age_ms=40.0), 12, 0.02, 1.0)
+
+
+@pytest.mark.parametrize("step_deg", [0.2, -0.3, 5.5, -6.0])
+def test_a_step_out_of_its_range_names_step_rad(step_deg):
+    with pytest.raises(GoalRejected, match=r"^step_rad: .* 0\.5 to 5 deg either way"):
+        plan_joint_step(StandIn(), 12, math.radians(step_deg), 1.0)
