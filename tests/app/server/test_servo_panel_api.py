@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from hardware.dynamixel.control_table import Reg
-from tests.support.app_client import make_client, settle_at
+from tests.support.app_client import make_client, settle_at, torque_on
 from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
@@ -275,11 +275,11 @@ def step_and_check(client, servo_id: int, step_rad: float) -> dict:
     assert goal[t < 0] == pytest.approx(start, abs=1e-9)  # the rest before the step
     assert goal[-1] == pytest.approx(start + step_rad, abs=1e-9)
     # the measured angle rises towards the goal and ends near it (the twin's P-only sag
-    # under gravity is a fraction of a degree)
+    # under gravity: 0.3 to 0.6 deg at the poses here)
     sign = math.copysign(1.0, step_rad)
     early, late = measured[t < 0].mean(), measured[-10:].mean()
     assert sign * (late - early) > 0.8 * abs(step_rad), (early, late)
-    assert abs(late - goal[-1]) < math.radians(0.5)
+    assert abs(late - goal[-1]) < math.radians(1.0)
     assert sign * (measured[t > 0.02].min() - early) > -math.radians(0.3)  # no step back
     figures = body["figures"]
     assert 0.0 < figures["rise_time_s"] < 0.5
@@ -344,3 +344,30 @@ def test_a_step_on_the_twin_rises_towards_its_goal_and_the_gains_change_it(tmp_p
         stiff = step_and_check(twin, 1, -math.radians(4.0))
         assert stiff["figures"]["rise_time_s"] < factory["figures"]["rise_time_s"]
         ok_json(twin.post("/api/tuning/revert"))
+
+
+@pytest.mark.slow  # the twin with a tool on a wrist, a step run on it
+def test_a_step_with_a_tool_on_a_turned_wrist_moves_the_joint_alone(tmp_path):
+    tool = {"offset_m": [0.03, 0.0, -0.04]}
+    wrist = {"enabled": True}
+    with make_client(tmp_path, backend="sim", tool=tool, wrist=wrist, safety=PATIENT) as twin:
+        take_lease(twin)
+        torque_on(twin)
+        ok_json(twin.post("/api/goal", json={"position_m": [0.02, 0.0, -0.27], "phi_rad": 0.6}))
+
+        def turned() -> bool:
+            now = ok_json(twin.get("/api/status"))
+            still = all(abs(v or 0.0) < 0.02 for v in now["joints"]["velocity_rad_s"])
+            return still and now["mode"] == "idle" and abs(now["ee"]["phi_rad"] - 0.6) < 0.01
+
+        wait_for(turned, "the tip at its goal, the wrist at 0.6 rad", 60.0, seen=lambda: "")
+        before = ok_json(twin.get("/api/status"))
+        body = step_and_check(twin, 1, math.radians(3.0))
+        after = ok_json(twin.get("/api/status"))
+        # the tips it commanded were at the wrist's angle: the wrist held, the tip moved
+        # only by the joint's step (not by the tool turned back to 0)
+        assert after["goal"]["phi_rad"] == pytest.approx(0.6)
+        assert after["ee"]["phi_rad"] == pytest.approx(0.6, abs=0.01)
+        moved = np.subtract(after["ee"]["commanded_m"], before["ee"]["commanded_m"])
+        assert 0.001 < np.linalg.norm(moved) < 0.02, moved
+        assert body["state"] == "done"
