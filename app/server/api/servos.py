@@ -111,7 +111,7 @@ class GainsWritten(BaseModel):
     config_written: str | None
 
 
-class StepRequest(BaseModel):
+class JointStepRequest(BaseModel):
     """A step of the servo's joint from where the arm rests."""
 
     model_config = ConfigDict(extra="forbid", strict=True)
@@ -148,7 +148,7 @@ class StepFigures(BaseModel):
     moved_fraction: float | None
 
 
-class StepOut(BaseModel):
+class JointStepOut(BaseModel):
     """The step's run (kind joint-step: its logs and report as any run's), how it ended
     (state done, or aborted with the reason: an e-stop, a fault) and its record, one
     sample per loop tick: t_s [s] from the step (the clock: the twin's simulated time, or
@@ -231,13 +231,13 @@ async def write_servo_gains(
 
 @router.post(
     "/servos/{servo_id}/step",
-    response_model=StepOut,
+    response_model=JointStepOut,
     responses={**CONTROL, **NO_SERVO},
 )
 async def step_servo(
     request: Request,
     servo_id: int,
-    body: StepRequest,
+    body: JointStepRequest,
     controller: ControllerDep,
     runs: RunsDep,
     _: ControlClient,
