@@ -95,17 +95,23 @@ def at_rest_home(page: Any, server: Server) -> None:
         page.fill(f"#goal-form input[name={axis}]", value)
     page.click("#goal-form button[type=submit]")
 
-    def resting() -> bool:  # from the hanging arm it is a long move: confirm it
+    def arrived() -> bool:  # from the hanging arm it is a long move: confirm it
         if page.locator("#confirm").is_visible():
             page.click("#confirm-yes")
-        status = server.get("/api/status")
-        goal, commanded = status["goal"]["position_m"], status["ee"]["commanded_m"]
-        if goal is None or abs(commanded[2] + 0.24) > 1e-9:
-            return False
-        still = all(abs(v or 0.0) < 0.02 for v in status["joints"]["velocity_rad_s"])
-        return still and np.allclose(goal, commanded, atol=1e-9)
+        return resting(server)
 
-    waiting.wait_for(resting, "the arm at rest at the home point", PAGE_WAIT_S, seen=server.brief)
+    waiting.wait_for(arrived, "the arm at rest at the home point", PAGE_WAIT_S, seen=server.brief)
+
+
+def resting(server: Server) -> bool:
+    """The arm rests at the home point: its goal's jog stands there and every joint is
+    still (a step starts only from rest: after a change of gains the arm sags anew)."""
+    status = server.get("/api/status")
+    goal, commanded = status["goal"]["position_m"], status["ee"]["commanded_m"]
+    if goal is None or abs(commanded[2] + 0.24) > 1e-9:
+        return False
+    still = all(abs(v or 0.0) < 0.02 for v in status["joints"]["velocity_rad_s"])
+    return still and bool(np.allclose(goal, commanded, atol=1e-9))
 
 
 def test_the_servo_panel_reads_refuses_writes_reverts_and_steps(page: Any, server: Server) -> None:
@@ -171,7 +177,9 @@ def test_the_servo_panel_reads_refuses_writes_reverts_and_steps(page: Any, serve
     wait_for(lambda: text(page, "#sp-message") == words, "the refusal of a 7° step")
     runs_before = len(server.get("/api/runs"))
 
-    # a 3° step of joint 2, drawn with its figures
+    # a 3° step of joint 2 once the arm rests again (the revert let it sag anew), drawn with
+    # its figures
+    wait_for(lambda: resting(server), "the arm at rest after the revert", seen=server.brief)
     page.fill("#sp-step-size", "3")
     page.click("#sp-step-run")
     wait_for(
