@@ -35,7 +35,7 @@ from app.control.loop_state import LoopState
 from app.control.model import Robot, RobotModel, dynamics_robot
 from app.control.owner import MotionOwner
 from app.control.safety import servo_faults
-from app.control.sources import GoalSource, Setpoint
+from app.control.sources import GoalSource, JogSource, Setpoint
 from app.control.state import Fault, Snapshot
 from app.control.timing import TickClock, TimingRecorder
 from app.control.wrist import WristBus, next_phi, turn_to
@@ -444,15 +444,41 @@ class Controller:
         ordered = [gains[sid] for sid in self.servo_ids]
 
         def write() -> dict[int, PositionGains]:
-            if self.state.source is not None:
-                raise MotionRefused(
-                    f"a {self.state.source.name} is running: gains change only while the arm rests"
-                )
+            if (moving := self._moving()) is not None:
+                raise MotionRefused(f"a {moving} is running: gains change only while the arm rests")
             self._use_gains(ordered)
             self.state.notice = "position gains changed"
             return self.gains
 
         return self.submit_motion(write)
+
+    def read_gains(self) -> Future:
+        """The legs' position gains as their servos hold them (``ServoBus.read_gains``:
+        five registers per servo, read in the control thread between ticks, so the read
+        holds one tick back by its bus transactions); refused while a motion runs
+        (MotionRefused in the Future): a run's record would show the late tick. The
+        Future holds them per leg servo id."""
+
+        def read() -> dict[int, PositionGains]:
+            if (moving := self._moving()) is not None:
+                raise MotionRefused(
+                    f"a {moving} is running: the servos' gains are read only while the arm rests"
+                )
+            return dict(zip(self.servo_ids, self.servos.read_gains(), strict=True))
+
+        return self.submit(read)
+
+    def _moving(self) -> str | None:
+        """What moves the arm now (the control thread's view): the active source's name;
+        None at rest: no source, or a goal's jog standing at its target (it holds a point)
+        with no held jog going."""
+        source = self.state.source
+        if source is None:
+            return None
+        held = self.state.hold_velocity_m_s is not None
+        if isinstance(source, JogSource) and source.at_rest and not held:
+            return None
+        return source.name
 
     def _use_gains(self, ordered: list[PositionGains]) -> None:
         """Write the legs' gains (joint order) and use them (the gravity offset's stiffness

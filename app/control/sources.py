@@ -117,7 +117,8 @@ class WristAxis:
     limits: Limits
 
 
-AT_REST = 1e-9  # a jog this close to its target, this slow, has arrived [m, m/s, m/s^2]
+AT_REST = 1e-9  # a jog's offset from its target [m], speed [m/s] and acceleration [m/s^2]
+# below this stands still: ruckig ends a path within rounding of its target
 
 
 class JogSource:
@@ -150,12 +151,12 @@ class JogSource:
 
     @property
     def at_rest(self) -> bool:
-        """The jog has arrived: at its target, not braking, with no speed or acceleration
-        left (it only holds the point from now on); to ruckig's rounding, 1e-9 in SI."""
+        """The jog has reached its target and stands there (no speed, no acceleration, to
+        ruckig's rounding: ``AT_REST``): it holds a point, it does not move the arm."""
         inp = self._inp
         off = np.subtract(inp.current_position, inp.target_position)
         motion = np.concatenate([off, inp.current_velocity, inp.current_acceleration])
-        return not self.braking and bool(np.all(np.abs(motion) < AT_REST))
+        return not self.braking and bool(np.abs(motion).max() <= AT_REST)
 
     @property
     def aim_m(self) -> np.ndarray:

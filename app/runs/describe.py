@@ -92,6 +92,14 @@ def _step(p: dict[str, Any]) -> str:
     )
 
 
+def _joint_step(p: dict[str, Any]) -> str:
+    return (
+        f"step of joint {number(p.get('joint'))} (servo {number(p.get('servo_id'))}): "
+        f"{degrees(p.get('step_rad'))} at {number(p.get('step_at_s'))} s of "
+        f"{number(p.get('duration_s'))} s, from joints {degrees(p.get('start_rad'))}"
+    )
+
+
 def _waypoints(p: dict[str, Any]) -> str:
     times = p.get("times_s") or []
     end = times[-1] if times else None
@@ -158,6 +166,7 @@ _SENTENCES = {
     "sinusoid": _sinusoid,
     "chirp": _chirp,
     "step": _step,
+    "joint-step": _joint_step,
     "waypoints": _waypoints,
     "hold": _hold,
     "program": _program,

@@ -1,12 +1,14 @@
-"""More timed paths for test runs: a chirp for identifying the servo response, and
-waypoints with timing (pick-and-place, rasters). Each offers what PlannedRun needs:
-``derivatives(t, order)``, ``duration_s``, ``peaks()`` and ``feedforward``.
+"""More timed paths for test runs: a chirp for identifying the servo response, waypoints
+with timing (pick-and-place, rasters), a step on one axis and a step of one joint. Each
+offers what PlannedRun needs: ``derivatives(t, order)``, ``duration_s``, ``peaks()`` and
+``feedforward``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -140,6 +142,75 @@ class StepParams:
             out[..., self.axis] = np.where(t >= self.step_at_s, self.size_m, 0.0)
             out += np.asarray(self.offset_m)
         return out
+
+    def peaks(self) -> tuple[float, float, float]:
+        return 0.0, 0.0, 0.0  # the approach and stop join it at rest
+
+
+@dataclass(frozen=True)
+class JointStepParams:
+    """A step of one joint (``joint``, 1..3) by ``step_rad`` [rad] at ``step_at_s``, the
+    others held, from the joints ``start_rad`` (3,) [rad], then hold: one servo's step
+    response in joint space (the servo panel's step). The goal climbs at ``ramp_rad_s``
+    [rad/s] (the loop's joint speed limit, a little under it: a step beyond what one tick
+    may move is what the loop would cut anyway): 5 deg take 13 ms at 90 % of 7.5 rad/s.
+
+    The loop takes tool tips: ``tip_of`` maps joints (*, 3) [rad] to the tip (*, 3) [m]
+    they put it at (the robot's FK and the tool at the loop's wrist angle), so the loop's
+    IK, on the branch nearest the arm, gives the joints back. With a wrist held away from
+    0, ``phi_rad`` is that angle (the feasibility check sees the tips at it)."""
+
+    joint: int
+    start_rad: tuple[float, float, float]
+    step_rad: float
+    ramp_rad_s: float
+    tip_of: Callable[[np.ndarray], np.ndarray] = field(repr=False, compare=False)
+    step_at_s: float = 0.2
+    duration_s: float = 1.0
+    phi_rad: float = 0.0
+    feedforward: bool = False
+
+    phi_field = "phi_rad"  # the field to name when the wrist cannot hold it
+
+    def __post_init__(self) -> None:
+        if self.joint not in (1, 2, 3):
+            raise ValueError(f"joint {self.joint}: the legs are 1, 2, 3")
+        if not (self.ramp_rad_s > 0 and 0 <= self.step_at_s < self.duration_s):
+            raise ValueError("a joint step needs a ramp speed > 0 and its step inside the run")
+
+    @property
+    def rise_s(self) -> float:
+        """How long the goal climbs [s]."""
+        return abs(self.step_rad) / self.ramp_rad_s
+
+    def joints_at(self, t: np.ndarray) -> np.ndarray:
+        """The joint goal (*, 3) [rad] at timed-part times ``t`` (*) [s]."""
+        t = np.asarray(t, dtype=np.float64)
+        climbed = np.clip((t - self.step_at_s) / self.rise_s, 0.0, 1.0) * self.step_rad
+        out = np.broadcast_to(np.asarray(self.start_rad), (*t.shape, 3)).copy()
+        out[..., self.joint - 1] += climbed
+        return out
+
+    @property
+    def moves_wrist(self) -> bool:
+        return self.phi_rad != 0.0
+
+    def phi_at(self, t: np.ndarray) -> np.ndarray:
+        """The wrist held at ``phi_rad`` throughout."""
+        return np.full(np.shape(t), self.phi_rad)
+
+    def phi_peak_speed(self) -> float:
+        return 0.0
+
+    def derivatives(self, t: np.ndarray, order: int) -> np.ndarray:
+        t = np.asarray(t, dtype=np.float64)
+        if order == 0:
+            return self.tip_of(self.joints_at(t))
+        # central differences: zero (exactly) where the goal stands, which is where the
+        # planner asks (the run's ends); finite, not an impulse, on the short climb
+        h = 1e-4
+        below, above = self.derivatives(t - h, order - 1), self.derivatives(t + h, order - 1)
+        return (above - below) / (2.0 * h)
 
     def peaks(self) -> tuple[float, float, float]:
         return 0.0, 0.0, 0.0  # the approach and stop join it at rest

@@ -494,13 +494,47 @@ class TuningManager:
         gains = {str(k): gains_out(g) for k, g in in_use.items()}
         return {"run_id": run_id, "gains": gains, "config_written": written}
 
-    def revert(self) -> dict[str, Any]:
-        """The gains in use before the last apply, back on the servos.
+    @property
+    def revertable(self) -> bool:
+        """An apply or a write that `revert` would undo."""
+        return bool(self._previous)
 
-        Raises MotionRefused: nothing was applied, or a motion is running (409)."""
+    def write(self, servo_id: int, gains: PositionGains) -> dict[str, Any]:
+        """One leg servo's gains from the operator (the servo panel, register units already
+        checked against the control table): written to it, the other legs keep theirs;
+        the gains replaced are kept for `revert`, as an apply's are.
+
+        Raises:
+            KeyError: ``servo_id`` is not a leg's (404).
+            MotionRefused: a tuning run or a test run is in progress, a procedure holds
+                the robot, or a motion is running (409).
+        """
+        with self._lock:
+            if self.running():
+                going = [r.run_id for r in self._runs.values() if r.state in RUNNING]
+                how = f"; POST /api/tuning/{going[-1]}/abort to stop it" if going else ""
+                name = f"tuning run {going[-1]}" if going else "a tuning run"
+                raise MotionRefused(f"{name} is in progress: gains change once it ends{how}")
+            if (other := self.busy()) is not None:
+                raise MotionRefused(other)
+            before = self.controller.gains
+            if servo_id not in before:
+                raise KeyError(servo_id)
+            wanted = {**before, servo_id: gains}
+            in_use = self.controller.set_gains(wanted).result(timeout=5.0)
+            self._previous.append(before)
+            written = self._write_config(in_use)
+        gains_now = {str(k): gains_out(g) for k, g in in_use.items()}
+        return {"gains": gains_now, "config_written": written}
+
+    def revert(self) -> dict[str, Any]:
+        """The gains in use before the last apply or write, back on the servos.
+
+        Raises MotionRefused: nothing was applied or written, or a motion is running
+        (409)."""
         with self._lock:
             if not self._previous:
-                raise MotionRefused("no applied tuning to revert")
+                raise MotionRefused("no applied tuning or written gains to revert")
             in_use = self.controller.set_gains(self._previous[-1]).result(timeout=5.0)
             self._previous.pop()
             written = self._write_config(in_use)

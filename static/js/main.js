@@ -7,6 +7,7 @@ import { startPlotsFrame } from "./plotshost.js";
 import { startPrograms } from "./programs.js";
 import { onStatus, startRuns } from "./runs.js";
 import { startScene } from "./scene.js";
+import { onServoStatus, startServoPanel } from "./servopanel.js";
 import { startStatus, state } from "./status.js";
 import { onWorkspaceStatus, startWorkspace2d } from "./workspace2d.js";
 import { renderWrist, startWrist } from "./wrist.js";
@@ -22,12 +23,13 @@ async function boot() {
   startScene(info);
   startStatus();
   state.listeners.push(onStatus, renderWrist);
-  state.listeners.push(renderHealth, onWorkspaceStatus);
+  state.listeners.push(renderHealth, onWorkspaceStatus, onServoStatus);
   startControl(info);
   startRuns();
   startPlotsFrame(info);
   startWorkspace2d();
   startPrograms();
+  startServoPanel();
 }
 
 boot();

@@ -62,6 +62,12 @@ export function parseDecimal(text) {
 
 const METRE_FIELDS = /\b(position|delta|amplitude|offset)_m\b/g;
 
+// A servo's gains as the page names them (the API's p, i, d, ff1, ff2: register units).
+export const GAIN_NAMES = {
+  p: "P gain", i: "I gain", d: "D gain", ff1: "FF1 gain (velocity)", ff2: "FF2 gain (acceleration)",
+};
+const GAIN_FIELD = /^(p|i|d|ff1|ff2): /;
+
 // "[0.0300, 0.0000, -0.2300] m" -> "(30.0, 0.0, -230.0) mm"; "0.5 m" -> "500.0 mm".
 export function metresToMm(text) {
   const num = "-?\\d+(?:\\.\\d+)?(?:e-?\\d+)?";
@@ -93,6 +99,22 @@ export function operatorText(err) {
     return { text: "The arm cannot reach that point (no joint angles for it).", clearsWhen: null };
   }
   if (err && err.status === 0) return { text: `No answer from the server: ${raw}`, clearsWhen: null };
+  if (raw.includes("only while the arm rests")) {
+    const what = raw.includes("read") ? "read the servo's gains" : "write gains";
+    return { text: `The arm is moving: ${what} once it rests.`, clearsWhen: null };
+  }
+  if (raw.startsWith("no applied tuning or written gains to revert")) {
+    return { text: "Nothing to revert: no gains were written or applied since the server started.", clearsWhen: null };
+  }
+  if (GAIN_FIELD.test(raw)) {
+    const name = GAIN_NAMES[raw.match(GAIN_FIELD)[1]];
+    return { text: raw.replace(GAIN_FIELD, `${name}: `).replace("Input should be", "must be"), clearsWhen: null };
+  }
+  if (raw.startsWith("step_rad: ")) { // a servo's step: the field is the step, in degrees
+    const said = raw.replace(/^step_rad: /, "").replace(/^the step is infeasible: /, "")
+      .replace(/(\d) deg\b/g, "$1°").replace(/\] deg\b/g, "]°");
+    return { text: `Step not possible: ${metresToMm(said)}`, clearsWhen: null };
+  }
   let text = raw
     .replace(/POST \/api\/reset first/g, "press Reset first")
     .replace(/POST \/api\/torque \{"enabled": true\} first/g, "press Torque on first")

@@ -1,4 +1,4 @@
-"""Units of the loop: timing statistics, following error, the gate's jog clamp."""
+"""Units of the loop: timing statistics, following error, the gate's jog clamp, a jog at rest."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from app.config import load_settings
 from app.control.errors import GoalRejected
 from app.control.gate import Gate
 from app.control.safety import FollowingError, MissCounter
+from app.control.sources import JogSource, Limits
 from app.control.timing import TickClock, TimingRecorder
 from kinematics import THESIS_DELTA
 
@@ -96,3 +97,24 @@ def test_joint_speed_is_limited_per_tick(gate):
     limited = gate.limit_step(np.array([0.3, -0.06, 0.0]), previous)
     assert np.abs(limited - previous).max() == pytest.approx(0.03)
     np.testing.assert_allclose(limited / np.linalg.norm(limited), [0.98058068, -0.19611614, 0])
+
+
+def test_a_jog_is_at_rest_only_once_it_stands_at_its_target():
+    jog_settings = load_settings().jog
+    limits = Limits(
+        jog_settings.max_velocity_m_s,
+        jog_settings.max_acceleration_m_s2,
+        jog_settings.max_jerk_m_s3,
+    )
+    home, period = np.array([0.0, 0.0, -0.24]), 0.005
+    jog = JogSource(home, limits, period)
+    assert jog.at_rest
+    jog.set_target(home + [0.0, 0.0, 0.005])
+    assert not jog.at_rest
+    jog.next(period)
+    assert not jog.at_rest
+    for _ in range(400):
+        jog.next(period)
+    assert jog.at_rest
+    jog.brake()
+    assert not jog.at_rest  # braking: its target is wherever it stops

@@ -44,6 +44,20 @@ KINDS = [
         ["step on x", "−5 mm at 0.5 s of 2 s"],
     ),
     (
+        "joint-step",
+        {
+            "servo_id": 2,
+            "joint": 2,
+            "step_rad": -0.06981317007977318,
+            "start_rad": [0.525083, 0.525083, 0.525083],
+            "step_at_s": 0.2,
+            "duration_s": 1.0,
+            "ramp_rad_s": 6.75,
+            "phi_rad": 0.0,
+        },
+        ["step of joint 2 (servo 2): −4° at 0.2 s of 1 s", "joints 30.1 / 30.1 / 30.1°"],
+    ),
+    (
         "waypoints",
         {
             "points_m": [[0, 0, -0.24], [0.02, 0, -0.24], [0, 0, -0.22]],
