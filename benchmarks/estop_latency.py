@@ -217,6 +217,7 @@ def main() -> None:
             )
             print(f"{how} ({args.trials} presses; the plots drew {fps:.1f} frames/s meanwhile)")
             print("  " + report("page event -> server", [r[0] for r in results]))
+            print("    each press, in order: " + " ".join(f"{r[0]:.0f}" for r in results))
             print("  " + report("  of which event -> request sent", [r[1] for r in results]))
             print("  " + report("driver -> server", [r[2] for r in results]))
             print("  " + report("request sent -> server", [r[3]["sent"] for r in results]))

@@ -209,7 +209,9 @@ export function homeText() {
   return tripleMm(homeM.map((v) => v * 1000));
 }
 
-function armMoving(s) {
+// Whether the arm moves now (a motion running, the command on its way or changing, a joint
+// faster than MOVING_RAD_S): torque off asks first, and a software-drawn scene pauses.
+export function armMoving(s) {
   if (!s || !s.torque) return false;
   const speeds = (s.joints && s.joints.velocity_rad_s) || [];
   const apart = (a, b) => Boolean(a && b) && a.some((v, i) => v !== null && b[i] !== null && Math.abs(v - b[i]) > ON_THE_WAY_M);

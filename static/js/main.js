@@ -6,7 +6,7 @@ import { renderHealth } from "./health.js";
 import { startPlotsFrame } from "./plotshost.js";
 import { startPrograms } from "./programs.js";
 import { onStatus, startRuns } from "./runs.js";
-import { startScene } from "./scene.js";
+import { sceneStatus, startScene } from "./scene.js";
 import { onServoStatus, startServoPanel } from "./servopanel.js";
 import { startStatus, state } from "./status.js";
 import { onWorkspaceStatus, startWorkspace2d } from "./workspace2d.js";
@@ -22,7 +22,7 @@ async function boot() {
   startWrist(info); // first: what the other parts show depends on whether a wrist is fitted
   startScene(info);
   startStatus();
-  state.listeners.push(onStatus, renderWrist);
+  state.listeners.push(onStatus, renderWrist, sceneStatus);
   state.listeners.push(renderHealth, onWorkspaceStatus, onServoStatus);
   startControl(info);
   startRuns();

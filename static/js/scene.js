@@ -3,10 +3,19 @@
 // took it over and the plots fell below 1 frame/s. So the frame is on by default only with
 // hardware rendering; the operator's choice is remembered per browser.
 
+import { armMoving } from "./control.js";
 import { isolatedOrigin } from "./isolation.js";
 
 const CHOICE_KEY = "deltadash.sceneEmbed";
 const SOFTWARE_DPR = 0.5;
+// Without a GPU the embedded scene's drawing is paused while the arm moves (the issue's
+// "scene rendering paused while the operator controls"): on a 2-core machine it and the
+// plots took the CPU that the page's e-stop key needs (docs/dashboard.md "The e-stop"). A
+// hidden frame of another site draws nothing in chromium. It goes on once the arm has
+// rested for RESUME_AFTER_MS.
+const RESUME_AFTER_MS = 1000;
+let pauseWhileMoving = false; // embedded under software WebGL
+let stillSince = null; // when the arm was last seen start resting [performance.now() ms]
 
 // True when WebGL runs on the CPU (SwiftShader, llvmpipe, software rasterisers).
 function softwareWebGL() {
@@ -20,6 +29,19 @@ function softwareWebGL() {
   } catch {
     return true;
   }
+}
+
+// status.js hands every status here.
+export function sceneStatus(s) {
+  const frame = document.getElementById("scene");
+  const moving = pauseWhileMoving && !frame.hidden && armMoving(s);
+  const now = performance.now();
+  if (moving) stillSince = null;
+  else if (stillSince === null) stillSince = now;
+  const pause = moving || (stillSince !== null && now - stillSince < RESUME_AFTER_MS &&
+    frame.classList.contains("paused"));
+  frame.classList.toggle("paused", pause);
+  document.getElementById("scene-paused").hidden = !pause;
 }
 
 function show(url, embed) {
@@ -50,6 +72,7 @@ export function startScene(info) {
   // e-stop key: the embedded scene draws at half resolution there (a quarter of the pixels;
   // viser's own fixedDpr setting). The tab of "open in a new tab" keeps full resolution.
   const software = softwareWebGL();
+  pauseWhileMoving = software;
   const frameBase = `${isolatedOrigin(info.viser_port)}/`; // its own process (isolation.js)
   const frameUrl = software ? `${frameBase}?fixedDpr=${SOFTWARE_DPR}` : frameBase;
   link.href = url;

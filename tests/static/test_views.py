@@ -167,3 +167,35 @@ def test_the_2d_view_draws_the_region_and_the_robots_point(page: Any, server: Se
     measured = server.get("/api/status")["ee"]["position_m"]
     shown = [float(v) for v in page.locator("#ws-robot").inner_text().split(" mm")[0].split(",")]
     np.testing.assert_allclose(shown, np.array(measured) * 1e3, atol=3.0)  # read 0.2 s apart
+
+
+def test_a_software_drawn_scene_pauses_while_the_arm_moves(page: Any, server: Server) -> None:
+    """Headless chromium draws WebGL in software: the embedded scene's frame is hidden (its
+    drawing paused, for the e-stop key's CPU) while the arm moves, with a note saying why,
+    and shown again once the arm rests."""
+    page.check("#scene-embed", timeout=PAGE_WAIT_S * 1e3)
+    frame, note = page.locator("#scene"), page.locator("#scene-paused")
+    torque_on(page, server)
+    paused = lambda: "paused" in (frame.get_attribute("class") or "")  # noqa: E731
+    status = server.get("/api/status")
+    z = -0.24 if abs(status["ee"]["position_m"][2] + 0.27) < 0.01 else -0.27  # 30 mm away
+    for axis, value in zip("xyz", ("0", "0", f"{z * 1e3:.0f}"), strict=True):
+        page.fill(f"#goal-form input[name={axis}]", value)
+    page.click("#goal-form button[type=submit]")
+
+    def paused_or_confirmed() -> bool:  # from the hanging arm it is a long move: confirm it
+        if page.locator("#confirm").is_visible():
+            page.click("#confirm-yes")
+        return paused()
+
+    wait_for(paused_or_confirmed, "the scene paused while the arm moves", PAGE_WAIT_S)
+    assert note.is_visible() and "paused while the arm moves" in note.inner_text()
+    assert frame.evaluate("e => getComputedStyle(e).visibility") == "hidden"
+    wait_for(
+        lambda: abs(server.get("/api/status")["ee"]["position_m"][2] - z) < 0.002,
+        "the arm at the goal",
+        PAGE_WAIT_S,
+    )
+    wait_for(lambda: not paused(), "the scene drawing again once the arm rests", PAGE_WAIT_S)
+    assert not note.is_visible()
+    page.uncheck("#scene-embed")
