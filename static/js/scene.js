@@ -1,7 +1,9 @@
 // The viser 3D scene, embedded in a frame or opened in its own tab (it runs on its own port).
-// A same-site frame shares this page's main thread: without a GPU, viser's software WebGL
-// took it over and the plots fell below 1 frame/s. So the frame is on by default only with
-// hardware rendering; the operator's choice is remembered per browser.
+// The frame comes from the other loopback name, so it runs in another renderer process than
+// this page (isolation.js). Without a GPU its software WebGL still takes CPU that this page's
+// e-stop key needs (and shares its process with the plots'), so the frame is on by default
+// only with hardware rendering, and without one it draws at half resolution and pauses
+// while the arm moves; the operator's choice is remembered per browser.
 
 import { armMoving } from "./control.js";
 import { isolatedOrigin } from "./isolation.js";
@@ -15,7 +17,7 @@ const SOFTWARE_DPR = 0.5;
 // rested for RESUME_AFTER_MS.
 const RESUME_AFTER_MS = 1000;
 let pauseWhileMoving = false; // embedded under software WebGL
-let stillSince = null; // when the arm was last seen start resting [performance.now() ms]
+let stillSince = null; // since when the arm rests [performance.now() ms], null: it moves
 
 // True when WebGL runs on the CPU (SwiftShader, llvmpipe, software rasterisers).
 function softwareWebGL() {
@@ -31,7 +33,7 @@ function softwareWebGL() {
   }
 }
 
-// status.js hands every status here.
+// status.js hands every status here (every 200 ms).
 export function sceneStatus(s) {
   const frame = document.getElementById("scene");
   const moving = pauseWhileMoving && !frame.hidden && armMoving(s);
