@@ -80,10 +80,10 @@ class SlowPlanning:
     def __init__(self, runs) -> None:
         self.real, self.began, self.release = runs.prepare, threading.Event(), threading.Event()
 
-    def __call__(self, params, kind):
+    def __call__(self, *args, **kwargs):
         self.began.set()
         assert self.release.wait(timeout=60), "the test never released the planner"
-        return self.real(params, kind)
+        return self.real(*args, **kwargs)
 
 
 @pytest.fixture
