@@ -1,7 +1,7 @@
 """Calibration on the twin built wrong: RMSE before and after, offsets found, time taken.
 
 Usage: python benchmarks/calibration_twin.py [--poses 40 120] [--parameters offsets geometry]
-       [--rods] [--apply]
+       [--rods] [--apply] [--measurement external pose-input]
 
 An app on the MuJoCo twin (in-process, over HTTP with FastAPI's TestClient) built with
 joint offsets of (3, -2, 2.5) deg, 0.3 mm of motion-capture noise per axis and a
@@ -16,11 +16,16 @@ frame fitted) and after on the fit and held-out poses [mm], and the run's wall t
 goals to three points before the run and again after applying it, and prints how far from
 each the platform came to rest by the twin's own measurement (30 samples averaged, mapped
 to the base frame with the twin's true measurement frame) [mm].
+
+--measurement pose-input measures by motion capture through the pose input instead: a
+stand-in (tests/support/mocap.py) streams the twin's view of its platform at 100 Hz over
+UDP as body "platform", its world frame shifted (0.2, -0.1, 0.05) m from the twin's own.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import sys
@@ -88,9 +93,14 @@ def ok(response) -> dict:
     return response.json()
 
 
-def case(poses: int, parameters: str, rods: bool, apply: bool = False) -> None:
+def case(
+    poses: int, parameters: str, rods: bool, apply: bool = False, measurement: str = "external"
+) -> None:
+    from tests.support.mocap import TwinMocap, free_udp_port
+
     sim = {**TWIN, **(RODS if rods else {})}
     landed = ""
+    port = free_udp_port()
     with tempfile.TemporaryDirectory() as folder:
         settings = load_settings(
             hardware={"backend": "sim", "sim": sim},
@@ -98,6 +108,7 @@ def case(poses: int, parameters: str, rods: bool, apply: bool = False) -> None:
             runs={"folder": folder},
             safety={"stale_feedback_s": 5.0, "following_error_time_s": 5.0},
             control={"gravity_compensation": apply},
+            world={"udp_port": port},
         )
         with TestClient(create_app(settings)) as client:
             lease = ok(client.post("/api/lease", json={"client": "bench", "take_over": True}))
@@ -108,16 +119,22 @@ def case(poses: int, parameters: str, rods: bool, apply: bool = False) -> None:
                     raise TimeoutError("torque on refused for a minute")
                 time.sleep(0.2)  # the relaxed arm comes to rest inside its limits
             before = landing_misses_m(client) if apply else []
-            began = time.monotonic()
-            body = {"poses": poses, "parameters": parameters}
-            run_id = ok(client.post("/api/calibration/run", json=body))["run_id"]
-            while (run := ok(client.get(f"/api/calibration/{run_id}")))["state"] in (
-                "planned",
-                "moving",
-                "fitting",
-            ):
-                time.sleep(0.5)
-            took = time.monotonic() - began
+            mocap = TwinMocap(client.app.state.backend.bus, port, shift_m=(0.2, -0.1, 0.05))
+            with contextlib.ExitStack() as stack:
+                if measurement == "pose-input":
+                    stack.enter_context(mocap.streaming())
+                    while ok(client.get("/api/mav/pose?body=platform"))["state"] != "ok":
+                        time.sleep(0.05)
+                began = time.monotonic()
+                body = {"poses": poses, "parameters": parameters, "measurement": measurement}
+                run_id = ok(client.post("/api/calibration/run", json=body))["run_id"]
+                while (run := ok(client.get(f"/api/calibration/{run_id}")))["state"] in (
+                    "planned",
+                    "moving",
+                    "fitting",
+                ):
+                    time.sleep(0.5)
+                took = time.monotonic() - began
             if apply and run["state"] == "done":
                 ok(client.post(f"/api/calibration/{run_id}/apply"))
                 after = landing_misses_m(client)
@@ -133,7 +150,8 @@ def case(poses: int, parameters: str, rods: bool, apply: bool = False) -> None:
     error = np.degrees(run["parameters"]["joint_offsets_rad"]) - OFFSETS_DEG
     mm = lambda key: f"{run[key] * 1e3:.2f}"  # noqa: E731
     print(
-        f"| {parameters} | {poses} ({run['holdout_poses']} held out) | {'yes' if rods else 'no'} "
+        f"| {parameters} | {measurement} | {poses} ({run['holdout_poses']} held out) "
+        f"| {'yes' if rods else 'no'} "
         f"| {run['condition_number']:.1f} | {np.abs(error).max():.3f} "
         f"| {mm('rmse_before_m')} -> {mm('rmse_after_m')} "
         f"| {mm('holdout_rmse_before_m')} -> {mm('holdout_rmse_m')} | {run['state']} "
@@ -150,17 +168,25 @@ def main() -> None:
     parser.add_argument(
         "--apply", action="store_true", help="apply the fit; goals' landing before and after"
     )
+    parser.add_argument(
+        "--measurement",
+        nargs="+",
+        default=["external"],
+        choices=("external", "pose-input"),
+        help="the twin's own measurement, or motion capture streamed to the pose input",
+    )
     args = parser.parse_args()
     print(f"load {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     landing = " goals' miss before -> after apply [mm] |" if args.apply else ""
     print(
-        "| fitted | poses | rods off | condition number | worst offset error [deg] "
+        "| fitted | measurement | poses | rods off | condition number | worst offset error [deg] "
         f"| RMSE fit poses [mm] | RMSE held out [mm] | state | time |{landing}"
     )
-    print("| --- " * (10 if args.apply else 9) + "|")
-    for parameters in args.parameters:
-        for poses in args.poses:
-            case(poses, parameters, args.rods, args.apply)
+    print("| --- " * (11 if args.apply else 10) + "|")
+    for measurement in args.measurement:
+        for parameters in args.parameters:
+            for poses in args.poses:
+                case(poses, parameters, args.rods, args.apply, measurement)
 
 
 if __name__ == "__main__":

@@ -5,14 +5,22 @@ ones; the observability is known before anything moves), then, in its own thread
 the arm to each pose with the controller's joint-space move, waits for it to come to rest
 (``REST_TICKS`` fresh ticks within ``REST_TOLERANCE_RAD``, every joint slower than
 ``REST_SPEED_RAD_S``; a stalled simulator's repeated state is not rest), and averages the
-joints and the external measurement over ``AVERAGE_TICKS`` fresh ticks. Then it
+joints and the external measurement over ``AVERAGE_TICKS`` fresh ticks (a tick without
+a fresh measurement is skipped; none for ``MEASURE_WAIT_S`` fails the run). Then it
 fits (``fit.fit``) and writes its files under the runs folder: ``pairs.csv`` (what it
 measured: ``deltadash calibrate --from-csv`` fits it again offline), ``report.png`` (the
 residuals before and after) and ``result.json``.
 
 The measurement is pluggable: ``measure(snapshot)`` returns the platform in the
-measurement frame [m] (3,), NaN when there is none; the default is the snapshot's
-``external_m`` (the twin's motion capture).
+measurement frame [m] (3,), NaN when there is none. A run's ``measurement`` chooses it:
+``"external"`` (the default), the snapshot's ``external_m`` (the twin's own motion
+capture; a real bus has none); ``"pose-input"``, the latest fresh pose of a motion-capture
+marker on the platform streamed through the pose input (``"body": "platform"`` on
+POST/WebSocket /api/mav/pose or the UDP JSON input; ``pose_input``). The measurement
+frame is the motion-capture system's world frame (fitted, 6-DoF); the base must stay still
+in it during the run. The marker need not be at the platform's centre: without a wrist the
+platform only translates, so a constant marker offset is part of the fitted frame's
+translation.
 
 A probe run (``source="probe"``, app/calibration/probe.py) instead touches a flat plate at
 ``plate_z_m`` at points spread over it and fits what z-only heights can observe. Its
@@ -41,7 +49,7 @@ import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -72,6 +80,7 @@ REST_TICKS = 40  # the joints must stay within REST_TOLERANCE_RAD this many tick
 REST_TOLERANCE_RAD = 2 * RAD_PER_TICK
 REST_SPEED_RAD_S = 0.02  # and every joint's speed below this (about 1 deg/s)
 MOVE_TIMEOUT_S = 60.0
+MEASURE_WAIT_S = 1.0  # at rest, a measurement may be missing this long before the run fails
 STOP_TIMEOUT_S = 5.0
 POLL_S = 0.005
 RUNNING = ("planned", "moving", "fitting")  # the states abort stops
@@ -80,6 +89,42 @@ RUNNING = ("planned", "moving", "fitting")  # the states abort stops
 def external(snapshot: Snapshot) -> np.ndarray:
     """The default measurement: the snapshot's external position (the twin's capture)."""
     return np.asarray(snapshot.external_m, dtype=np.float64)
+
+
+MEASUREMENTS = ("external", "pose-input")
+
+
+class Tracked(Protocol):
+    """What a measurement needs of a pose tracker (app.world.poses.PoseTracker)."""
+
+    def latest(self) -> tuple[Any, np.ndarray]: ...
+
+    def health(self) -> tuple[str, float]: ...
+
+
+def pose_input(tracker: Tracked) -> Measure:
+    """A measurement from a motion-capture marker's poses in ``tracker`` (the pose input's
+    "platform" body, app.world.poses.PoseTracker): the latest sample's position [m] (3,)
+    while the tracker says "ok" (fresher than the world's ``stale_after_s``), NaN
+    otherwise."""
+
+    def measure(snapshot: Snapshot) -> np.ndarray:
+        del snapshot  # the marker's own stream, not the loop's state
+        sample, _ = tracker.latest()
+        if sample is None or tracker.health()[0] != "ok":
+            return np.full(3, np.nan)
+        return np.asarray(sample.position_m, dtype=np.float64)
+
+    return measure
+
+
+_NO_MEASUREMENT = {
+    "external": "measurement: no external measurement of the platform (ee.external_m): "
+    "this backend has none; stream motion capture of the platform to the pose input and "
+    "use measurement 'pose-input'",
+    "pose-input": "measurement: no fresh motion-capture pose of the platform on the pose "
+    "input (body 'platform'; its health: GET /api/mav/pose?body=platform)",
+}
 
 
 class Stopped(Exception):
@@ -102,6 +147,7 @@ class CalibrationRun:
     joints: list[np.ndarray] = field(default_factory=list)
     measured: list[np.ndarray] = field(default_factory=list)
     source: str = "motion"
+    measurement: str = "external"  # a motion run's measurement (MEASUREMENTS)
     plate_z_m: float | None = None
     fit_plate_z: bool = False
     probe_xy: np.ndarray | None = field(default=None, repr=False)  # (poses, 2) [m]
@@ -158,6 +204,7 @@ class CalibrationRun:
             ),
             "files": sorted(p.name for p in self.folder.glob("*") if p.is_file()),
             "source": self.source,
+            "measurement": self.measurement if self.source == "motion" else None,
             "plate_z_m": self.plate_z_m,
             "plate_error_m": (
                 result.plate_error_m
@@ -184,9 +231,14 @@ class CalibrationManager:
         config_path: Path | None = None,
         measure: Measure = external,
         probe: Touch | None = None,
+        pose_measure: Measure | None = None,
     ) -> None:
         self.controller, self.folder, self.busy = controller, Path(folder), busy
-        self.config_path, self.measure, self.probe = config_path, measure, probe
+        self.config_path, self.probe = config_path, probe
+        # the measurements a motion run may use, by name (MEASUREMENTS)
+        self.measures: dict[str, Measure] = {"external": measure}
+        if pose_measure is not None:
+            self.measures["pose-input"] = pose_measure
         self._runs: dict[str, CalibrationRun] = {}
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -255,17 +307,21 @@ class CalibrationManager:
         source: str = "motion",
         plate_z_m: float | None = None,
         fit_plate_z: bool = False,
+        measurement: str = "external",
     ) -> CalibrationRun:
         """Plan and start a run (returns at once; the thread moves the arm, or probes).
 
         source: "motion" (external measurement of the platform) or "probe" (touches of a
         flat plate at ``plate_z_m`` [m], base frame; ``fit_plate_z``: fit an error of that
-        height too).
+        height too). measurement (motion runs): "external" (the backend's own, the twin's)
+        or "pose-input" (a motion-capture marker on the platform, streamed to the pose
+        input as body "platform").
 
         Raises:
-            CalibrationError: poses, parameters, source or plate that cannot be planned,
-                or a probe run on a backend without a probe (422).
-            MotionRefused: the robot may not move now, or a run is in progress (409).
+            CalibrationError: poses, parameters, source, measurement or plate that cannot be
+                planned, or a probe run on a backend without a probe (422).
+            MotionRefused: the robot may not move now, a run is in progress, or the chosen
+                measurement has nothing fresh now (409).
         """
         with self._lock:
             if self._thread is not None and self._thread.is_alive():
@@ -279,6 +335,7 @@ class CalibrationManager:
             nominal = per_leg(model.robot)
             xy = None
             if source == "motion":
+                self._require_measurement(measurement, snap)
                 chosen = plan(nominal, poses, parameters, allowed=self._allowed)
             elif source == "probe":
                 chosen, xy = self._plan_probe(poses, parameters, plate_z_m, fit_plate_z)
@@ -298,6 +355,7 @@ class CalibrationManager:
                     fit_plate_z,
                     xy,
                 )
+                run.measurement = measurement
                 run.nominal, run.model_version = nominal, model.version
                 run.offsets_at_start_rad = offsets
                 self._runs[run_id] = run
@@ -311,6 +369,18 @@ class CalibrationManager:
                 self.controller.owner.release(claim)
                 raise
             return run
+
+    def _require_measurement(self, measurement: str, snap: Snapshot) -> None:
+        """A motion run starts only with a measurement that answers now."""
+        if measurement not in MEASUREMENTS:
+            raise CalibrationError(
+                f"measurement: {measurement!r} is not one of {', '.join(MEASUREMENTS)}"
+            )
+        measure = self.measures.get(measurement)
+        if measure is None:
+            raise CalibrationError(f"measurement: {measurement!r} is not available here")
+        if not np.isfinite(measure(snap)).all():
+            raise MotionRefused(_NO_MEASUREMENT[measurement])
 
     def _plan_probe(
         self, poses: int, parameters: str, plate_z_m: float | None, fit_plate_z: bool
@@ -465,14 +535,18 @@ class CalibrationManager:
 
         self._wait(run, "the arm to come to rest", rested, MOVE_TIMEOUT_S)
         joints, measured = [], []
+        measure, answered_s = self.measures[run.measurement], time.monotonic()
         while len(joints) < AVERAGE_TICKS:
             snap = self._wait(run, "a fresh tick", self._fresh(last), 5.0)
             last = snap.tick
             if snap.stale:
                 continue  # the same state again: it would count twice
-            y = self.measure(snap)
-            if not np.isfinite(y).all():
-                raise Stopped("no external measurement of the platform (ee.external_m)")
+            y = measure(snap)
+            if not np.isfinite(y).all():  # a stream's hiccup: skip the tick, for a while
+                if time.monotonic() - answered_s > MEASURE_WAIT_S:
+                    raise Stopped(_NO_MEASUREMENT[run.measurement])
+                continue
+            answered_s = time.monotonic()
             joints.append(snap.joints_measured_rad)
             measured.append(y)
         return np.mean(joints, axis=0), np.mean(measured, axis=0)

@@ -6,6 +6,11 @@ moves and the progress while it does, then the fit. Offline (--from-csv FILE): f
 of joint values and external measurements (columns q0_rad, q1_rad, q2_rad, x_m, y_m, z_m
 and an optional set = fit | holdout; a run's pairs.csv is one) on the config's robot.
 
+--measurement pose-input (with --url): the platform is measured by your motion capture,
+streamed to the server's pose input as body "platform" (UDP JSON on [world] udp_port, or
+POST/WebSocket /api/mav/pose; docs/calibration.md); the default, external, is the
+backend's own measurement (the simulated robot's).
+
 --probe --plate-z MM (with --url): no motion capture; the run touches a flat plate whose
 height in the base frame is MM millimetres (negative: below the base) and fits from the
 touch heights alone, saying which parameter combinations heights cannot pin
@@ -54,6 +59,13 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
         help="offsets: joint offsets and measurement frame; geometry: also each leg's L, l, R",
     )
     parser.add_argument(
+        "--measurement",
+        choices=("external", "pose-input"),
+        default="external",
+        help="what measures the platform: the backend's own (default: the simulated "
+        "robot's) or motion capture streamed to the pose input as body 'platform'",
+    )
+    parser.add_argument(
         "--probe",
         action="store_true",
         help="touch a flat plate at --plate-z instead of measuring the platform (z only)",
@@ -85,6 +97,13 @@ def run(args: argparse.Namespace) -> int:
     if args.probe and args.from_csv:
         print(
             "error: --probe: touches are taken on a server (--url), not from --from-csv",
+            file=sys.stderr,
+        )
+        return 2
+    if args.measurement != "external" and (args.probe or args.from_csv):
+        print(
+            "error: --measurement: a probe run measures by its touches, and --from-csv "
+            "reads its measurements from the file",
             file=sys.stderr,
         )
         return 2
@@ -207,6 +226,8 @@ def _remote(args: argparse.Namespace) -> int:
                     "plate_z_m": args.plate_z * 1e-3,
                     "fit_plate_z": bool(args.fit_plate_z),
                 }
+            elif args.measurement != "external":
+                request["measurement"] = args.measurement
             run_id = cli_run._http(f"{url}/api/calibration/run", "POST", request, headers)["run_id"]
             running = run_id
             body = cli_run._http(f"{url}/api/calibration/{run_id}", headers=headers)

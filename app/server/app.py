@@ -24,7 +24,7 @@ from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 
 from app.calibration.probe import Touch, twin_probe
-from app.calibration.procedure import CalibrationManager, per_leg
+from app.calibration.procedure import CalibrationManager, per_leg, pose_input
 from app.config import Settings
 from app.control.authority import Authority
 from app.control.controller import Controller
@@ -130,6 +130,7 @@ def create_app(
                 busy=lambda: app.state.runs.busy(),
                 config_path=config_path,
                 probe=_twin_probe(settings, controller),
+                pose_measure=pose_input(app.state.world.platform),
             )
             app.state.tuning = TuningManager(
                 controller,

@@ -2,7 +2,10 @@
 
 UDP: one JSON object per datagram, the same as POST /api/mav/pose:
 ``{"t": 12.34, "position": [x, y, z], "quaternion": [w, x, y, z], "velocity": [vx, vy, vz]}``
-(world frame z up [m], body to world, velocity optional). MAVLink: ODOMETRY messages from a
+(world frame z up [m], body to world, velocity optional). An optional ``"body"`` says whose
+pose it is: ``"drone"`` (the default: the robot's base, for hold-in-world) or
+``"platform"`` (a motion-capture marker on the platform: the measurement of a calibration
+run with ``measurement: "pose-input"``). MAVLink: ODOMETRY messages from a
 PX4/ArduPilot autopilot via pymavlink, converted from NED/FRD (app/world/frames.py).
 Each listener is a daemon thread that pushes vetted samples into a PoseTracker.
 """
@@ -24,6 +27,17 @@ from kinematics import PoseError
 log = logging.getLogger(__name__)
 
 
+BODIES = ("drone", "platform")  # whose pose a sample is: the base's, or the platform's
+
+
+def body_of(data: dict[str, Any]) -> str:
+    """The ``body`` field of a pose object ("drone" when absent); PoseError otherwise."""
+    body = data.get("body", "drone")
+    if body not in BODIES:
+        raise PoseError(f"body: {body!r} is not one of {', '.join(map(repr, BODIES))}")
+    return body
+
+
 def sample_from_json(data: dict[str, Any]):
     """A PoseSample from the documented JSON; PoseError or KeyError names what is wrong."""
     missing = [key for key in ("t", "position", "quaternion") if key not in data]
@@ -39,10 +53,18 @@ def sample_from_json(data: dict[str, Any]):
 
 
 class UdpPoseListener:
-    """Receives JSON pose datagrams on ``port`` (127.0.0.1 unless ``host`` says otherwise)."""
+    """Receives JSON pose datagrams on ``port`` (127.0.0.1 unless ``host`` says otherwise):
+    the drone's into ``tracker``, the platform marker's (``"body": "platform"``) into
+    ``platform`` (counted as errors when there is none)."""
 
-    def __init__(self, tracker: PoseTracker, port: int, host: str = "127.0.0.1") -> None:
-        self.tracker = tracker
+    def __init__(
+        self,
+        tracker: PoseTracker,
+        port: int,
+        host: str = "127.0.0.1",
+        platform: PoseTracker | None = None,
+    ) -> None:
+        self.tracker, self.platform = tracker, platform
         self.socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.socket.bind((host, port))
         self.socket.settimeout(0.2)
@@ -69,8 +91,12 @@ class UdpPoseListener:
             except OSError:
                 return
             try:
-                self.tracker.push(sample_from_json(json.loads(payload)))
-            except (ValueError, KeyError, TypeError) as exc:
+                data = json.loads(payload)
+                tracker = self.tracker if body_of(data) == "drone" else self.platform
+                if tracker is None:
+                    raise PoseError("body: 'platform' poses are not taken here")
+                tracker.push(sample_from_json(data))
+            except (ValueError, KeyError, TypeError, AttributeError) as exc:
                 self.errors += 1
                 log.debug("bad pose datagram: %s", exc)
 

@@ -46,18 +46,27 @@ def base_motion(
 
 
 class WorldService:
-    """Owns the external pose tracker and listeners; builds hold sources for the loop."""
+    """Owns the external pose trackers (the drone's, ``tracker``; a platform marker's,
+    ``platform``) and their listeners; builds hold sources for the loop."""
 
     def __init__(self, controller: Controller) -> None:
         self.controller = controller
         world = controller.settings.world
         self.mount = Pose.from_arrays(world.mount_position_m, world.mount_quaternion)
         self.tracker = PoseTracker(world.stale_after_s, world.lost_after_s, world.max_jump_m)
+        # a motion-capture marker on the platform (body "platform" on the pose input): a
+        # calibration run's measurement (app/calibration/procedure.py pose_input)
+        self.platform = PoseTracker(world.stale_after_s, world.lost_after_s, world.max_jump_m)
         self._listeners: list = []
         if world.udp_port is not None:
-            self._listeners.append(UdpPoseListener(self.tracker, world.udp_port).start())
+            listener = UdpPoseListener(self.tracker, world.udp_port, platform=self.platform)
+            self._listeners.append(listener.start())
         if world.mavlink_url is not None:
             self._listeners.append(MavlinkPoseListener(self.tracker, world.mavlink_url).start())
+
+    def tracker_for(self, body: str) -> PoseTracker:
+        """The tracker of ``body`` ("drone" or "platform")."""
+        return self.platform if body == "platform" else self.tracker
 
     def close(self) -> None:
         for listener in self._listeners:

@@ -45,6 +45,29 @@ def test_pose_websocket_stream(client):
     assert ok_json(client.get("/api/mav/pose"))["accepted"] >= 2
 
 
+def test_a_platform_marker_pose_is_its_own_stream(client):
+    drone = ok_json(client.get("/api/mav/pose"))["accepted"]
+    marker = ok_json(client.get("/api/mav/pose?body=platform"))["accepted"]
+    body = {**_pose(500.0, z=-0.3), "body": "platform"}
+    answer = ok_json(client.post("/api/mav/pose", json=body))
+    assert answer["accepted"] is True and answer["input"]["accepted"] == marker + 1
+    # the drone's stream did not see it (its next sample, older, is still taken)
+    assert ok_json(client.post("/api/mav/pose", json=_pose(200.0)))["input"]["accepted"] == (
+        drone + 1
+    )
+    with client.websocket_connect("/api/mav/pose") as ws:
+        ws.send_text(json.dumps({**body, "t": 500.01}))
+        ws.send_text(json.dumps({**body, "body": "tool"}))
+        assert "body" in ws.receive_json()["error"]
+    wait_for(
+        lambda: ok_json(client.get("/api/mav/pose?body=platform"))["accepted"] == marker + 2,
+        "the streamed marker pose",
+    )
+    bad = client.post("/api/mav/pose", json={**body, "body": "tool"})
+    assert bad.status_code == 422 and "body" in bad.text
+    assert client.get("/api/mav/pose?body=tool").status_code == 422
+
+
 def test_hold_faults_when_the_pose_stream_is_lost(client):
     client.post("/api/reset")
     client.post("/api/torque", json={"enabled": True})

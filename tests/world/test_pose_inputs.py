@@ -49,6 +49,31 @@ def test_udp_json_stream_is_received_and_vetted(tracker):
     np.testing.assert_allclose(sample.position_m, [0.0, 0.0, 1.004])
 
 
+def test_udp_platform_marker_poses_go_to_their_own_tracker(tracker):
+    platform = PoseTracker(stale_after_s=0.05, lost_after_s=0.5, max_jump_m=0.5)
+    listener = UdpPoseListener(tracker, _free_port(), platform=platform).start()
+    alone = UdpPoseListener(PoseTracker(0.05, 0.5, 0.5), _free_port()).start()
+    marker = {"t": 1.0, "position": [0.01, 0.02, -0.3], "quaternion": [1, 0, 0, 0]}
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+            for port, sample in (
+                (listener.port, {**marker, "body": "platform"}),
+                (listener.port, {**marker, "t": 2.0}),  # no body: the drone's
+                (listener.port, {**marker, "t": 3.0, "body": "tool"}),
+                (alone.port, {**marker, "body": "platform"}),  # nowhere to go: an error
+            ):
+                sender.sendto(json.dumps(sample).encode(), ("127.0.0.1", port))
+        wait_for(
+            lambda: platform.accepted == 1 and tracker.accepted == 1 and listener.errors == 1,
+            "one marker pose, one drone pose, one bad body",
+        )
+        wait_for(lambda: alone.errors == 1, "the marker pose refused without a tracker")
+    finally:
+        listener.stop()
+        alone.stop()
+    assert platform.latest()[0].t_s == 1.0 and tracker.latest()[0].t_s == 2.0
+
+
 def test_mavlink_odometry_is_converted_from_ned(tracker):
     port = _free_port()
     listener = MavlinkPoseListener(tracker, f"udpin:127.0.0.1:{port}").start()

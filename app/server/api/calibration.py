@@ -42,6 +42,13 @@ class CalibrationRequest(BaseModel):
         "touches of a flat plate at plate_z_m, heights only (what they cannot observe is "
         "reported)",
     )
+    measurement: Literal["external", "pose-input"] = Field(
+        "external",
+        description="motion: what measures the platform. external: the backend's own (the "
+        "twin's motion capture; a real bus has none); pose-input: a motion-capture marker on "
+        "the platform streamed to the pose input with body 'platform' (POST or WebSocket "
+        "/api/mav/pose, or UDP JSON), in the capture system's world frame, the base still",
+    )
     plate_z_m: float | None = Field(
         None,
         description="probe: the plate's height in the base frame [m] (z up, below the base)",
@@ -59,6 +66,8 @@ class CalibrationRequest(BaseModel):
                 raise ValueError(
                     f"plate_z_m: {self.plate_z_m} m is not below the base (z < 0, in metres)"
                 )
+            if self.measurement != "external":
+                raise ValueError("measurement: a probe run measures by its touches")
         elif self.plate_z_m is not None or self.fit_plate_z:
             raise ValueError("plate_z_m, fit_plate_z: only for source 'probe'")
         return self
@@ -114,6 +123,9 @@ class CalibrationOut(BaseModel):
     measurement_frame: Frame | None
     files: list[str]
     source: str = Field("motion", description="motion or probe")
+    measurement: str | None = Field(
+        "external", description="motion: external or pose-input (null for a probe run)"
+    )
     plate_z_m: float | None = Field(None, description="probe: the plate's stated height [m]")
     plate_error_m: float | None = Field(
         None, description="probe with fit_plate_z: the fitted error of the plate's height [m]"
@@ -166,6 +178,7 @@ async def start_calibration(
             body.source,
             body.plate_z_m,
             body.fit_plate_z,
+            body.measurement,
         )
     except CalibrationError as exc:
         raise HTTPException(422, str(exc)) from None

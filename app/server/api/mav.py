@@ -25,7 +25,7 @@ from app.server.api.models import Accepted, Finite, Vector3
 from app.server.api.responses import PoseAccepted, PoseInputStatus, RunStarted
 from app.server.errors import CONTROL, INVALID, UNAUTHORISED
 from app.world.drone_sim import DroneSimParams
-from app.world.inputs import sample_from_json
+from app.world.inputs import body_of, sample_from_json
 from app.world.service import WorldService
 from kinematics import PoseError
 
@@ -42,6 +42,12 @@ class PoseBody(BaseModel):
     quaternion: Annotated[list[Finite], Field(min_length=4, max_length=4)]
     velocity: Vector3 | None = None
     angular_velocity: Vector3 | None = None
+    body: Literal["drone", "platform"] = Field(
+        "drone",
+        description="whose pose: drone (the robot's base, for hold-in-world) or platform (a "
+        "motion-capture marker on the platform: a calibration run's measurement with "
+        "measurement 'pose-input')",
+    )
 
 
 class HoldRequest(BaseModel):
@@ -81,26 +87,31 @@ class HoldTestRequest(BaseModel):
 
 
 def _push(world: WorldService, data: dict[str, Any]) -> dict[str, Any]:
-    tracker = world.tracker
+    tracker = world.tracker_for(body_of(data))
     accepted = tracker.push(sample_from_json(data))
     return {"accepted": accepted, "input": tracker.status()}
 
 
 @router.post("/mav/pose", response_model=PoseAccepted, responses={**UNAUTHORISED, **INVALID})
 def post_pose(body: PoseBody, world: WorldDep, _: TokenChecked) -> dict[str, Any]:
-    """One pose sample; out-of-order, duplicate or jumping samples are dropped (accepted=false)."""
+    """One pose sample of the drone (or, with ``"body": "platform"``, of a marker on the
+    platform); out-of-order, duplicate or jumping samples are dropped (accepted=false)."""
     return _push(world, body.model_dump())
 
 
 @router.get("/mav/pose", response_model=PoseInputStatus)
-def get_pose_status(world: WorldDep) -> dict[str, Any]:
-    """The pose input's health: state (ok/stale/lost/none), age, rate, counters."""
-    return world.tracker.status()
+def get_pose_status(
+    world: WorldDep, body: Literal["drone", "platform"] = "drone"
+) -> dict[str, Any]:
+    """The pose input's health for ``body`` (the drone's by default, or the platform
+    marker's): state (ok/stale/lost/none), age, rate, counters."""
+    return world.tracker_for(body).status()
 
 
 @router.websocket("/mav/pose")
 async def stream_poses(websocket: WebSocket, world: WorldDep) -> None:
-    """A stream of pose JSON objects (same fields as POST); bad ones are answered with an error."""
+    """A stream of pose JSON objects (same fields as POST, ``body`` included); bad ones are
+    answered with an error."""
     if not websocket_token_ok(websocket):
         await websocket.close(code=1008, reason="missing or wrong token (?token=)")
         return

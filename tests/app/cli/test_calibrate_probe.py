@@ -80,6 +80,8 @@ def test_what_heights_cannot_pin_is_printed(served, capsys) -> None:
         (["--plate-z", "-250"], "--plate-z"),
         (["--probe", "--plate-z", "-250", "--from-csv", "x.csv"], "--probe"),
         (["--probe", "--plate-z", "250"], "plate_z_m"),
+        (["--probe", "--plate-z", "-250", "--measurement", "pose-input"], "--measurement"),
+        (["--from-csv", "x.csv", "--measurement", "pose-input"], "--measurement"),
     ],
 )
 def test_bad_probe_arguments_are_refused_naming_them(served, capsys, args, field) -> None:

@@ -80,3 +80,12 @@ def test_calibrate_on_a_server_applies_and_writes_the_offsets(served, tmp_path, 
 def test_bad_poses_are_refused_naming_the_field(served, capsys):
     assert main(["calibrate", "--url", URL, "--poses", "3", "--take-over"]) == 2
     assert "poses" in capsys.readouterr().err
+
+
+def test_motion_capture_without_a_stream_is_refused_saying_so(served, capsys):
+    code = main(
+        ["calibrate", "--url", URL, "--poses", "16", "--take-over", "--measurement", "pose-input"]
+    )
+    err = capsys.readouterr().err
+    assert code != 0 and "motion-capture" in err and "body 'platform'" in err, err
+    assert served.get("/api/status").json()["mode"] == "idle"
