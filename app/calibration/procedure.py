@@ -6,7 +6,8 @@ the arm to each pose with the controller's joint-space move, waits for it to com
 (``REST_TICKS`` fresh ticks within ``REST_TOLERANCE_RAD``, every joint slower than
 ``REST_SPEED_RAD_S``; a stalled simulator's repeated state is not rest), and averages the
 joints and the external measurement over ``AVERAGE_TICKS`` fresh ticks (a tick without
-a fresh measurement is skipped; none for ``MEASURE_WAIT_S`` fails the run). Then it
+a fresh measurement is skipped; none for ``MEASURE_WAIT_S`` fails the run, as readings
+spread beyond ``SPREAD_LIMIT_M`` do; a failed run keeps the pairs it measured). Then it
 fits (``fit.fit``) and writes its files under the runs folder: ``pairs.csv`` (what it
 measured: ``deltadash calibrate --from-csv`` fits it again offline), ``report.png`` (the
 residuals before and after) and ``result.json``.
@@ -80,7 +81,8 @@ REST_TICKS = 40  # the joints must stay within REST_TOLERANCE_RAD this many tick
 REST_TOLERANCE_RAD = 2 * RAD_PER_TICK
 REST_SPEED_RAD_S = 0.02  # and every joint's speed below this (about 1 deg/s)
 MOVE_TIMEOUT_S = 60.0
-MEASURE_WAIT_S = 1.0  # at rest, a measurement may be missing this long before the run fails
+MEASURE_WAIT_S = 3.0  # at rest, a measurement may be missing this long before the run fails
+SPREAD_LIMIT_M = 0.003  # a reading this far from its rest's median: the run fails
 STOP_TIMEOUT_S = 5.0
 POLL_S = 0.005
 RUNNING = ("planned", "moving", "fitting")  # the states abort stops
@@ -125,6 +127,18 @@ _NO_MEASUREMENT = {
     "pose-input": "measurement: no fresh motion-capture pose of the platform on the pose "
     "input (body 'platform'; its health: GET /api/mav/pose?body=platform)",
 }
+
+
+def _keep_measured(run: CalibrationRun) -> None:
+    """A run that ended early keeps what it measured (pairs.csv, fit poses first; a
+    `deltadash calibrate --from-csv` of enough of them still fits)."""
+    if not run.measured or (run.folder / "pairs.csv").exists():
+        return
+    held = max(0, len(run.measured) - len(run.plan.fit_joints))
+    try:
+        write_pairs(run.folder / "pairs.csv", np.array(run.joints), np.array(run.measured), held)
+    except Exception:  # never hides why the run ended
+        log.exception("calibration run %s: its pairs could not be kept", run.run_id)
 
 
 class Stopped(Exception):
@@ -456,9 +470,11 @@ class CalibrationManager:
             _judge(run, result)
         except (Stopped, CalibrationError, GoalRejected, MotionRefused) as exc:
             run.advance("failed", str(exc))
+            _keep_measured(run)
         except Exception as exc:  # a bug ends the run, saying so, never the server
             log.exception("calibration run %s failed", run.run_id)
             run.advance("failed", f"internal error: {exc!r}")
+            _keep_measured(run)
 
     def _execute_probe(self, run: CalibrationRun) -> None:
         try:
@@ -549,7 +565,15 @@ class CalibrationManager:
             answered_s = time.monotonic()
             joints.append(snap.joints_measured_rad)
             measured.append(y)
-        return np.mean(joints, axis=0), np.mean(measured, axis=0)
+        seen = np.array(measured)
+        spread = float(np.linalg.norm(seen - np.median(seen, axis=0), axis=1).max())
+        if spread > SPREAD_LIMIT_M:
+            raise Stopped(
+                f"measurement: at pose {run.pose + 1} the readings of the resting arm spread "
+                f"{spread * 1e3:.1f} mm (over {SPREAD_LIMIT_M * 1e3:g} mm): a marker swapped "
+                "or occluded, or the base moving?"
+            )
+        return np.mean(joints, axis=0), np.mean(seen, axis=0)
 
     # ---- apply ----
     def apply(self, run_id: str, settings_joints: list[JointCalibration]) -> dict[str, Any]:

@@ -218,6 +218,18 @@ def _remote(args: argparse.Namespace) -> int:
     def work(headers: dict[str, str], problems: list[str]) -> int:
         running = None  # the run to abort if this ends (Ctrl-C) before it does
         try:
+            if args.measurement == "pose-input":  # before torque on: nothing to measure by
+                stream = cli_run._http(f"{url}/api/mav/pose?body=platform", headers=headers)
+                if stream["state"] != "ok":
+                    print(
+                        f"error: --measurement pose-input: the platform marker's stream is "
+                        f"{stream['state']} (body 'platform' on the pose input; "
+                        f"{stream['accepted']} samples taken, {stream['dropped']} dropped, "
+                        f"{stream.get('udp_errors') or 0} datagrams refused); start it first "
+                        "(docs/calibration.md)",
+                        file=sys.stderr,
+                    )
+                    return 2
             cli_run._http(f"{url}/api/torque", "POST", {"enabled": True}, headers)
             request: dict[str, Any] = {"poses": args.poses, "parameters": args.parameters}
             if args.probe:

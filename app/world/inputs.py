@@ -31,7 +31,10 @@ BODIES = ("drone", "platform")  # whose pose a sample is: the base's, or the pla
 
 
 def body_of(data: dict[str, Any]) -> str:
-    """The ``body`` field of a pose object ("drone" when absent); PoseError otherwise."""
+    """The ``body`` field of a pose object ("drone" when absent); PoseError for another
+    value, or for a message that is not a JSON object."""
+    if not isinstance(data, dict):
+        raise PoseError(f"a pose is a JSON object, got {type(data).__name__}")
     body = data.get("body", "drone")
     if body not in BODIES:
         raise PoseError(f"body: {body!r} is not one of {', '.join(map(repr, BODIES))}")
@@ -96,7 +99,7 @@ class UdpPoseListener:
                 if tracker is None:
                     raise PoseError("body: 'platform' poses are not taken here")
                 tracker.push(sample_from_json(data))
-            except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            except (ValueError, KeyError, TypeError) as exc:
                 self.errors += 1
                 log.debug("bad pose datagram: %s", exc)
 

@@ -86,12 +86,23 @@ class PoseTracker:
         self.accepted = 0
         self.dropped = 0
         self.jumps = 0
+        self.restarts = 0
         self._rate_hz = 0.0
 
     def push(self, sample: PoseSample) -> bool:
-        """Keep ``sample`` if newer than the latest; False when dropped (old, duplicate, jump)."""
+        """Keep ``sample`` if newer than the latest; False when dropped (old, duplicate, jump).
+
+        A sample arriving more than ``lost_after_s`` after the latest kept one starts the
+        stream afresh (``restarts``): its time and position are the new baseline, so a
+        restarted source (its clock from 0 again) or one back after an occlusion (or after
+        a bad first sample) is not refused for ever as out of order or jumping."""
         with self._lock:
             latest = self._latest
+            if latest is not None and sample.received_s - latest.received_s > self.lost_after_s:
+                self.restarts += 1
+                self._previous, self._latest, self._rate_hz = None, sample, 0.0
+                self.accepted += 1
+                return True
             if latest is not None and sample.t_s <= latest.t_s:
                 self.dropped += 1
                 return False
@@ -140,4 +151,5 @@ class PoseTracker:
             "accepted": self.accepted,
             "dropped": self.dropped,
             "jumps": self.jumps,
+            "restarts": self.restarts,
         }

@@ -65,8 +65,16 @@ class WorldService:
             self._listeners.append(MavlinkPoseListener(self.tracker, world.mavlink_url).start())
 
     def tracker_for(self, body: str) -> PoseTracker:
-        """The tracker of ``body`` ("drone" or "platform")."""
-        return self.platform if body == "platform" else self.tracker
+        """The tracker of ``body`` ("drone" or "platform"); ValueError for another."""
+        trackers = {"drone": self.tracker, "platform": self.platform}
+        if body not in trackers:
+            raise ValueError(f"body: {body!r} is not 'drone' or 'platform'")
+        return trackers[body]
+
+    def udp_errors(self) -> int | None:
+        """Datagrams the UDP pose input refused (None without one)."""
+        udp = [x for x in self._listeners if isinstance(x, UdpPoseListener)]
+        return udp[0].errors if udp else None
 
     def close(self) -> None:
         for listener in self._listeners:

@@ -52,6 +52,20 @@ def test_tracker_drops_old_duplicate_and_jumping_samples():
     assert tracker.dropped == 3 and tracker.jumps == 1
 
 
+def test_a_stream_back_after_a_loss_starts_afresh():
+    tracker = PoseTracker(stale_after_s=0.05, lost_after_s=0.5, max_jump_m=0.05)
+    assert tracker.push(make_sample(100.0, [0, 0, 0], [1, 0, 0, 0], received_s=1.0))  # occluded
+    # real samples 1 m away, then a restarted clock: refused while the baseline is fresh
+    assert not tracker.push(make_sample(100.01, [1, 0, 1], [1, 0, 0, 0], received_s=1.01))
+    assert not tracker.push(make_sample(0.0, [1, 0, 1], [1, 0, 0, 0], received_s=1.2))
+    # once the kept sample is older than lost_after_s, the next one is the new baseline
+    assert tracker.push(make_sample(0.3, [1, 0, 1], [1, 0, 0, 0], received_s=1.6))
+    assert tracker.push(make_sample(0.31, [1.001, 0, 1], [1, 0, 0, 0], received_s=1.61))
+    sample, velocity = tracker.latest()
+    assert sample.t_s == 0.31 and velocity[0] == pytest.approx(0.1)
+    assert tracker.restarts == 1 and tracker.jumps == 1 and tracker.dropped == 2
+
+
 def test_tracker_health_ages():
     tracker = PoseTracker(stale_after_s=0.05, lost_after_s=0.5, max_jump_m=0.05)
     assert tracker.health(0.0)[0] == "none"

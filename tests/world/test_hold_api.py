@@ -59,6 +59,8 @@ def test_a_platform_marker_pose_is_its_own_stream(client):
         ws.send_text(json.dumps({**body, "t": 500.01}))
         ws.send_text(json.dumps({**body, "body": "tool"}))
         assert "body" in ws.receive_json()["error"]
+        ws.send_text("[1]")  # not an object: answered, the stream stays open
+        assert "object" in ws.receive_json()["error"]
     wait_for(
         lambda: ok_json(client.get("/api/mav/pose?body=platform"))["accepted"] == marker + 2,
         "the streamed marker pose",

@@ -33,8 +33,9 @@ router = APIRouter(tags=["drone"])
 
 
 class PoseBody(BaseModel):
-    """One drone pose: source time [s], world position [m], quaternion (w, x, y, z) body to
-    world, optional world velocity [m/s] and body angular velocity [rad/s]."""
+    """One pose of the drone (or of a marker on the platform: ``body``): source time [s],
+    world position [m], quaternion (w, x, y, z) body to world, optional world velocity
+    [m/s] and body angular velocity [rad/s]."""
 
     model_config = ConfigDict(extra="forbid", strict=True)
     t: Finite
@@ -104,8 +105,9 @@ def get_pose_status(
     world: WorldDep, body: Literal["drone", "platform"] = "drone"
 ) -> dict[str, Any]:
     """The pose input's health for ``body`` (the drone's by default, or the platform
-    marker's): state (ok/stale/lost/none), age, rate, counters."""
-    return world.tracker_for(body).status()
+    marker's): state (ok/stale/lost/none), age, rate, counters (and the UDP input's
+    refused datagrams)."""
+    return world.tracker_for(body).status() | {"udp_errors": world.udp_errors()}
 
 
 @router.websocket("/mav/pose")

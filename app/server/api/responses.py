@@ -133,14 +133,22 @@ class BusStatusOut(_Out):
 
 
 class PoseInputStatus(_Out):
-    """The drone pose input's health."""
+    """A pose input's health (the drone's, or a platform marker's: ``body``)."""
 
     state: str = Field(description="ok | stale | lost | none")
     age_s: float | None = Field(description="since the last accepted sample [s]")
     rate_hz: float
     accepted: int
-    dropped: int
+    dropped: int = Field(description="samples dropped: out of order, duplicate or jumping")
     jumps: int
+    restarts: int = Field(
+        0, description="times the stream started afresh: a sample after lost_after_s of none"
+    )
+    udp_errors: int | None = Field(
+        None,
+        description="GET only, with [world] udp_port: datagrams refused (not JSON, a bad "
+        "field or body), of both bodies",
+    )
 
 
 class StatusOut(_Out):

@@ -83,9 +83,11 @@ def test_bad_poses_are_refused_naming_the_field(served, capsys):
 
 
 def test_motion_capture_without_a_stream_is_refused_saying_so(served, capsys):
+    torque = served.get("/api/status").json()["torque"]
     code = main(
         ["calibrate", "--url", URL, "--poses", "16", "--take-over", "--measurement", "pose-input"]
     )
     err = capsys.readouterr().err
-    assert code != 0 and "motion-capture" in err and "body 'platform'" in err, err
-    assert served.get("/api/status").json()["mode"] == "idle"
+    assert code == 2 and "stream is none" in err and "body 'platform'" in err, err
+    status = served.get("/api/status").json()
+    assert status["mode"] == "idle" and status["torque"] == torque, status  # nothing done

@@ -127,6 +127,7 @@ def test_a_stream_that_stops_ends_the_run_with_its_reason(client, mocap) -> None
         wait_for(lambda: _state(client, run_id)["progress"]["pose"] >= 1, "a first pose", RUN_S)
     body = _ended(client, run_id)
     assert body["state"] == "failed" and "motion-capture" in body["error"], body
+    assert "pairs.csv" in body["files"], body  # what it measured is kept
     status = ok_json(client.get("/api/status"))
     assert status["mode"] == "idle" and status["torque"], status  # holding, free again
     assert ok_json(client.get("/api/calibration"))[0]["run_id"] == run_id
