@@ -10,6 +10,7 @@ import io
 import urllib.error
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
@@ -58,6 +59,9 @@ def served(app, monkeypatch) -> TestClient:
         return response.json()
 
     monkeypatch.setattr(cli_run, "_http", http)
+    # the emulated bus has no external measurement (a run would be refused at its start):
+    # one that answers, as the stood-in thread measures nothing anyway
+    monkeypatch.setitem(app.app.state.calibration.measures, "external", lambda _: np.zeros(3))
     monkeypatch.setattr(CalibrationManager, "_execute", _until_aborted)
     monkeypatch.setattr(TuningManager, "_execute", _until_aborted)
     return app
