@@ -100,7 +100,7 @@ def post_pose(body: PoseBody, world: WorldDep, _: TokenChecked) -> dict[str, Any
     return _push(world, body.model_dump())
 
 
-@router.get("/mav/pose", response_model=PoseInputStatus)
+@router.get("/mav/pose", response_model=PoseInputStatus, responses=INVALID)
 def get_pose_status(
     world: WorldDep, body: Literal["drone", "platform"] = "drone"
 ) -> dict[str, Any]:
