@@ -24,7 +24,12 @@ PREAMBLE = "import tests.support.slow_checks as slow; slow.install()"
 
 def slow_check(job: CheckJob) -> CheckedProgram:
     """In the worker: say so, hold HOLD_S (or until the server is gone), then check."""
-    Path(os.environ[STARTED_ENV]).write_text(str(os.getpid()))
+    # written whole, then renamed into place: the test polls for the file and reads the
+    # pid at once (CI read an empty file created but not yet written)
+    started = Path(os.environ[STARTED_ENV])
+    partial = started.with_name(started.name + ".partial")
+    partial.write_text(str(os.getpid()))
+    partial.replace(started)
     server, end = os.getppid(), time.monotonic() + HOLD_S
     while time.monotonic() < end and os.getppid() == server:
         time.sleep(0.2)
