@@ -32,12 +32,15 @@ JOINTS = [{"servo_id": 1}, {"servo_id": 2}, {"servo_id": 3, "max_angle_rad": HIG
 # a starved simulator (the twin, or the one the emulated servos move) may stall or lag for
 # a while on a loaded machine: these tests look at the panel, not at the loop's faults
 PATIENT = {"stale_feedback_s": 5.0, "following_error_time_s": 5.0}
+# a held jog's heartbeat may come late too: the jog below must still be going when the
+# requests after its start arrive (CI once saw it stopped at the 0.15 s default)
+SLOW_DEADMAN = {"hold_timeout_s": 2.0}
 
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory):
     folder = tmp_path_factory.mktemp("panel")
-    with make_client(folder, hardware={"joints": JOINTS}, safety=PATIENT) as c:
+    with make_client(folder, hardware={"joints": JOINTS}, safety=PATIENT, jog=SLOW_DEADMAN) as c:
         take_lease(c)
         yield c
 
