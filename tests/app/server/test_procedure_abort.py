@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.support.app_client import make_client, torque_on
+from tests.support.app_client import make_client, settle_at, torque_on
 from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
@@ -41,8 +41,11 @@ def twin(tmp_path_factory):
 
 
 def _ready(client) -> None:
+    """Reset, torque on and the arm at rest at REST: a procedure plans from where the arm
+    is, and refuses to go on if it then moved (CI saw an arm still swinging after torque on
+    move 23.7 mm between a tuning's plan and its first run)."""
     client.post("/api/reset")
-    torque_on(client)
+    settle_at(client, REST)
 
 
 def _status(client) -> dict:
@@ -111,7 +114,8 @@ def test_estop_stops_a_calibration_and_frees_the_robot(twin) -> None:
     wait_for(lambda: not twin.app.state.calibration.running(), "its thread to end", WAIT_S)
     answer = twin.post(f"/api/calibration/{run_id}/abort")
     assert answer.status_code == 409 and "failed" in answer.text, answer.text
-    _ready(twin)
+    twin.post("/api/reset")
+    torque_on(twin)
     _idle_and_free(twin)
 
 
