@@ -41,7 +41,27 @@ def _hold(client, compensate: bool) -> dict:
     run = ok_json(client.get(f"/api/runs/{run_id}"))
     assert run["state"] == "done", run
     rows = csv.DictReader(io.StringIO(client.get(f"/api/runs/{run_id}/log.csv").text))
-    return run["stats"]["world"], [r for r in rows if r["phase"] == "hold"]
+    world = run["stats"]["world"] | {"health": run["stats"]["health"]}
+    return world, [r for r in rows if r["phase"] == "hold"]
+
+
+STARVED_GAP_MS = 250.0  # a pause this long, or
+STARVED_STALE_MS = 250.0  # the simulator's time standing this long, spoils a 3 s hold
+
+
+def _starved(world: dict) -> list[str]:
+    """What of a run's loop health makes its tip figures say nothing of the method: the
+    loop paused, or the simulator stood still, for a quarter of a second (two suites and
+    CPU hogs on two cores did that). The health's own limits (20 ms, 1 %) are tighter: a
+    quiet 2-core machine passes them narrowly or not, and the comparison still holds
+    there (docs/performance.md, "Hold-in-world with a tool and a wrist")."""
+    health = world["health"]
+    out = []
+    if health["longest_gap_ms"] > STARVED_GAP_MS:
+        out.append(f"the loop paused {health['longest_gap_ms']:.0f} ms")
+    if health["longest_stale_ms"] > STARVED_STALE_MS:
+        out.append(f"the simulator stood {health['longest_stale_ms']:.0f} ms")
+    return out
 
 
 def _heading_errors(rows: list[dict]) -> tuple[np.ndarray, np.ndarray]:
@@ -62,7 +82,6 @@ def test_compensated_hold_keeps_the_tip_better_and_the_heading(client):
     def tip_rmse(world: dict) -> float:
         return math.sqrt(sum(world[a]["rmse_m"] ** 2 for a in "xyz"))
 
-    assert tip_rmse(compensated) < tip_rmse(plain), (tip_rmse(compensated), tip_rmse(plain))
     for world, rows in ((plain, plain_rows), (compensated, compensated_rows)):
         heading = world["heading"]
         assert heading["samples"] > 0 and heading["limited_s"] == 0.0
@@ -70,6 +89,11 @@ def test_compensated_hold_keeps_the_tip_better_and_the_heading(client):
         turned, unturned = _heading_errors(rows)
         rms = [float(np.sqrt(np.mean(e**2))) for e in (turned, unturned)]
         assert rms[0] < rms[1], rms
+    # two real-time runs compared: only meaningful when neither starved (CI once saw the
+    # compensated hold at 48 mm against 20 mm with both suites of two clones side by side)
+    if starved := _starved(plain) + _starved(compensated):
+        pytest.skip(f"the tip comparison: the simulator starved ({'; '.join(starved)})")
+    assert tip_rmse(compensated) < tip_rmse(plain), (tip_rmse(compensated), tip_rmse(plain))
 
 
 @pytest.mark.slow
