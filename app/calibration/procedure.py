@@ -83,6 +83,7 @@ REST_SPEED_RAD_S = 0.02  # and every joint's speed below this (about 1 deg/s)
 MOVE_TIMEOUT_S = 60.0
 MEASURE_WAIT_S = 3.0  # at rest, a measurement may be missing this long before the run fails
 SPREAD_LIMIT_M = 0.003  # a reading this far from its rest's median: the run fails
+Ending = tuple[str, str | None]  # the state a run ends in (done/refused/failed), its error
 STOP_TIMEOUT_S = 5.0
 POLL_S = 0.005
 RUNNING = ("planned", "moving", "fitting")  # the states abort stops
@@ -440,17 +441,24 @@ class CalibrationManager:
         """The thread: its motions are ``claim``'s; the robot is free again when it ends."""
         owner = self.controller.owner
         owner.bind(claim)
+        ending: Ending = ("failed", "internal error: the run's thread ended early")
         try:
-            self._execute(run)
+            ending = self._execute(run)
         finally:
             owner.release(claim)
-            self._save(run)
+            # the state says the run ended only once its files are written and the robot
+            # is free: a client that sees "failed" finds pairs.csv and an idle robot
+            try:
+                self._save(run, ending)
+            except OSError:  # a full disk: the run still ends, saying how
+                log.exception("calibration run %s: result.json not written", run.run_id)
+            run.advance(*ending)
 
-    def _execute(self, run: CalibrationRun) -> None:
+    def _execute(self, run: CalibrationRun) -> Ending:
+        """Moves, measures and fits; the state the run ends in, with its error."""
         try:
             if run.source == "probe":
-                self._execute_probe(run)
-                return
+                return self._execute_probe(run)
             run.advance("moving")
             for q in run.plan.joints:
                 joints, measured = self._visit(run, q)
@@ -467,16 +475,16 @@ class CalibrationManager:
             from app.calibration.report import write_report  # matplotlib: only when needed
 
             write_report(run.folder / "report.png", result, f"calibration {run.run_id}")
-            _judge(run, result)
+            return _judge(result)
         except (Stopped, CalibrationError, GoalRejected, MotionRefused) as exc:
-            run.advance("failed", str(exc))
             _keep_measured(run)
+            return "failed", str(exc)
         except Exception as exc:  # a bug ends the run, saying so, never the server
             log.exception("calibration run %s failed", run.run_id)
-            run.advance("failed", f"internal error: {exc!r}")
             _keep_measured(run)
+            return "failed", f"internal error: {exc!r}"
 
-    def _execute_probe(self, run: CalibrationRun) -> None:
+    def _execute_probe(self, run: CalibrationRun) -> Ending:
         try:
             assert self.probe is not None and run.probe_xy is not None and run.plate_z_m is not None
             run.advance("moving")
@@ -494,15 +502,20 @@ class CalibrationManager:
 
             title = f"probe calibration {run.run_id} (plate at z = {run.plate_z_m * 1e3:.1f} mm)"
             write_report(run.folder / "report.png", result, title)
-            _judge(run, result)
+            return _judge(result)
         except (Stopped, CalibrationError, GoalRejected, MotionRefused) as exc:
-            run.advance("failed", str(exc))
+            return "failed", str(exc)
         except Exception as exc:  # a bug ends the run, saying so, never the server
             log.exception("calibration run %s failed", run.run_id)
-            run.advance("failed", f"internal error: {exc!r}")
+            return "failed", f"internal error: {exc!r}"
 
-    def _save(self, run: CalibrationRun) -> None:
-        (run.folder / "result.json").write_text(json.dumps(run.view(), indent=1))
+    def _save(self, run: CalibrationRun, ending: Ending | None = None) -> None:
+        """The run's result.json (as it is, or as it will be once it ends in ``ending``;
+        an aborted run stays aborted)."""
+        body = run.view()
+        if ending is not None and not run.aborted.is_set():
+            body["state"], body["error"] = ending[0], ending[1] or body["error"]
+        (run.folder / "result.json").write_text(json.dumps(body, indent=1))
 
     def _wait(
         self, run: CalibrationRun, what: str, until: Callable[[Snapshot], bool], timeout_s: float
@@ -674,17 +687,16 @@ def write_calibration(
     write_config(path, config)
 
 
-def _judge(run: CalibrationRun, result: FitResult) -> None:
+def _judge(result: FitResult) -> Ending:
     """done when the fit beats the current model on the held-out data, else refused."""
     if result.better:
-        run.advance("done")
-    else:
-        run.advance(
-            "refused",
-            f"the fit is worse on the held-out poses than the current model "
-            f"({result.holdout_rmse_m * 1e3:.3f} mm vs "
-            f"{result.holdout_before_m * 1e3:.3f} mm): it is not offered",
-        )
+        return "done", None
+    return (
+        "refused",
+        f"the fit is worse on the held-out poses than the current model "
+        f"({result.holdout_rmse_m * 1e3:.3f} mm vs "
+        f"{result.holdout_before_m * 1e3:.3f} mm): it is not offered",
+    )
 
 
 def offsets_into_zero_ticks(

@@ -80,6 +80,7 @@ RUN_TIMEOUT_S = 120.0  # a starved twin runs slower than the wall clock
 POLL_S = 0.01
 RUNNING = ("planned", "moving", "step", "chirp", "fitting", "checking")  # abort stops these
 CHECK_TIMEOUT_S = 900.0  # the twin check's worker is killed beyond this (a loaded machine)
+Ending = tuple[str, str | None]  # the state a run ends in (done/failed), its error
 TwinCheck = Callable[[OfferJob], Offer]
 
 
@@ -324,13 +325,21 @@ class TuningManager:
         """The thread: its motions are ``claim``'s; the robot is free again when it ends."""
         owner = self.controller.owner
         owner.bind(claim)
+        ending: Ending = ("failed", "internal error: the run's thread ended early")
         try:
-            self._execute(run)
+            ending = self._execute(run)
         finally:
             owner.release(claim)
-            self._save(run)
+            # the state says the run ended only once result.json is written and the robot
+            # is free: a client that sees "done" or "failed" finds both
+            try:
+                self._save(run, *ending)
+            except OSError:  # a full disk: the run still ends, saying how
+                log.exception("tuning run %s: result.json not written", run.run_id)
+            run.advance(*ending)
 
-    def _execute(self, run: TuningRun) -> None:
+    def _execute(self, run: TuningRun) -> Ending:
+        """Records, fits and checks; the state the run ends in, with its error."""
         try:
             logs = {}
             for kind, params in (("step", STEP), ("chirp", CHIRP)):
@@ -349,14 +358,12 @@ class TuningManager:
 
             bode_figure(fits, bodes, run.folder / "bode.png")
             self._suggest(run)
-            if not run.aborted.is_set():  # result.json before the state says done
-                self._save(run, state="done")
-            run.advance("done")
+            return "done", None
         except (Stopped, IdentificationError, TuningError, GoalRejected, MotionRefused) as exc:
-            run.advance("failed", str(exc))
+            return "failed", str(exc)
         except Exception as exc:  # a bug ends the run, saying so, never the server
             log.exception("tuning run %s failed", run.run_id)
-            run.advance("failed", f"internal error: {exc!r}")
+            return "failed", f"internal error: {exc!r}"
 
     def _suggest(self, run: TuningRun) -> None:
         """The fitted joints' candidate gains checked on the twin (state ``checking``);
@@ -434,9 +441,12 @@ class TuningManager:
         if claim is not None:
             self.controller.owner.release(claim)
 
-    def _save(self, run: TuningRun, state: str | None = None) -> None:
-        """The run's result.json (as it is, or as it will be in `state`)."""
-        body = run.view() | ({"state": state} if state is not None else {})
+    def _save(self, run: TuningRun, state: str | None = None, error: str | None = None) -> None:
+        """The run's result.json (as it is, or as it will be once it ends in ``state``
+        with ``error``; an aborted run stays aborted)."""
+        body = run.view()
+        if state is not None and not run.aborted.is_set():
+            body["state"], body["error"] = state, error or body["error"]
         (run.folder / "result.json").write_text(json.dumps(body, indent=1))
 
     def _wait(self, run: TuningRun, what: str, until: Callable[[], bool], timeout_s: float) -> None:

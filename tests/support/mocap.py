@@ -3,10 +3,10 @@
 ``TwinMocap`` reads the twin's own view of its platform (``measure_platform``: the true
 centre plus marker, in the twin's measurement frame, with its noise) at ``rate_hz`` and
 sends each reading to the server's UDP pose input as the documented JSON, body
-"platform", with its own clock, a still orientation and ``shift_m`` added: the stream's
-world frame is then not the one the twin's ``ee.external_m`` uses, so a fit that came out
-in the shifted frame used the stream. It is what a VICON/OptiTrack bridge does, over the
-real socket and listener.
+"platform", with its own clock (one that runs on from one stream to the next), a still
+orientation and ``shift_m`` added: the stream's world frame is then not the one the
+twin's ``ee.external_m`` uses, so a fit that came out in the shifted frame used the
+stream. It is what a VICON/OptiTrack bridge does, over the real socket and listener.
 """
 
 from __future__ import annotations
@@ -40,11 +40,10 @@ class TwinMocap:
 
     def _run(self) -> None:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
-            start = time.monotonic()
             while not self._stop.wait(self.period_s):
                 position = self.bus.measure_platform() + self.shift_m
                 sample = {
-                    "t": time.monotonic() - start,
+                    "t": time.monotonic(),  # a capture system's clock: it runs on between takes
                     "position": [float(v) for v in position],
                     "quaternion": [1.0, 0.0, 0.0, 0.0],
                     "body": "platform",

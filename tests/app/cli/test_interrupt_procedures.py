@@ -25,9 +25,10 @@ URL = "http://testserver"
 WAIT_S = 60.0
 
 
-def _until_aborted(self, run) -> None:
+def _until_aborted(self, run) -> tuple[str, str | None]:
     """A run's thread that moves nothing and ends only when the run is aborted."""
     assert run.aborted.wait(WAIT_S), "the run was not aborted"
+    return "failed", "aborted by the operator"  # an aborted run stays aborted
 
 
 def _interrupt(*_args, **_kwargs) -> None:

@@ -53,14 +53,13 @@ def _twin_check(job: OfferJob):
     )
 
 
-def _identified(self: TuningManager, run: TuningRun) -> None:
+def _identified(self: TuningManager, run: TuningRun) -> tuple[str, str | None]:
     """What a run's thread leaves (stands in for the step and chirp runs and the fit; the
-    twin check's verdicts are `_stand_in_check`'s)."""
+    twin check's verdicts are `_stand_in_check`'s): the state it ends in."""
     run.fits = [JointFit(joint, MODEL, 1e-3, 0.1, 500) for joint in run.joints]
     self.twin_check = _twin_check
     self._suggest(run)
-    run.state = "done"
-    self._save(run)
+    return "done", None
 
 
 @pytest.fixture(autouse=True)

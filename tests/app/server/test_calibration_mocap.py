@@ -77,8 +77,22 @@ def _ended(client, run_id: str) -> dict:
     )
 
 
+def _marker(client) -> dict:
+    return ok_json(client.get("/api/mav/pose?body=platform"))
+
+
 def _marker_fresh(client) -> bool:
-    return ok_json(client.get("/api/mav/pose?body=platform"))["state"] == "ok"
+    return _marker(client)["state"] == "ok"
+
+
+def _stream_up(client, accepted_before: int) -> None:
+    """Waits until the server keeps this stream's samples (not a last one of the one
+    before, still fresh for stale_after_s after a previous test stopped streaming)."""
+    wait_for(
+        lambda: (m := _marker(client))["state"] == "ok" and m["accepted"] > accepted_before + 10,
+        "the marker's stream",
+        seen=lambda: _marker(client),
+    )
 
 
 @pytest.mark.slow  # the twin, through a calibration
@@ -99,8 +113,9 @@ def test_without_a_fresh_stream_the_run_does_not_start(client) -> None:
 @pytest.mark.slow
 def test_a_run_measured_by_the_stream_recovers_the_offsets(client, mocap) -> None:
     _ready(client)
+    accepted = _marker(client)["accepted"]
     with mocap.streaming():
-        wait_for(lambda: _marker_fresh(client), "the marker's stream")
+        _stream_up(client, accepted)
         run_id = ok_json(
             client.post("/api/calibration/run", json={"poses": 16, "measurement": "pose-input"})
         )["run_id"]
@@ -119,8 +134,9 @@ def test_a_run_measured_by_the_stream_recovers_the_offsets(client, mocap) -> Non
 @pytest.mark.slow
 def test_a_stream_that_stops_ends_the_run_with_its_reason(client, mocap) -> None:
     _ready(client)
+    accepted = _marker(client)["accepted"]
     with mocap.streaming():
-        wait_for(lambda: _marker_fresh(client), "the marker's stream")
+        _stream_up(client, accepted)
         run_id = ok_json(
             client.post("/api/calibration/run", json={"poses": 16, "measurement": "pose-input"})
         )["run_id"]
