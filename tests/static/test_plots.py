@@ -178,10 +178,11 @@ def test_the_cursor_reads_out_the_drawn_values_at_the_hovered_time(plots: Any, p
     data = drawn(plots)
     readout = plots.locator("#plot-readout")
     # the drawn sample nearest -3 s: hovered there, it is the nearest to the pointer even
-    # where a loaded machine left a gap in the samples around -3 s
+    # where a loaded machine left a gap in the samples around -3 s (CI once drew none
+    # between -3.5 and -2.49 s); any sample well inside the 10 s window will do
     times = data[0][0]
     target = min(times, key=lambda x: abs(x - -3.0))
-    assert abs(target - -3.0) < 0.5, target
+    assert -9.0 < target < -1.0, (target, times)
     last: dict[str, Any] = {"target": target}
 
     def hovered() -> bool:
