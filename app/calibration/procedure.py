@@ -308,12 +308,13 @@ class CalibrationManager:
             run.state, run.error = "aborted", "aborted by the operator"
             if self._claim is not None:
                 self.controller.owner.release(self._claim, then=self._stop_motion)
-        self._save(run)
+            self._save(run)  # under the lock: the thread's last save cannot land after it
         return run
 
     def running(self) -> bool:
         """A run's thread is moving the arm or fitting."""
-        return self._thread is not None and self._thread.is_alive()
+        thread = self._thread  # None once its run has ended (_hold)
+        return thread is not None and thread.is_alive()
 
     def start(
         self,
@@ -339,7 +340,7 @@ class CalibrationManager:
                 measurement has nothing fresh now (409).
         """
         with self._lock:
-            if self._thread is not None and self._thread.is_alive():
+            if self.running():
                 raise MotionRefused("a calibration run is in progress")
             # another procedure holds the robot (named, with its abort route), or a run
             if (other := self.controller.owner.busy() or self.busy()) is not None:
@@ -433,8 +434,9 @@ class CalibrationManager:
 
     def close(self) -> None:
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
+        thread = self._thread
+        if thread is not None:
+            thread.join(timeout=5.0)
 
     # ---- the run's thread ----
     def _hold(self, run: CalibrationRun, claim: Claim) -> None:
@@ -445,14 +447,21 @@ class CalibrationManager:
         try:
             ending = self._execute(run)
         finally:
-            owner.release(claim)
-            # the state says the run ended only once its files are written and the robot
-            # is free: a client that sees "failed" finds pairs.csv and an idle robot
-            try:
-                self._save(run, ending)
-            except OSError:  # a full disk: the run still ends, saying how
-                log.exception("calibration run %s: result.json not written", run.run_id)
-            run.advance(*ending)
+            # one step under the lock, so an abort finds the run either running (and stops
+            # it) or ended: the robot freed, result.json written, then the state published;
+            # a client that sees the run ended finds its files and the robot free, and may
+            # start the next run at once
+            with self._lock:
+                if self._claim is claim:
+                    self._claim = None
+                owner.release(claim)
+                try:
+                    self._save(run, ending)
+                except Exception:  # a full disk, a bug in the view: the run still ends
+                    log.exception("calibration run %s: result.json not written", run.run_id)
+                run.advance(*ending)
+                if self._thread is threading.current_thread():
+                    self._thread = None  # not running from here on (running())
 
     def _execute(self, run: CalibrationRun) -> Ending:
         """Moves, measures and fits; the state the run ends in, with its error."""

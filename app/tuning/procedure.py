@@ -262,11 +262,12 @@ class TuningManager:
 
             if claim is not None:
                 self.controller.owner.release(claim, then=stop)
-        self._save(run)
+            self._save(run)  # under the lock: the thread's last save cannot land after it
         return run
 
     def running(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
+        thread = self._thread  # None once its run has ended (_hold)
+        return thread is not None and thread.is_alive()
 
     def start(self, joints: tuple[int, ...], target: Target) -> TuningRun:
         """Start a run (returns at once; its thread moves the arm).
@@ -317,8 +318,9 @@ class TuningManager:
             self._stop.set()
             if self._workers is not None:
                 self._workers.close()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
+        thread = self._thread
+        if thread is not None:
+            thread.join(timeout=5.0)
 
     # ---- the run's thread ----
     def _hold(self, run: TuningRun, claim: Claim) -> None:
@@ -329,14 +331,21 @@ class TuningManager:
         try:
             ending = self._execute(run)
         finally:
-            owner.release(claim)
-            # the state says the run ended only once result.json is written and the robot
-            # is free: a client that sees "done" or "failed" finds both
-            try:
-                self._save(run, *ending)
-            except OSError:  # a full disk: the run still ends, saying how
-                log.exception("tuning run %s: result.json not written", run.run_id)
-            run.advance(*ending)
+            # one step under the lock, so an abort finds the run either running (and stops
+            # it) or ended: the robot freed, result.json written, then the state published;
+            # a client that sees the run ended finds its files and the robot free, and may
+            # start the next run at once
+            with self._lock:
+                if self._claim is claim:
+                    self._claim = None
+                owner.release(claim)
+                try:
+                    self._save(run, *ending)
+                except Exception:  # a full disk, a bug in the view: the run still ends
+                    log.exception("tuning run %s: result.json not written", run.run_id)
+                run.advance(*ending)
+                if self._thread is threading.current_thread():
+                    self._thread = None  # not running from here on (running())
 
     def _execute(self, run: TuningRun) -> Ending:
         """Records, fits and checks; the state the run ends in, with its error."""

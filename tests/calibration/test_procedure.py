@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -93,3 +95,104 @@ def test_the_view_has_the_contract_fields(tmp_path) -> None:
         assert body[key] is not None, key
     assert body["unobservable"] == [] and len(body["singular_values"]) == 18
     assert np.isclose(body["parameters"]["joint_offsets_rad"][0], math.radians(2.0), atol=1e-6)
+
+
+class Owned:
+    """A controller with only the robot's owner (what a run's thread uses as it ends)."""
+
+    def __init__(self) -> None:
+        from app.control.owner import MotionOwner
+
+        self.owner = MotionOwner()
+
+
+def _ending_run(tmp_path, monkeypatch, ending, save):
+    """A manager whose run is "moving" with its claim held; its thread's work ends in
+    `ending` at once and `save(manager, run)` stands in for writing result.json."""
+    controller = Owned()
+    manager = CalibrationManager(controller, tmp_path)  # type: ignore[arg-type]
+    run = _run(tmp_path, "offsets", "moving")[1]
+    manager._runs = {run.run_id: run}
+    claim = controller.owner.claim(f"calibration run {run.run_id}", "abort")
+    manager._claim = claim
+    monkeypatch.setattr(CalibrationManager, "_execute", lambda self, r: ending)
+    real_save = CalibrationManager._save
+
+    def saving(self, r, ending=None):
+        save(self, r)
+        real_save(self, r, ending)
+
+    monkeypatch.setattr(CalibrationManager, "_save", saving)
+    return manager, run, claim
+
+
+def test_a_run_says_it_ended_only_once_its_file_is_written_and_the_robot_free(
+    tmp_path, monkeypatch
+) -> None:
+    """What a client polling the run sees: while result.json is being written the run is
+    still running, and the robot is already free; after, the file and the state agree."""
+    seen = []
+    manager, run, claim = _ending_run(
+        tmp_path,
+        monkeypatch,
+        ("failed", "measurement: the stream stopped"),
+        lambda m, r: seen.append((r.state, m.controller.owner.busy(), m._claim)),
+    )
+    manager._hold(run, claim)
+    assert seen == [("moving", None, None)], seen  # before: ("failed", "calibration run ...")
+    assert (run.state, run.error) == ("failed", "measurement: the stream stopped")
+    saved = json.loads((run.folder / "result.json").read_text())
+    assert (saved["state"], saved["error"]) == (run.state, run.error)
+    assert not manager.running()
+
+
+class CountedLock:
+    """A lock that says (``second``) when a second caller has asked for it."""
+
+    def __init__(self) -> None:
+        self._lock, self._asked, self.second = threading.Lock(), 0, threading.Event()
+
+    def __enter__(self) -> None:
+        self._asked += 1
+        if self._asked >= 2:
+            self.second.set()
+        self._lock.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self._lock.release()
+
+
+def test_an_abort_while_a_run_ends_is_refused_and_stops_nothing(tmp_path, monkeypatch) -> None:
+    """An abort that comes while the thread writes the run's end waits for it, then finds
+    the run ended (409): it neither stops a motion someone started on the freed robot nor
+    leaves result.json saying another state than the run."""
+    writing, go_on = threading.Event(), threading.Event()
+
+    def slow(manager, run) -> None:
+        writing.set()
+        assert go_on.wait(10.0)
+
+    manager, run, claim = _ending_run(tmp_path, monkeypatch, ("done", None), slow)
+    manager._stop_motion = lambda: pytest.fail("the abort stopped a motion")  # type: ignore[method-assign]
+    manager._lock = CountedLock()  # type: ignore[assignment]
+    thread = threading.Thread(target=manager._hold, args=(run, claim))
+    thread.start()
+    assert writing.wait(10.0)
+    answer: dict = {}
+
+    def abort() -> None:
+        try:
+            manager.abort(run.run_id)
+            answer["aborted"] = True
+        except MotionRefused as exc:
+            answer["refused"] = str(exc)
+
+    aborting = threading.Thread(target=abort)
+    aborting.start()
+    assert manager._lock.second.wait(10.0)  # the abort waits on the lock the ending holds
+    go_on.set()
+    thread.join(10.0)
+    aborting.join(10.0)
+    assert "refused" in answer and "is done" in answer["refused"], answer
+    assert run.state == "done"
+    assert json.loads((run.folder / "result.json").read_text())["state"] == "done"
