@@ -181,6 +181,11 @@ class SceneAccess:
         client = self._client(client_id)
         return client.handles.get(name) if client is not None else None
 
+    def unlocked(self, client_id: int) -> bool:
+        """Has this client entered the token (always, when none is set)?"""
+        client = self._client(client_id)
+        return client is not None and client.unlocked
+
     def holds(self, client_id: int) -> bool:
         client = self._client(client_id)
         return client is not None and self.authority.holds(client.lease_id)

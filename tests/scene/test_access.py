@@ -114,12 +114,23 @@ def raw(scene) -> Iterator[tuple[RawClient, int]]:
     try:
         new = wait_for(lambda: set(scene.server.get_clients()) - before, "the client connected")
         client_id = next(iter(new))
-        wait_for(
-            lambda: scene.access.handle(client_id, "take") is not None, "its Control folder built"
-        )
+        wait_for(lambda: built(scene, client_id), "its own folders built")
         yield client, client_id
     finally:
         client.close()
+
+
+def built(scene, client_id: int) -> bool:
+    """The client's own Control, Jog, Goal points and sinusoid folders are there."""
+    return all(
+        handle is not None
+        for handle in (
+            scene.access.handle(client_id, "take"),
+            scene.panel.handle(client_id, "jog"),
+            scene.panel.handle(client_id, "go_to"),
+            scene.tests.handle(client_id, "start"),
+        )
+    )
 
 
 def robot(client: TestClient) -> dict:
@@ -143,10 +154,14 @@ def test_a_websocket_client_without_the_token_cannot_move_the_robot(scene, raw, 
     panel, before = scene.panel, robot(app_client)
     refused_once_more(scene, client_id, lambda: client.set(panel.gui_torque, "off"))
     assert scene.access.message(client_id) == LOCKED
-    refused_once_more(scene, client_id, lambda: client.set(panel.gui_jog, "+Z"))
+    jog, start = panel.handle(client_id, "jog"), scene.tests.handle(client_id, "start")
+    refused_once_more(scene, client_id, lambda: client.set(jog, "+Z"))
     refused_once_more(scene, client_id, lambda: client.set(panel.gui_reset, True))
     refused_once_more(scene, client_id, lambda: client.drag_goal([0.03, 0.0, -0.26]))
-    refused_once_more(scene, client_id, lambda: client.set(scene.tests.gui_start, True))
+    refused_once_more(scene, client_id, lambda: client.set(start, True))
+    for name in ("save_point", "delete_point", "go_to"):  # what a later Go to reaches
+        handle = panel.handle(client_id, name)
+        refused_once_more(scene, client_id, lambda h=handle: client.set(h, True))
     assert unmoved(before, robot(app_client)), (before, robot(app_client))
     assert ok_json(app_client.get("/api/runs")) == []
     assert ok_json(app_client.get("/api/lease"))["holder"] == "browser"
@@ -170,12 +185,13 @@ def test_the_token_unlocks_but_taking_control_from_a_holder_is_explicit(scene, r
     assert scene.access.handle(client_id, "token").value == ""  # not left on screen
     # unlocked, but the browser holds the lease: no command until it takes control
     before = robot(app_client)
-    refused_once_more(scene, client_id, lambda: client.set(scene.panel.gui_jog, "+Z"))
+    jog = scene.panel.handle(client_id, "jog")
+    refused_once_more(scene, client_id, lambda: client.set(jog, "+Z"))
     assert "held by 'browser'" in scene.access.message(client_id)
     assert unmoved(before, robot(app_client)), (before, robot(app_client))
     client.set(scene.access.handle(client_id, "take"), True)
     wait_for(lambda: scene.access.holds(client_id), "the scene client to take control")
-    client.set(scene.panel.gui_jog, "-Z")
+    client.set(jog, "-Z")
     wait_for(lambda: robot(app_client)["goal_m"][2] < GOAL[2] - 1e-3, "the scene's jog down")
     # now the browser's old lease is refused until it takes control back
     refused = app_client.post("/api/torque", json={"enabled": False})
@@ -199,3 +215,73 @@ def test_a_second_scene_client_cannot_command_while_another_holds_control(scene,
     assert not ok_json(app_client.get("/api/lease"))["held"]
     access.disconnect(9002)
     assert first.lease_id is not None
+
+
+def operator_of(scene, client: RawClient, client_id: int) -> None:
+    """Unlock ``client`` with the token and give it control, as the operator does."""
+    client.set(scene.access.handle(client_id, "token"), TOKEN)
+    client.set(scene.access.handle(client_id, "unlock"), True)
+    wait_for(lambda: scene.access.unlocked(client_id), "unlocked by the token")
+    client.set(scene.access.handle(client_id, "take"), True)
+    wait_for(lambda: scene.access.holds(client_id), "the operator to take control")
+
+
+def goal_z(app_client) -> float:
+    return robot(app_client)["goal_m"][2]
+
+
+def test_a_locked_client_cannot_change_what_the_operators_click_does(scene, raw, app_client):
+    """Issue 28 point 1: the jog Step and Speed (and the sinusoid's fields) were shared by
+    every scene client, so a locked one set Step to 50 mm and the operator's next click
+    moved 50 mm. Each client's fields are its own now."""
+    operator, operator_id = raw
+    operator_of(scene, operator, operator_id)
+    before = set(scene.server.get_clients())
+    attacker = RawClient(scene.server.get_port())
+    try:
+        attacker_id = next(
+            iter(wait_for(lambda: set(scene.server.get_clients()) - before, "the attacker"))
+        )
+        wait_for(lambda: built(scene, attacker_id), "the attacker's folders")
+        panel = scene.panel
+        for name, value in (("jog_step", 50.0), ("jog_speed", 500.0)):
+            attacker.set(panel.handle(operator_id, name), value)  # the operator's fields
+            attacker.set(panel.handle(attacker_id, name), value)  # and its own
+        attacker.set(scene.tests.handle(operator_id, "amplitude"), (90.0, 90.0, 90.0))
+        # the attacker's messages are handled in order: once its own field holds 50 mm,
+        # the ones before it were handled too
+        wait_for(lambda: panel.handle(attacker_id, "jog_step").value == 50.0, "handled")
+        refused_once_more(
+            scene, attacker_id, lambda: attacker.set(panel.handle(attacker_id, "jog"), "-Z")
+        )
+    finally:
+        attacker.close()
+    assert panel.handle(operator_id, "jog_step").value == pytest.approx(5.0)
+    assert panel.handle(operator_id, "jog_speed").value == pytest.approx(50.0)
+    assert scene.tests.handle(operator_id, "amplitude").value == pytest.approx((50.0, 50.0, 80.0))
+    z = goal_z(app_client)
+    operator.set(panel.handle(operator_id, "jog"), "-Z")
+    wait_for(lambda: goal_z(app_client) < z - 1e-3, "the operator's jog")
+    assert goal_z(app_client) == pytest.approx(z - 0.005, abs=1e-6), "one 5 mm step"
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "reason"),
+    [("jog_step", 1e6, "jog step"), ("jog_speed", 1e6, "jog speed"), ("jog_step", 0.0, "jog step")],
+)
+def test_the_server_checks_a_jog_field_whoever_sends_it(
+    scene, raw, app_client, field, value, reason
+):
+    """viser stores any number a client sends, whatever the field's min and max: a 1e6 mm
+    step moved the tool 165 mm to the boundary. The server refuses it and nothing moves."""
+    operator, operator_id = raw
+    operator_of(scene, operator, operator_id)
+    panel = scene.panel
+    operator.set(panel.handle(operator_id, field), value)
+    wait_for(lambda: panel.handle(operator_id, field).value == value, "the field written")
+    before = robot(app_client)
+    panel.message = ""
+    operator.set(panel.handle(operator_id, "jog"), "+X")
+    wait_for(lambda: reason in panel.message, "the jog refused", seen=lambda: panel.message)
+    assert "refused" in panel.message
+    assert unmoved(before, robot(app_client)), (before, robot(app_client))

@@ -64,8 +64,7 @@ def test_scene_jog_after_torque_off_and_on_moves_by_the_step_only(sim_client) ->
         status(client)["ee"]["commanded_m"]
     ), "goal must be the held point, not the old goal"
 
-    panel.gui_jog_step.value = 5.0
-    panel.jog((1, 0, 0))
+    panel.jog((1, 0, 0), step_mm=5.0)
     wait_for(lambda: status(client)["mode"] == "jog", "the jog to start")
     after = np.array(wait_for(lambda: still(client), "the jog to end"))
     moved = np.linalg.norm(after - before)

@@ -48,13 +48,13 @@ def _scene_app(folder) -> TestClient:
 def test_points_saved_in_the_scene_are_there_after_a_restart(tmp_path):
     with _scene_app(tmp_path) as client:
         scene = client.app.state.scene
-        name = scene.goals.save("pick", np.array([-0.03, 0.02, -0.27]))
-        scene.panel._refresh_points(name)
+        scene.goals.save("pick", np.array([-0.03, 0.02, -0.27]))
+        scene.panel._refresh_points()
         scene.goals.save("gone", np.array([0.0, 0.0, -0.22]))
         scene.goals.delete("gone")
     with _scene_app(tmp_path) as client:
         scene = client.app.state.scene
         assert list(scene.goals.saved) == ["pick"]
         np.testing.assert_array_equal(scene.goals.saved["pick"], [-0.03, 0.02, -0.27])
-        assert scene.panel.gui_points.options == ("pick",)
-        assert scene.panel.gui_point_name.value == "point 2"
+        assert scene.panel.point_names() == ("pick",)
+        assert scene.panel.next_point_name() == "point 2"

@@ -74,8 +74,7 @@ def test_frame_draws_the_measured_pose(scene, app_client):
 def test_jog_step_moves_the_goal_by_the_step(scene):
     scene.goals.drag_to(np.array([0.0, 0.0, -0.25]), final=True)
     wait_for(lambda: np.allclose(_goal(scene), [0.0, 0.0, -0.25]), "the start goal")
-    scene.panel.gui_jog_step.value = 10.0
-    scene.panel.jog((0, 0, -1))
+    scene.panel.jog((0, 0, -1), step_mm=10.0)
     wait_for(lambda: np.allclose(_goal(scene), [0.0, 0.0, -0.26], atol=1e-9), "the jog goal")
     assert scene.panel.message == ""
 
@@ -92,22 +91,29 @@ def test_estop_and_reset_buttons(scene):
 def test_goal_points_save_go_to_delete(scene, app_client):
     scene.goals.drag_to(np.array([-0.03, 0.02, -0.27]), final=True)
     wait_for(lambda: np.allclose(_goal(scene), [-0.03, 0.02, -0.27]), "the goal")
-    scene.panel.gui_point_name.value = "pick"
-    scene.panel.save_point()
-    assert "pick" in scene.goals.saved
-    assert scene.panel.gui_points.value == "pick"
+    assert scene.panel.save_point("pick") == "pick"
+    assert "pick" in scene.goals.saved and "pick" in scene.panel.point_names()
     scene.goals.drag_to(np.array([0.03, 0.0, -0.22]), final=True)
     scene.panel.go_to("pick")
     wait_at(app_client, [-0.03, 0.02, -0.27], "the robot at the saved point")
     scene.panel.delete_point("pick")
     assert "pick" not in scene.goals.saved
-    assert scene.panel.gui_points.options == ("—",)
+    assert scene.panel.point_names() == ()
 
 
-def test_sinusoid_panel_defaults_are_the_thesis_test(scene):
+def test_sinusoid_fields_in_ui_units_give_the_thesis_test(scene):
+    """A client's fields as they open (mm, Hz, deg, s) are the thesis test in SI."""
     from app.runs.trajectories import SinusoidParams
 
-    params, default = scene.tests.params(), SinusoidParams()
+    shown = {
+        "amplitude": (50.0, 50.0, 80.0),
+        "frequency": (1.0, 1.0, 2.0),
+        "phase": (0.0, 0.0, 0.0),
+        "offset": (0.0, 0.0, -240.0),
+        "duration": 10.0,
+        "feedforward": False,
+    }
+    params, default = scene.tests.params(shown), SinusoidParams()
     for name in ("amplitude_m", "frequency_hz", "phase_rad", "offset_m"):
         np.testing.assert_allclose(getattr(params, name), getattr(default, name), atol=1e-12)
     assert (params.duration_s, params.feedforward) == (default.duration_s, default.feedforward)
