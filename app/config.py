@@ -423,6 +423,16 @@ class ServerSettings(_Section):
     viser_port: int = Field(8080, ge=0, le=65535, description="3D scene port")
     scene: bool = Field(True, description="serve the 3D scene (viser) on viser_port")
     token: str | None = Field(None, min_length=8, description="required for control if set")
+    allowed_hosts: tuple[str, ...] = Field(
+        (),
+        description="Host names accepted besides localhost, IP addresses and `host` "
+        '(DNS rebinding check; "*": any)',
+    )
+    allowed_origins: tuple[str, ...] = Field(
+        (),
+        description="web origins (scheme://host:port) that may call the API and the scene "
+        "besides the server's own pages",
+    )
     telemetry_hz: float = Field(50.0, gt=0, le=200, description="WebSocket telemetry rate")
     lease_timeout_s: float = Field(30.0, gt=0, description="control lease lapses when idle")
     max_body_bytes: int = Field(

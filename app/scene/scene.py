@@ -20,9 +20,11 @@ import viser
 
 from app.control.authority import Authority, is_loopback
 from app.control.model import reach_m
+from app.origins import OriginPolicy
 from app.scene.access import SceneAccess
 from app.scene.goal_store import FILE_NAME as POINTS_FILE
 from app.scene.goal_view import GoalView
+from app.scene.origins import guarded_viser_server
 from app.scene.panel import ControlPanel
 from app.scene.program_view import ProgramView
 from app.scene.robot_view import RobotView
@@ -73,7 +75,11 @@ class Scene:
 
     def start(self) -> None:
         """Serve the scene and start the display thread (blocks ~0.5 s while meshing)."""
-        server = viser.ViserServer(host=self.host, port=self.port, label="deltadash", verbose=False)
+        # pages of other sites and DNS rebinding are refused on this port (app/origins.py)
+        policy = OriginPolicy.from_settings(getattr(self.controller.settings, "server", None))
+        server = guarded_viser_server(
+            policy, host=self.host, port=self.port, label="deltadash", verbose=False
+        )
         self.server = server
         settings, model = self.controller.settings, self.controller.model
         robot = model.robot

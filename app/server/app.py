@@ -28,6 +28,7 @@ from app.calibration.procedure import CalibrationManager, per_leg, pose_input
 from app.config import Settings
 from app.control.authority import Authority
 from app.control.controller import Controller
+from app.origins import OriginPolicy
 from app.programs.workers import ProgramWorkers
 from app.runs.manager import RunManager
 from app.scene import start_scene
@@ -49,6 +50,7 @@ from app.server.backends import open_backend
 from app.server.errors import install_error_handlers
 from app.server.estop import EstopFirst, EstopListener
 from app.server.limits import RequestLimits
+from app.server.origins import OriginCheck
 from app.static_files import static_dir
 from app.tuning.procedure import TuningManager
 from app.world.service import WorldService
@@ -168,6 +170,8 @@ def create_app(
     app.state.authority = Authority(settings.server.token, settings.server.lease_timeout_s)
     install_error_handlers(app)
     app.add_middleware(RequestLimits, settings=settings)  # before any body is read
+    # other sites' pages and DNS rebinding: refused before the token, a body or a route
+    app.add_middleware(OriginCheck, policy=OriginPolicy.from_settings(settings.server))
     app.add_middleware(EstopFirst)  # outermost: an e-stop is latched before anything else
     reads = [Depends(require_read_token)]  # the token on reads too, beyond loopback
     app.include_router(robot.router, prefix="/api", dependencies=reads)

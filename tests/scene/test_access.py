@@ -21,7 +21,7 @@ from app.config import load_settings
 from app.scene.access import LOCKED
 from app.server import create_app
 from app.server.backends import open_backend
-from tests.support.app_client import unmoved
+from tests.support.app_client import LocalClient, unmoved
 from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
@@ -86,7 +86,7 @@ def app_client(tmp_path_factory) -> Iterator[TestClient]:
         server={"viser_port": 0, "token": TOKEN},
     )
     opener = functools.partial(open_backend, emulator_in_process=True)
-    with TestClient(create_app(settings, backend_opener=opener)) as client:
+    with LocalClient(create_app(settings, backend_opener=opener)) as client:
         take_lease(client, "browser", token=TOKEN)  # a browser holds control
         yield client
 

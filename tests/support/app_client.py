@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
+from urllib.parse import urljoin
 
 import numpy as np
 from fastapi.testclient import TestClient
@@ -18,6 +19,20 @@ from app.config import load_settings
 from app.server import create_app
 from app.server.backends import open_backend
 from tests.support.wait import ok_json, wait_for
+
+# the Host the test client sends: a name of this machine (app/origins.py refuses "testserver")
+LOCAL = "http://127.0.0.1"
+
+
+class LocalClient(TestClient):
+    """A ``TestClient`` that calls the app as ``127.0.0.1``, WebSockets included (Starlette's
+    own sends ``Host: testserver``, which the server refuses as another machine's name)."""
+
+    def __init__(self, app: Any, **kwargs: Any) -> None:
+        super().__init__(app, base_url=kwargs.pop("base_url", LOCAL), **kwargs)
+
+    def websocket_connect(self, url: str, *args: Any, **kwargs: Any) -> Any:
+        return super().websocket_connect(urljoin("ws://127.0.0.1", url), *args, **kwargs)
 
 
 def make_client(
@@ -40,7 +55,7 @@ def make_client(
     opener = open_backend
     if backend == "emulated":
         opener = functools.partial(open_backend, emulator_in_process=True)
-    return TestClient(create_app(settings, backend_opener=opener, config_path=config_path))
+    return LocalClient(create_app(settings, backend_opener=opener, config_path=config_path))
 
 
 def cleared(client: TestClient) -> TestClient:

@@ -13,7 +13,7 @@ from fastapi.testclient import TestClient
 from app.config import load_settings
 from app.server import create_app
 from app.server.backends import open_backend
-from tests.support.app_client import unmoved
+from tests.support.app_client import LocalClient, unmoved
 from tests.support.lease import take_lease
 from tests.support.wait import ok_json, wait_for
 
@@ -57,7 +57,7 @@ def _app(tmp_path_factory, **server) -> TestClient:
         server={"viser_port": 0, "token": TOKEN, **server},
     )
     opener = functools.partial(open_backend, emulator_in_process=True)
-    return TestClient(create_app(settings, backend_opener=opener))
+    return LocalClient(create_app(settings, backend_opener=opener))
 
 
 @pytest.fixture(scope="module")

@@ -9,6 +9,7 @@ from fastapi.testclient import TestClient
 
 from app.config import load_settings
 from app.server import create_app
+from tests.support.app_client import LocalClient
 
 ASSET = re.compile(r"""(?:src|href)=["']([^"']+)["']""")
 
@@ -16,7 +17,7 @@ ASSET = re.compile(r"""(?:src|href)=["']([^"']+)["']""")
 @pytest.fixture(scope="module")
 def client() -> TestClient:
     # No `with`: the lifespan (bus, loop, scene) is not needed to serve the documentation.
-    return TestClient(create_app(load_settings()))
+    return LocalClient(create_app(load_settings()))
 
 
 @pytest.mark.parametrize("page", ["/docs", "/redoc"])

@@ -19,6 +19,7 @@ from app.server.api import serialize
 from app.server.api.deps import get_runs
 from app.server.api.responses import StatusOut, TelemetryMessage
 from app.server.errors import INTERNAL_ERROR
+from tests.support.app_client import LocalClient
 
 SERVER = Path(__file__).resolve().parents[3] / "app" / "server"
 
@@ -26,7 +27,7 @@ SERVER = Path(__file__).resolve().parents[3] / "app" / "server"
 @pytest.fixture(scope="module")
 def bare() -> TestClient:
     """The app without its lifespan: routes and schema only, no bus, no loop."""
-    return TestClient(create_app(load_settings()))
+    return LocalClient(create_app(load_settings()))
 
 
 def test_status_and_telemetry_match_their_models_exactly(fresh):
@@ -132,7 +133,7 @@ def test_an_unexpected_exception_is_a_logged_500_with_a_generic_body(caplog):
     app = create_app(load_settings())
     app.dependency_overrides[get_runs] = broken
     with caplog.at_level(logging.ERROR, logger="app.server.errors"):
-        response = TestClient(app).get("/api/runs")
+        response = LocalClient(app).get("/api/runs")
     assert response.status_code == 500
     assert response.json() == {"detail": INTERNAL_ERROR}
     assert "a bug, not" not in response.text
