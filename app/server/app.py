@@ -51,6 +51,7 @@ from app.server.errors import install_error_handlers
 from app.server.estop import EstopFirst, EstopListener
 from app.server.limits import RequestLimits
 from app.server.origins import OriginCheck
+from app.server.queries import WorkspaceQueries
 from app.static_files import static_dir
 from app.tuning.procedure import TuningManager
 from app.world.service import WorldService
@@ -80,9 +81,10 @@ def begin_shutdown(app: FastAPI) -> None:
     programs.check_timeout_s) answers 503 now instead of holding the stop, and no new one
     starts. Blocks for milliseconds; safe before startup or twice (the lifespan's end
     closes them again)."""
-    workers = getattr(app.state, "program_workers", None)
-    if workers is not None:
-        workers.close()
+    for name in ("program_workers", "queries"):  # workspace queries' workers too
+        workers = getattr(app.state, name, None)
+        if workers is not None:
+            workers.close()
 
 
 def _twin_probe(settings: Settings, controller: Controller) -> Touch | None:
@@ -124,6 +126,8 @@ def create_app(
             app.state.program_workers = ProgramWorkers(
                 settings, programs.CONCURRENT_CHECKS, settings.programs.check_timeout_s
             )
+            # workspace queries (nearest point, sections) too: no request costs the loop
+            app.state.queries = WorkspaceQueries(settings)
             # one mover at a time: a procedure claims controller.owner while it runs (every
             # motion command asks it: app/control/owner.py), and starts only with no run
             app.state.calibration = CalibrationManager(
@@ -152,6 +156,7 @@ def create_app(
                 if app.state.scene is not None:
                     await asyncio.to_thread(app.state.scene.stop)
                 await asyncio.to_thread(app.state.program_workers.close)
+                await asyncio.to_thread(app.state.queries.close)
                 await asyncio.to_thread(app.state.tuning.close)
                 await asyncio.to_thread(app.state.calibration.close)
                 await asyncio.to_thread(app.state.runs.close)

@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.control.errors import GoalRejected, MotionRefused
-from app.server import sections
+from app.programs.workers import WorkerError
 from hardware.errors import BusError
 from kinematics import PoseError
 
@@ -73,15 +73,24 @@ def _field_errors(exc: RequestValidationError) -> str:
 async def _offer(request: Request, exc: GoalRejected) -> tuple[str, dict[str, Any]]:
     """The 422's words and ``nearest_m``: for a refused goal (``exc.goal``) a point the gate
     accepts at the goal's wrist angle (sections.nearest, workspace, joint limits and
-    margins; computed in a worker thread, it takes tens of ms), else the exception's own
-    ``nearest`` if any."""
+    margins; tens of ms to seconds, in a worker process: app/server/queries.py), else, and
+    when every worker is busy, the exception's own ``nearest`` if any."""
     controller = getattr(request.app.state, "controller", None)
-    if exc.goal is None or controller is None:
-        nearest = None if exc.nearest is None else [float(v) for v in exc.nearest]
-        return str(exc), {"nearest_m": nearest}
-    point = await asyncio.to_thread(sections.nearest, controller.gate, exc.goal, exc.phi)
+    queries = getattr(request.app.state, "queries", None)
+    if exc.goal is None or controller is None or queries is None:
+        return _own_offer(exc)
+    try:  # in a worker process (app/server/queries.py): the loop's process only waits
+        point = await asyncio.to_thread(queries.nearest, controller.gate, exc.goal, exc.phi)
+    except (WorkerError, ValueError):  # busy, or no accepted point: the gate's own offer
+        return _own_offer(exc)
     mm = ", ".join(f"{v:.4f}" for v in point)
     return f"{exc.reason}; nearest reachable point [{mm}] m", {"nearest_m": point.tolist()}
+
+
+def _own_offer(exc: GoalRejected) -> tuple[str, dict[str, Any]]:
+    """The refusal's own words and ``nearest`` (the gate's workspace projection, if any)."""
+    nearest = None if exc.nearest is None else [float(v) for v in exc.nearest]
+    return str(exc), {"nearest_m": nearest}
 
 
 def install_error_handlers(app: FastAPI) -> None:
@@ -107,6 +116,10 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(BusError)
     async def bus_error(_: Request, exc: BusError) -> JSONResponse:
         return _error(503, f"servo bus: {exc}")
+
+    @app.exception_handler(WorkerError)  # a workspace query refused (busy) or not answered
+    async def query_unavailable(_: Request, exc: WorkerError) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=503, headers={"Retry-After": "1"})
 
     @app.exception_handler(TimeoutError)  # a command the control loop did not answer in time
     async def timeout(_: Request, exc: TimeoutError) -> JSONResponse:

@@ -17,6 +17,7 @@ from app.control.controller import Controller
 from app.programs.workers import ProgramWorkers
 from app.runs.manager import RunManager
 from app.scene import Scene
+from app.server.queries import WorkspaceQueries
 from app.tuning.procedure import TuningManager
 from app.world.service import WorldService
 
@@ -37,6 +38,11 @@ def get_settings(connection: HTTPConnection) -> Settings:
 
 def get_runs(connection: HTTPConnection) -> RunManager:
     return connection.app.state.runs
+
+
+def get_queries(connection: HTTPConnection) -> WorkspaceQueries:
+    """The app's workspace queries (worker processes, app/server/queries.py)."""
+    return connection.app.state.queries
 
 
 def get_program_workers(connection: HTTPConnection) -> ProgramWorkers:
@@ -135,6 +141,7 @@ ControllerDep = Annotated[Controller, Depends(get_controller)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 RunsDep = Annotated[RunManager, Depends(get_runs)]
 ProgramWorkersDep = Annotated[ProgramWorkers, Depends(get_program_workers)]
+QueriesDep = Annotated[WorkspaceQueries, Depends(get_queries)]
 CalibrationDep = Annotated[CalibrationManager, Depends(get_calibration)]
 TuningDep = Annotated[TuningManager, Depends(get_tuning)]
 WorldDep = Annotated[WorldService, Depends(get_world)]

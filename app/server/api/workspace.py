@@ -9,7 +9,7 @@ import numpy as np
 from fastapi import APIRouter, Query
 
 from app.server import sections
-from app.server.api.deps import ControllerDep
+from app.server.api.deps import ControllerDep, QueriesDep
 from app.server.api.models import REACH_M
 from app.server.api.responses import NearestOut, WorkspaceSectionOut
 from app.server.errors import INVALID, UNAVAILABLE
@@ -31,6 +31,7 @@ WristAngle = Annotated[
 @router.get("/section", response_model=WorkspaceSectionOut, responses={**INVALID, **UNAVAILABLE})
 def get_section(
     controller: ControllerDep,
+    queries: QueriesDep,
     plane: Annotated[
         sections.Plane, Query(description="xy: top view at z = at_m; xz: at y = at_m; yz: at x")
     ],
@@ -41,9 +42,11 @@ def get_section(
     centres, one string per row (v), '1' where accepted (workspace with the gate's margin
     and ceiling, joint limits and singularity margin on the knee-out branch). The level is
     rounded to 1 mm and phi to 1 deg (``at_m`` and ``phi_rad`` in the answer are the ones
-    used); a phi outside the wrist's limits is a 422 naming ``phi_rad``."""
+    used); a phi outside the wrist's limits is a 422 naming ``phi_rad``. Computed in a
+    worker process (app/server/queries.py): 503 with Retry-After while every worker is
+    busy."""
     phi = controller.gate.check_phi(phi_rad)
-    cut = sections.section(controller.gate, plane, at_m, phi)
+    cut = queries.section(controller.gate, plane, at_m, phi)  # in a worker process
     u_axis, v_axis, level_axis = ("xyz"[k] for k in sections.AXES[plane])
     return {
         "plane": plane,
@@ -61,6 +64,7 @@ def get_section(
 @router.get("/nearest", response_model=NearestOut, responses={**INVALID, **UNAVAILABLE})
 def get_nearest(
     controller: ControllerDep,
+    queries: QueriesDep,
     x_m: Coordinate,
     y_m: Coordinate,
     z_m: Coordinate,
@@ -69,9 +73,11 @@ def get_nearest(
     """Whether the gate accepts a point (a tool tip at ``phi_rad``) as a goal and, if not,
     a nearby point it accepts at that angle: the workspace's nearest point (the 422's
     ``nearest_m``) when that passes the joint limits too, else the accepted point nearest it
-    on the way to the workspace's centre (app/server/sections.py ``nearest``)."""
+    on the way to the workspace's centre (app/server/sections.py ``nearest``). Computed in
+    a worker process (app/server/queries.py): 503 with Retry-After while every worker is
+    busy."""
     point = np.array([x_m, y_m, z_m])
-    nearest = sections.nearest(controller.gate, point, controller.gate.check_phi(phi_rad))
+    nearest = queries.nearest(controller.gate, point, controller.gate.check_phi(phi_rad))
     return {
         "position_m": point.tolist(),
         "inside": bool(np.array_equal(nearest, point)),

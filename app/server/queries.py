@@ -1,0 +1,95 @@
+"""Workspace queries out of the loop's process: the nearest accepted point and sections.
+
+``sections.nearest`` (the page's "nearest", ``GET /api/workspace/nearest``, the 422 of a
+refused goal) is up to seconds of NumPy and Python for a far point, and
+``sections.section`` a few hundred ms for a new level; run in the server's process they
+hold the GIL the 200 Hz loop needs: four clients asking for far points pulled the loop
+from ~160 Hz to 104-135 Hz (issue 28). So :class:`WorkspaceQueries` runs them in worker
+processes (``app.programs.workers.ProgramWorkers``: spawned, nice +10, killed past a
+bound) with at most ``slots`` at a time and none queued, and keeps the last answers
+(a repeated query costs a dictionary look-up):
+
+- a query while every slot is busy is refused at once (:class:`QueriesBusy`: the route
+  answers 503 with Retry-After; a refused goal's 422 falls back to the gate's own
+  nearest workspace point, computed with the refusal, so it is still a 422);
+- a query that takes longer than ``timeout_s`` has its worker killed (503).
+
+No request can make the loop's process do more than look up or hand over a query.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from app.config import Settings
+from app.control.gate import Gate
+from app.programs.workers import ChecksBusy, ProgramWorkers, WorkerError
+from app.server import sections
+
+SLOTS = 2  # worker processes at once (each ~150 MB); a third query is refused
+TIMEOUT_S = 20.0  # the longest a query may take, its worker's start included [s]
+CACHE_SIZE = 512  # answers kept (a section is ~30 kB)
+
+
+class QueriesBusy(WorkerError):
+    """Every slot is answering a query: refused at once (503, Retry-After)."""
+
+
+class WorkspaceQueries:
+    """The workspace queries of the server's routes, in worker processes (see the module
+    docstring). Blocking methods: call them from a worker thread (``asyncio.to_thread``).
+    Raises QueriesBusy or another WorkerError (the message says why) besides what the
+    query raises itself (ValueError)."""
+
+    def __init__(self, settings: Settings, slots: int = SLOTS, timeout_s: float = TIMEOUT_S):
+        self._workers = ProgramWorkers(settings, slots, timeout_s)
+        self._answers: OrderedDict[tuple, tuple[Gate, Any]] = OrderedDict()
+        self._lock = threading.Lock()
+        self.asked = 0  # queries answered in a worker (not from the kept answers)
+
+    def nearest(self, gate: Gate, point: np.ndarray, phi: float = 0.0) -> np.ndarray:
+        """``sections.nearest(gate, point, phi)``: (3,) [m] for a (3,) tip [m]."""
+        key = ("nearest", id(gate), *(float(v) for v in point), float(phi))
+        return self._ask(key, gate, sections.nearest, np.asarray(point, dtype=np.float64), phi)
+
+    def section(self, gate: Gate, plane: str, at_m: float, phi: float) -> sections.Section:
+        """``sections.section(gate, plane, at_m, phi)`` (its own rounding is the key)."""
+        level = round(at_m / sections.LEVEL_STEP_M)
+        turn = round(phi / sections.PHI_STEP_RAD)
+        key = ("section", id(gate), plane, level, turn)
+        return self._ask(key, gate, sections.section, plane, at_m, phi)
+
+    def _ask(self, key: tuple, gate: Gate, query: Callable[..., Any], *args: Any) -> Any:
+        with self._lock:
+            kept = self._answers.get(key)
+            if kept is not None and kept[0] is gate:  # the same gate object, not a reused id
+                self._answers.move_to_end(key)
+                return kept[1]
+        try:
+            answer = self._workers.call(query, gate, *args)
+        except ChecksBusy as exc:
+            raise QueriesBusy(
+                "busy: the server is answering other workspace queries; try again shortly"
+                if "stopping" not in str(exc)
+                else "the server is stopping: no workspace queries now"
+            ) from None
+        except WorkerError as exc:  # its worker overran (killed) or died
+            kind = "took too long" if "longer" in str(exc) else "ended before answering"
+            raise WorkerError(
+                f"the workspace query {kind} (its worker was stopped); try again"
+            ) from None
+        with self._lock:
+            self.asked += 1
+            self._answers[key] = (gate, answer)
+            while len(self._answers) > CACHE_SIZE:
+                self._answers.popitem(last=False)
+        return answer
+
+    def close(self) -> None:
+        """Kill the workers (the server stopping); later queries are QueriesBusy."""
+        self._workers.close()
