@@ -20,6 +20,7 @@ Without a wrist axis A is refused.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -356,7 +357,7 @@ def step(state: ModalState, line: Line, program: Program) -> None:
 
 
 def interpret(
-    lines: list[Line],
+    lines: Iterable[Line],
     start_m,
     work_offset_m,
     start_phi_rad: float = 0.0,
@@ -367,7 +368,13 @@ def interpret(
     wrist at ``start_phi_rad`` [rad]; ``wrist``: its limits (min, max) [rad], None when
     there is none (A is refused then).
 
-    Lines after M2 or M30 are read (a typo there is still refused) but not run.
+    ``lines`` are taken one at a time (``tokens.iter_lines`` reads each when asked), so
+    the first fault of a file by line is the one raised. Lines after M2 or M30 are read (a
+    typo there is still refused) but not run. Percent lines (RS274/NGC): when the first
+    line with anything but comments is ``%``, the program ends at the next ``%`` line and
+    nothing after it is read; with no closing ``%`` (and no M2/M30 before the file's
+    end) the file is refused at its last line. A ``%`` line in a file that does not open
+    with one is a delimiter that does nothing. ``Program.lines``: the lines read.
 
     Raises:
         ProgramError: the first line that cannot be run, naming it and the word.
@@ -378,12 +385,32 @@ def interpret(
         phi_rad=float(start_phi_rad),
         wrist=wrist,
     )
-    program = Program(lines=len(lines))
+    program = Program()
+    opened_at = 0  # the line of the opening % (0: none)
+    content = False  # a line with words met
+    closed = False
     for line in lines:
+        program.lines = line.number
+        if line.percent:
+            if opened_at:
+                closed = True
+                break  # the useful contents stop here; the rest is not read
+            if not content:
+                opened_at = line.number
+            continue
+        content = content or bool(line.words)
         if state.ended:
             _collect(line, state.wrist is not None)
             continue
         step(state, line, program)
+    if opened_at and not closed and not state.ended:
+        raise ProgramError(
+            program.lines,
+            "",
+            f"the file ends without the % line that closes the % on line {opened_at} "
+            "(RS274/NGC: a program that opens with % ends with a % line; "
+            "add one, or end the program with M2)",
+        )
     return program
 
 

@@ -10,6 +10,7 @@ the modal machine does not support is refused there (app/programs/modal.py).
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 from app.programs.errors import ProgramError
@@ -32,10 +33,12 @@ class Word:
 
 @dataclass(frozen=True)
 class Line:
-    """The words of one program line; ``number``: its line in the file (1-based)."""
+    """The words of one program line; ``number``: its line in the file (1-based);
+    ``percent``: a line that is only ``%`` (RS274/NGC's program delimiter; no words)."""
 
     number: int
     words: tuple[Word, ...]
+    percent: bool = False
 
 
 def _strip_comments(text: str, number: int) -> str:
@@ -67,8 +70,8 @@ def tokenize_line(text: str, number: int) -> Line:
             number (``#1``, ``/``, ``X``, ``G1.2.3``), naming the text at fault.
     """
     code = "".join(_strip_comments(text, number).split()).upper()
-    if code == "%":  # program delimiter, as LinuxCNC allows
-        return Line(number, ())
+    if code == "%":  # program delimiter, as LinuxCNC allows (the modal machine reads it)
+        return Line(number, (), percent=True)
     words: list[Word] = []
     at = 0
     while at < len(code):
@@ -101,6 +104,23 @@ def program_lines(program: str) -> list[str]:
     return _NEWLINE.split(program.removeprefix("\ufeff"))
 
 
+def iter_lines(program: str) -> Iterator[Line]:
+    """A program's text -> its lines of words, one at a time, empty lines included
+    (numbers stay right). Lazy: a line is read only when asked for, so the modal machine
+    meets the faults of a file in their order (a line it refuses before an unreadable
+    later one) and never reads what follows a closing ``%``.
+
+    Raises (when the line is reached):
+        ProgramError: as ``tokenize_line``.
+    """
+    for i, text in enumerate(program_lines(program), start=1):
+        yield tokenize_line(text, i)
+
+
 def tokenize(program: str) -> list[Line]:
-    """A program's text -> its lines of words, empty lines included (numbers stay right)."""
-    return [tokenize_line(text, i) for i, text in enumerate(program_lines(program), start=1)]
+    """A program's text -> all its lines of words at once (``iter_lines`` as a list).
+
+    Raises:
+        ProgramError: the first line that cannot be read (see ``tokenize_line``).
+    """
+    return list(iter_lines(program))

@@ -69,6 +69,11 @@ def test_numbers_beyond_any_coordinate_are_refused_naming_the_word(text, word):
     assert tokenize("G1 X-1000000 F1000000")[0].words[1].value == -1e6  # the bound itself
 
 
+def test_percent_lines_are_marked_for_the_modal_machine():
+    lines = tokenize("%\n% (end)\nG0 X1")
+    assert [line.percent for line in lines] == [True, True, False]
+
+
 def test_lines_are_counted_as_an_editor_counts_them():
     # a form feed or U+2028 inside a line is not a line break; CR LF, LF and CR are
     lines = tokenize("G0 X0\x0cY0\r\nG1 X1 ; U+2028 \u2028 in a comment\rG92")
