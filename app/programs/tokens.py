@@ -9,6 +9,7 @@ the modal machine does not support is refused there (app/programs/modal.py).
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -18,7 +19,9 @@ from app.programs.errors import ProgramError
 # ASCII digits only: \d would read Arabic-Indic or other Unicode digits as numbers
 _WORD = re.compile(r"([A-Z])([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))(E[+-]?[0-9]+)?")
 _NEWLINE = re.compile(r"\r\n|\n|\r")  # what an editor counts as a line break; not \f, U+2028
-MAX_MAGNITUDE = 1e6  # no coordinate, radius, feed or dwell of the subset is larger
+MAX_MAGNITUDE = 1e6  # no coordinate, feed or dwell of the subset is larger
+UNBOUNDED = frozenset("IJKR")  # arc centres and radii: finite, any size (CAM posts nearly
+# straight arcs with I = 2,426,220 mm); the modal machine bounds the radius in metres
 
 
 @dataclass(frozen=True)
@@ -88,7 +91,10 @@ def tokenize_line(text: str, number: int) -> Line:
                 "exponent notation is not G-code: write the number in full (e.g. X0.001)",
             )
         value = float(match[2])
-        if not abs(value) <= MAX_MAGNITUDE:  # 400 digits are inf, 160 overflow later
+        if match[1] in UNBOUNDED:
+            if not math.isfinite(value):  # 400 digits are inf
+                raise ProgramError(number, match[0][:24], "out of range (too many digits)")
+        elif not abs(value) <= MAX_MAGNITUDE:  # 400 digits are inf, 160 overflow later
             raise ProgramError(
                 number, match[0][:24], f"out of range (at most {MAX_MAGNITUDE:,.0f} in size)"
             )
