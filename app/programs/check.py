@@ -19,7 +19,7 @@ from app.control.gate import Gate
 from app.programs.errors import ProgramError
 from app.programs.modal import interpret
 from app.programs.planner import PlanLimits, ProgramPath, plan_program
-from app.programs.tokens import program_lines, tokenize
+from app.programs.tokens import iter_lines, program_lines
 from app.programs.verify import Verification, VerifyLimits, Violation, verify_path
 from kinematics.dynamics import THESIS_MASS, MassModel
 from kinematics.sizing import XM430_W210_12V
@@ -203,7 +203,7 @@ def check_program(
     start_phi = float(start_phi_rad)
     if not math.isfinite(start_phi):
         raise ProgramError(0, "", "start_phi_rad: expected a finite number [rad]")
-    program = interpret(tokenize(text), start, offset, start_phi, wrist)
+    program = interpret(iter_lines(text), start, offset, start_phi, wrist)
     limits = plan_limits(settings)
     path = plan_program(program.segments, limits)
     period_s = limits.period_s

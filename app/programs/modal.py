@@ -20,6 +20,7 @@ Without a wrist axis A is refused.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,7 +31,15 @@ from app.programs.tokens import Line, Word
 
 MM, INCH = 1e-3, 25.4e-3
 RADIUS_TOLERANCE_M = 1e-5  # start and end radius of an arc may differ this much...
-RADIUS_TOLERANCE_REL = 1e-3  # ...or this fraction of the radius (LinuxCNC: similar)
+RADIUS_TOLERANCE_REL = 1e-3  # ...or this fraction of the radius...
+RADIUS_TOLERANCE_MAX_M = 2 * 0.01e-3 * math.sqrt(2)  # ...but never more than LinuxCNC's
+# default (CENTER_ARC_RADIUS_TOLERANCE_MM: the end and centre rounded to 0.01 mm), so a
+# huge radius's 0.1 % (2.4 m for 2,426 m) never passes an end off its circle
+FULL_CIRCLE_TOLERANCE_M = 1e-10  # an arc is a full turn only when its end is its start
+# this closely: a tenth of a 6-decimal millimetre post's digit (1e-9 m), far above the
+# rounding of the arithmetic (1e-16 m here); a 6 um CAM arc is an arc (grbl#496)
+MAX_ARC_RADIUS_M = 1e6  # 1,000 km: the path (centre + radius, each up to 1e6 m) keeps
+# its points within ~1e-9 m; a larger radius is refused, with the straight line it nears
 _SUPPORTED_G = {
     0: "motion", 10: "motion", 20: "motion", 30: "motion", 40: "dwell",
     170: "plane", 180: "plane", 190: "plane",
@@ -220,22 +229,27 @@ def _arc(
     r1 = math.hypot(end[a] - centre[a], end[b] - centre[b])
     if r0 <= RADIUS_TOLERANCE_M:
         raise ProgramError(n, word, "the arc's centre is at its start (zero radius)")
-    if abs(r1 - r0) > max(RADIUS_TOLERANCE_M, RADIUS_TOLERANCE_REL * r0):
+    chord = math.hypot(end[a] - start[a], end[b] - start[b])
+    _check_radius(r0, chord, n, word)
+    if abs(r1 - r0) > radius_tolerance(r0):
         raise ProgramError(
             n,
             word,
             f"the end is {abs(r1 - r0) * 1e3:.4f} mm {'further from' if r1 > r0 else 'nearer'} "
-            f"the centre than the start (radius {r0 * 1e3:.4f} mm)",
+            f"the centre than the start (radius {r0 * 1e3:.4f} mm; at most "
+            f"{radius_tolerance(r0) * 1e3:.4f} mm is closed by a spiral)",
         )
     phi0 = math.atan2(start[b] - centre[b], start[a] - centre[a])
     phi1 = math.atan2(end[b] - centre[b], end[a] - centre[a])
-    same = math.hypot(end[a] - start[a], end[b] - start[b]) <= RADIUS_TOLERANCE_M
+    # a full turn only when the end is the start (or at the start's very angle, as in
+    # LinuxCNC); else the arc sweeps what it says, however short its chord
+    same = chord <= FULL_CIRCLE_TOLERANCE_M
     if clockwise:
         sweep = -((phi0 - phi1) % (2 * math.pi))
-        sweep = -2 * math.pi if same else sweep
+        sweep = -2 * math.pi if same or sweep == 0.0 else sweep
     else:
         sweep = (phi1 - phi0) % (2 * math.pi)
-        sweep = 2 * math.pi if same else sweep
+        sweep = 2 * math.pi if same or sweep == 0.0 else sweep
     return Segment(
         n,
         "arc",
@@ -252,14 +266,40 @@ def _arc(
     )
 
 
+def radius_tolerance(radius_m: float) -> float:
+    """How much an arc's end radius may differ from its start radius [m] (a spiral closes
+    the gap): 0.01 mm, or 0.1 % of ``radius_m`` [m] for a larger radius, at most
+    0.0283 mm (LinuxCNC's default tolerance)."""
+    relative = min(RADIUS_TOLERANCE_REL * radius_m, RADIUS_TOLERANCE_MAX_M)
+    return max(RADIUS_TOLERANCE_M, relative)
+
+
+def _check_radius(radius_m: float, chord_m: float, n: int, word: str) -> None:
+    """ProgramError for an arc radius [m] over MAX_ARC_RADIUS_M, saying how straight the
+    arc is over its chord [m] (its sagitta), so the CAM user can write it as G1."""
+    if radius_m <= MAX_ARC_RADIUS_M:
+        return
+    half = min(chord_m / 2, radius_m)
+    sagitta = half * half / (radius_m + math.sqrt(radius_m * radius_m - half * half))
+    raise ProgramError(
+        n,
+        word,
+        f"the arc's radius is {radius_m / 1e3:,.6g} km, over {MAX_ARC_RADIUS_M / 1e3:,.0f} km "
+        f"(a centre that far leaves the path's points imprecise); over its "
+        f"{chord_m * 1e3:.4f} mm chord it is {sagitta * 1e3:.3g} mm from a straight line: "
+        "write it as G1 to its end (or have the post-processor output such arcs as lines)",
+    )
+
+
 def _centre_from_radius(start, end, r_word: Word, clockwise: bool, axes, state, n: int):
     """Centre of the R-format arc (LinuxCNC): R > 0 the short way, R < 0 the long way."""
     a, b = axes
     radius = r_word.value * state.unit_m
     dx, dy = end[a] - start[a], end[b] - start[b]
     chord = math.hypot(dx, dy)
-    if chord <= RADIUS_TOLERANCE_M:
+    if chord <= FULL_CIRCLE_TOLERANCE_M:
         raise ProgramError(n, r_word.text, "an R arc cannot be a full circle: give I, J or K")
+    _check_radius(abs(radius), chord, n, r_word.text)
     if abs(radius) < chord / 2 - RADIUS_TOLERANCE_M:
         raise ProgramError(
             n, r_word.text, f"|R| is under half the chord ({chord / 2 * 1e3:.4f} mm)"
@@ -356,7 +396,7 @@ def step(state: ModalState, line: Line, program: Program) -> None:
 
 
 def interpret(
-    lines: list[Line],
+    lines: Iterable[Line],
     start_m,
     work_offset_m,
     start_phi_rad: float = 0.0,
@@ -367,7 +407,13 @@ def interpret(
     wrist at ``start_phi_rad`` [rad]; ``wrist``: its limits (min, max) [rad], None when
     there is none (A is refused then).
 
-    Lines after M2 or M30 are read (a typo there is still refused) but not run.
+    ``lines`` are taken one at a time (``tokens.iter_lines`` reads each when asked), so
+    the first fault of a file by line is the one raised. Lines after M2 or M30 are read (a
+    typo there is still refused) but not run. Percent lines (RS274/NGC): when the first
+    line with anything but comments is ``%``, the program ends at the next ``%`` line and
+    nothing after it is read; with no closing ``%`` (and no M2/M30 before the file's
+    end) the file is refused at its last line. A ``%`` line in a file that does not open
+    with one is a delimiter that does nothing. ``Program.lines``: the lines read.
 
     Raises:
         ProgramError: the first line that cannot be run, naming it and the word.
@@ -378,12 +424,32 @@ def interpret(
         phi_rad=float(start_phi_rad),
         wrist=wrist,
     )
-    program = Program(lines=len(lines))
+    program = Program()
+    opened_at = 0  # the line of the opening % (0: none)
+    content = False  # a line with words met
+    closed = False
     for line in lines:
+        program.lines = line.number
+        if line.percent:
+            if opened_at:
+                closed = True
+                break  # the useful contents stop here; the rest is not read
+            if not content:
+                opened_at = line.number
+            continue
+        content = content or bool(line.words)
         if state.ended:
             _collect(line, state.wrist is not None)
             continue
         step(state, line, program)
+    if opened_at and not closed and not state.ended:
+        raise ProgramError(
+            program.lines,
+            "",
+            f"the file ends without the % line that closes the % on line {opened_at} "
+            "(RS274/NGC: a program that opens with % ends with a % line; "
+            "add one, or end the program with M2)",
+        )
     return program
 
 

@@ -9,7 +9,9 @@ the modal machine does not support is refused there (app/programs/modal.py).
 
 from __future__ import annotations
 
+import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 from app.programs.errors import ProgramError
@@ -17,7 +19,9 @@ from app.programs.errors import ProgramError
 # ASCII digits only: \d would read Arabic-Indic or other Unicode digits as numbers
 _WORD = re.compile(r"([A-Z])([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))(E[+-]?[0-9]+)?")
 _NEWLINE = re.compile(r"\r\n|\n|\r")  # what an editor counts as a line break; not \f, U+2028
-MAX_MAGNITUDE = 1e6  # no coordinate, radius, feed or dwell of the subset is larger
+MAX_MAGNITUDE = 1e6  # no coordinate, feed or dwell of the subset is larger
+UNBOUNDED = frozenset("IJKR")  # arc centres and radii: finite, any size (CAM posts nearly
+# straight arcs with I = 2,426,220 mm); the modal machine bounds the radius in metres
 
 
 @dataclass(frozen=True)
@@ -32,10 +36,12 @@ class Word:
 
 @dataclass(frozen=True)
 class Line:
-    """The words of one program line; ``number``: its line in the file (1-based)."""
+    """The words of one program line; ``number``: its line in the file (1-based);
+    ``percent``: a line that is only ``%`` (RS274/NGC's program delimiter; no words)."""
 
     number: int
     words: tuple[Word, ...]
+    percent: bool = False
 
 
 def _strip_comments(text: str, number: int) -> str:
@@ -67,8 +73,8 @@ def tokenize_line(text: str, number: int) -> Line:
             number (``#1``, ``/``, ``X``, ``G1.2.3``), naming the text at fault.
     """
     code = "".join(_strip_comments(text, number).split()).upper()
-    if code == "%":  # program delimiter, as LinuxCNC allows
-        return Line(number, ())
+    if code == "%":  # program delimiter, as LinuxCNC allows (the modal machine reads it)
+        return Line(number, (), percent=True)
     words: list[Word] = []
     at = 0
     while at < len(code):
@@ -85,7 +91,10 @@ def tokenize_line(text: str, number: int) -> Line:
                 "exponent notation is not G-code: write the number in full (e.g. X0.001)",
             )
         value = float(match[2])
-        if not abs(value) <= MAX_MAGNITUDE:  # 400 digits are inf, 160 overflow later
+        if match[1] in UNBOUNDED:
+            if not math.isfinite(value):  # 400 digits are inf
+                raise ProgramError(number, match[0][:24], "out of range (too many digits)")
+        elif not abs(value) <= MAX_MAGNITUDE:  # 400 digits are inf, 160 overflow later
             raise ProgramError(
                 number, match[0][:24], f"out of range (at most {MAX_MAGNITUDE:,.0f} in size)"
             )
@@ -101,6 +110,23 @@ def program_lines(program: str) -> list[str]:
     return _NEWLINE.split(program.removeprefix("\ufeff"))
 
 
+def iter_lines(program: str) -> Iterator[Line]:
+    """A program's text -> its lines of words, one at a time, empty lines included
+    (numbers stay right). Lazy: a line is read only when asked for, so the modal machine
+    meets the faults of a file in their order (a line it refuses before an unreadable
+    later one) and never reads what follows a closing ``%``.
+
+    Raises (when the line is reached):
+        ProgramError: as ``tokenize_line``.
+    """
+    for i, text in enumerate(program_lines(program), start=1):
+        yield tokenize_line(text, i)
+
+
 def tokenize(program: str) -> list[Line]:
-    """A program's text -> its lines of words, empty lines included (numbers stay right)."""
-    return [tokenize_line(text, i) for i, text in enumerate(program_lines(program), start=1)]
+    """A program's text -> all its lines of words at once (``iter_lines`` as a list).
+
+    Raises:
+        ProgramError: the first line that cannot be read (see ``tokenize_line``).
+    """
+    return list(iter_lines(program))

@@ -57,7 +57,7 @@ def test_nested_comments_are_refused_as_linuxcnc_does():
     ("text", "word"),
     [
         ("G1 F" + "9" * 400, "F" + "9" * 23),  # inf as a float
-        ("G2 X1 Y0 R" + "1" * 160, "R" + "1" * 23),  # finite, but overflows the geometry
+        ("G2 X1 Y0 R" + "1" * 400, "R" + "1" * 23),  # inf as a float
         ("G1 X-2000000", "X-2000000"),
     ],
 )
@@ -67,6 +67,19 @@ def test_numbers_beyond_any_coordinate_are_refused_naming_the_word(text, word):
     assert info.value.line == 2 and info.value.word == word
     assert "out of range" in str(info.value)
     assert tokenize("G1 X-1000000 F1000000")[0].words[1].value == -1e6  # the bound itself
+
+
+def test_arc_centres_and_radii_of_any_finite_size_are_read():
+    """FreeCAD posts I-2426220.106 (UGS#2517): I, J, K and R are not bounded here; the
+    modal machine bounds the arc's radius in metres (tests/programs/test_field_reports.py)."""
+    words = tokenize("G2 X-27.306 Y52.107 I-2426220.106 J-10.411 R" + "1" * 160)[0].words
+    assert [w.value for w in words[3:5]] == [-2426220.106, -10.411]
+    assert words[5].value == float("1" * 160)
+
+
+def test_percent_lines_are_marked_for_the_modal_machine():
+    lines = tokenize("%\n% (end)\nG0 X1")
+    assert [line.percent for line in lines] == [True, True, False]
 
 
 def test_lines_are_counted_as_an_editor_counts_them():
