@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -16,6 +17,8 @@ import urllib.error
 import urllib.request
 from collections.abc import Callable
 from typing import Any
+
+import numpy as np
 
 from app.cli.progress import Progress
 from app.runs.health import summary
@@ -226,6 +229,7 @@ def _headless(
         controller.start()
         try:
             controller.set_torque(True).result(timeout=2.0)
+            wait_at_rest(controller)  # the plan starts where the arm is: let it settle
             runs = RunManager(controller, settings.runs.folder_path)
             run = runs.start_sinusoid(params)
             with Progress(_expected_s(params), f"run {run.run_id}", "s") as bar:
@@ -238,6 +242,56 @@ def _headless(
     result = run.as_dict()
     result["files"] = {name: str(run.folder / name) for name in FILES}
     return result
+
+
+REST_WINDOW_S = 0.3  # loop time over which the arm must stand still [s]
+# ... moving less than this [m]: half the run's start tolerance (2 mm, app/runs/manager.py),
+# more than an encoder count's flicker at rest (0.3-0.45 mm at the tip on the twin)
+REST_TOL_M = 1e-3
+REST_DEADLINE_S = 20.0  # wall time to wait for that after torque on [s]
+
+
+def wait_at_rest(
+    controller: Any,
+    window_s: float = REST_WINDOW_S,
+    tol_m: float = REST_TOL_M,
+    deadline_s: float = REST_DEADLINE_S,
+    clock: Callable[[], float] = time.monotonic,
+) -> np.ndarray:
+    """Wait until the measured tool tip moved less than ``tol_m`` [m] over ``window_s`` of
+    loop time (snapshots' ``time_s``, so a loaded machine only makes it slower), as a
+    person waits for the arm to settle after torque on before starting a test from where
+    it is. Returns the point at rest (3,) [m].
+
+    Raises MotionRefused when it has not settled within ``deadline_s`` of ``clock`` [s]
+    (saying how far it moved in the last window), or when the loop faulted meanwhile.
+    """
+    from app.control.errors import MotionRefused
+
+    started = clock()
+    window: list[tuple[float, np.ndarray]] = []
+    moved = float("nan")
+    while True:
+        snap = controller.snapshot()
+        if snap.mode in ("fault", "estop"):
+            raise MotionRefused(f"the loop is in {snap.mode} while waiting for the arm to settle")
+        point = np.asarray(snap.point_measured_m, dtype=np.float64)
+        if np.isfinite(point).all() and (not window or snap.time_s > window[-1][0]):
+            window.append((snap.time_s, point))
+            # keep the oldest sample that still makes the window span window_s
+            while len(window) > 2 and window[-1][0] - window[1][0] >= window_s:
+                window.pop(0)
+            moved = max(float(np.linalg.norm(p - point)) for _, p in window)
+            if window[-1][0] - window[0][0] >= window_s and moved < tol_m:
+                return point
+        if clock() - started > deadline_s:
+            shown = "?" if not math.isfinite(moved) else f"{moved * 1e3:.2f}"
+            raise MotionRefused(
+                f"the arm did not come to rest within {deadline_s:g} s after torque on (it "
+                f"moved {shown} mm in the last {window_s:g} s of loop time; at rest is under "
+                f"{tol_m * 1e3:g} mm): nothing was started"
+            )
+        time.sleep(0.02)
 
 
 def _expected_s(params: SinusoidParams) -> float:

@@ -171,10 +171,9 @@ def stop_motion(state: LoopState) -> None:
 
 def start_point(state: LoopState) -> np.ndarray:
     """Where a new path starts: the commanded point, else (first motion after torque off,
-    e-stop or a fault, or nothing commanded yet) the measured one."""
-    if not state.resync and np.isfinite(state.commanded_point_m).all():
-        return state.commanded_point_m
-    return state.point_m
+    e-stop or a fault, or nothing commanded yet) the measured one (``LoopState.start_m``,
+    which snapshots carry as ``start_m`` for plans made in other threads)."""
+    return state.start_m
 
 
 def start_joints(state: LoopState) -> np.ndarray:

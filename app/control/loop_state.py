@@ -108,6 +108,14 @@ class LoopState:
             raise RuntimeError("no joint state read yet")
         return self.joints.position_rad
 
+    @property
+    def start_m(self) -> np.ndarray:
+        """Where a new path starts (3,) [m]: the commanded point, else (first motion after
+        torque off, e-stop or a fault, or nothing commanded yet) the measured one."""
+        if not self.resync and np.isfinite(self.commanded_point_m).all():
+            return self.commanded_point_m
+        return self.point_m
+
     def snapshot(self, time_s: float) -> Snapshot:
         """The immutable record other threads read, as of now."""
         state = self.joints
@@ -116,6 +124,7 @@ class LoopState:
         return Snapshot(
             time_s=time_s,
             tick=self.tick,
+            start_m=self.start_m.copy(),
             mode=self.mode,
             torque=self.torque,
             estopped=self.estopped,

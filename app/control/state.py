@@ -99,6 +99,8 @@ class Snapshot:
     joints_commanded_rad: np.ndarray = field(default_factory=lambda: _NAN3)
     point_commanded_m: np.ndarray = field(default_factory=lambda: _NAN3)
     goal_m: np.ndarray = field(default_factory=lambda: _NAN3)
+    # where a new path starts (commands.start_point's rule): what a plan must start from
+    start_m: np.ndarray = field(default_factory=lambda: _NAN3)
     velocity_rad_s: np.ndarray = field(default_factory=lambda: _NAN3)
     current_a: np.ndarray = field(default_factory=lambda: _NAN3)
     voltage_v: np.ndarray = field(default_factory=lambda: _NAN3)

@@ -102,10 +102,11 @@ class RunManager:
         controller's model in use); GoalRejected if infeasible."""
         model = model or self.controller.model
         snap = self.controller.snapshot()
-        # the command is the robot's point only while it holds it (torque on, no stop); a
-        # relaxed or stopped arm is where it is measured (it starts from there: resync)
+        # where the loop starts a new path (commands.start_point): the command while it
+        # holds it; after torque on, a stop or a fault, where the arm is measured (resync);
+        # the launch checks the robot is still within runs' tolerance of this point
         holding = snap.torque and not snap.estopped and not snap.faults
-        start = snap.point_commanded_m if holding else snap.point_measured_m
+        start = snap.start_m if holding else snap.point_measured_m
         if not np.isfinite(start).all():
             start = snap.point_measured_m
         if not np.isfinite(start).all():
