@@ -31,7 +31,7 @@ from app.control.gate import Gate
 from app.programs.workers import ChecksBusy, ProgramWorkers, WorkerError
 from app.server import sections
 
-SLOTS = 2  # worker processes at once (each ~150 MB); a third query is refused
+SLOTS = 1  # worker processes at once (~150 MB; one core stays the loop's); a second is refused
 TIMEOUT_S = 20.0  # the longest a query may take, its worker's start included [s]
 CACHE_SIZE = 512  # answers kept (a section is ~30 kB)
 
