@@ -48,6 +48,11 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     )
     parser.add_argument("--apply", action="store_true", help="apply the suggested gains")
     parser.add_argument(
+        "--confirm-missed",
+        action="store_true",
+        help="with --apply: apply them even when they miss the goal on the twin",
+    )
+    parser.add_argument(
         "--revert", action="store_true", help="only put back the gains before the last apply"
     )
     parser.add_argument(
@@ -196,6 +201,7 @@ def _tune(url: str, headers: dict[str, str], args: argparse.Namespace) -> int:
     print(json.dumps(body, indent=1) if args.json else format_result(body))
     code = 0 if body["state"] == "done" else 1
     if code == 0 and args.apply:
-        applied = cli_run._http(f"{url}/api/tuning/{run_id}/apply", "POST", None, headers)
+        confirm = {"confirm_missed": True} if args.confirm_missed else None
+        applied = cli_run._http(f"{url}/api/tuning/{run_id}/apply", "POST", confirm, headers)
         _print_gains("applied", applied)
     return code

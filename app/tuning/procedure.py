@@ -489,19 +489,30 @@ class TuningManager:
         return recorded.folder / "log.csv"
 
     # ---- apply and revert ----
-    def apply(self, run_id: str) -> dict[str, Any]:
+    def apply(self, run_id: str, confirm_missed: bool = False) -> dict[str, Any]:
         """The servos of the run's joints use its suggested gains from now on (the others
-        keep theirs); the gains replaced are kept for `revert`.
+        keep theirs); the gains replaced are kept for `revert`. Gains that miss the goal on
+        the twin (``met_goal`` false) are applied only with ``confirm_missed``: the
+        operator has been told what they miss.
 
         Raises:
-            MotionRefused: the run is not done (running, failed, applied already), or a
-                motion is running (409).
+            MotionRefused: the run is not done (running, failed, applied already), its
+                gains miss the goal and ``confirm_missed`` is false (the message says
+                what they miss), or a motion is running (409).
         """
         run = self._runs[run_id]
         if run.state == "applied":
             raise MotionRefused(f"run {run_id} is applied already")
         if run.state != "done":
             raise MotionRefused(f"run {run_id} is {run.state}: only a done run can be applied")
+        offer = run.offer
+        if offer is not None and not offer.met and not confirm_missed:
+            missed = ", ".join(offer.verdict.failed) or "the goal"
+            raise MotionRefused(
+                f"run {run_id}'s gains miss the goal on the twin ({missed}; {offer.reason}): "
+                "apply them anyway with confirm_missed = true (deltadash tune "
+                "--confirm-missed), or keep the gains in use"
+            )
         with self._lock:
             before = self.controller.gains
             wanted = {**before, **{sid: s.gains for sid, s in run.suggestions.items()}}

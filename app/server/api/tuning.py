@@ -50,6 +50,17 @@ class TuningRequest(BaseModel):
     target: TargetIn = Field(default_factory=TargetIn)
 
 
+class TuningApplyRequest(BaseModel):
+    """Optional: apply gains that miss the goal on the twin (``checked.met_goal`` false)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    confirm_missed: bool = Field(
+        False,
+        description="apply even though the twin check found the gains miss the goal (the "
+        "409 without it says what they miss)",
+    )
+
+
 class TuningStarted(BaseModel):
     run_id: str
 
@@ -195,12 +206,19 @@ def get_tuning_run(run_id: str, tuning: TuningDep) -> dict[str, Any]:
     "/tuning/{run_id}/apply", response_model=TuningApplied, responses={**CONTROL, **NOT_FOUND}
 )
 async def apply_tuning(
-    run_id: str, tuning: TuningDep, _c: ControllerDep, _: ControlClient
+    run_id: str,
+    tuning: TuningDep,
+    _c: ControllerDep,
+    _: ControlClient,
+    body: TuningApplyRequest | None = None,
 ) -> dict[str, Any]:
     """The tuned joints' servos use the suggested gains from now on (the previous ones
-    kept for POST /api/tuning/revert). 409 for a run not done or a motion running."""
+    kept for POST /api/tuning/revert). 409 for a run not done, a motion running, or gains
+    that miss the goal on the twin unless the body says ``{"confirm_missed": true}`` (the
+    409 says what they miss)."""
     _run(tuning, run_id)
-    return await asyncio.to_thread(tuning.apply, run_id)
+    confirm = body is not None and body.confirm_missed
+    return await asyncio.to_thread(tuning.apply, run_id, confirm)
 
 
 @router.get(

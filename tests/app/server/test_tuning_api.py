@@ -103,6 +103,37 @@ class StandInCheck:
         )
 
 
+def test_gains_that_miss_the_goal_are_applied_only_when_the_operator_confirms(client):
+    """Issue 28 point 5: a set with met_goal false was applied like any other. Now the
+    409 says what it misses, and ``confirm_missed`` applies it."""
+    manager = client.app.state.tuning
+    run = _fitted_run(client, name="missed")
+    manager.twin_check = StandInCheck(fail=1000)  # nothing passes
+    try:
+        manager._suggest(run)
+    finally:
+        manager.twin_check = None
+    run.state = "done"
+    body = ok_json(client.get(f"/api/tuning/{run.run_id}"))
+    assert not body["checked"]["met_goal"]
+    take_lease(client)
+    torque_on(client)
+    before = client.app.state.controller.gains
+    refused = client.post(f"/api/tuning/{run.run_id}/apply")
+    assert refused.status_code == 409, refused.text
+    detail = refused.json()["detail"]
+    assert "miss the goal" in detail and "at_limit" in detail and "confirm_missed" in detail
+    assert client.app.state.controller.gains == before  # nothing written
+    assert ok_json(client.get(f"/api/tuning/{run.run_id}"))["state"] == "done"
+    bad = client.post(f"/api/tuning/{run.run_id}/apply", json={"confirm_missed": "yes"})
+    assert bad.status_code == 422
+    applied = ok_json(client.post(f"/api/tuning/{run.run_id}/apply", json={"confirm_missed": True}))
+    assert applied["gains"] == body["suggested"] | {
+        sid: g for sid, g in applied["gains"].items() if sid not in body["suggested"]
+    }
+    ok_json(client.post("/api/tuning/revert"))
+
+
 def test_the_suggested_gains_are_the_twin_checks_choice_never_a_failed_set(client):
     manager = client.app.state.tuning
     run = _fitted_run(client)
@@ -320,7 +351,9 @@ def test_a_run_on_the_twin_identifies_checks_suggests_applies_and_reverts(tmp_pa
         png = twin.get(f"/api/tuning/{run_id}/bode.png")
         assert png.status_code == 200 and png.content.startswith(b"\x89PNG")
 
-        ok_json(twin.post(f"/api/tuning/{run_id}/apply"))
+        if not checked["met_goal"]:  # applied only when confirmed (issue 28)
+            assert twin.post(f"/api/tuning/{run_id}/apply").status_code == 409
+        ok_json(twin.post(f"/api/tuning/{run_id}/apply", json={"confirm_missed": True}))
         bus = twin.app.state.backend.bus  # the twin's servo models, in their process
         for sid, gains in zip(ids, bus.read_gains(), strict=True):
             assert gains_out(gains) == body["suggested"][sid], sid
