@@ -442,7 +442,8 @@ def interpret(
             _collect(line, state.wrist is not None)
             continue
         step(state, line, program)
-    if opened_at and not closed and not state.ended:
+    # a lone % after nothing but comments, with nothing after it either, opens nothing
+    if opened_at and content and not closed and not state.ended:
         raise ProgramError(
             program.lines,
             "",

@@ -17,7 +17,7 @@ from app.cli import main
 from app.cli import run as cli_run
 from tests.support.app_client import make_client
 
-URL = "http://testserver"
+URL = "http://127.0.0.1"
 OFFSETS_RAD = [math.radians(d) for d in (3.0, -2.0, 2.5)]
 PATIENT = {"stale_feedback_s": 5.0, "following_error_time_s": 5.0}  # a starved simulator
 

@@ -21,7 +21,7 @@ from app.server.backends import _calibrations
 from hardware.encoder import RAD_PER_TICK
 from tests.support.app_client import make_client
 
-URL = "http://testserver"
+URL = "http://127.0.0.1"
 OFFSETS_RAD = [math.radians(d) for d in (3.0, -2.0, 2.5)]
 TWIN = {
     "true_joint_offsets_rad": OFFSETS_RAD,

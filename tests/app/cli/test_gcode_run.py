@@ -15,7 +15,7 @@ from app.cli import main
 from app.cli import run as cli_run
 from tests.support.app_client import make_client
 
-URL = "http://testserver"
+URL = "http://127.0.0.1"
 PROGRAM = "G21 G90 G17\nG0 X0 Y0 Z-230\nG1 F1500 X10\nG3 X-10 Y0 R10\nG1 X0\nM2\n"
 FAILING = "G21 G90\nG1 F1200 X0 Y0 Z-220\nZ-40\nZ-220\nM2\n"
 

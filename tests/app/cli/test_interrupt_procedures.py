@@ -21,7 +21,7 @@ from app.cli.progress import Progress
 from app.tuning.procedure import TuningManager
 from tests.support.app_client import make_client
 
-URL = "http://testserver"
+URL = "http://127.0.0.1"
 WAIT_S = 60.0
 
 

@@ -88,11 +88,11 @@ def test_take_over_is_needed_to_take_control_and_says_whom_it_was_taken_from(
     monkeypatch.setattr(run, "_http", through(app))
     dashboard = app.post("/api/lease", json={"client": "dashboard-ab12"}).json()["lease_id"]
     with pytest.raises(run.LeaseRefused) as refused:
-        run._take_control("http://testserver", None, take_over=False)
+        run._take_control("http://127.0.0.1", None, take_over=False)
     assert "'dashboard-ab12'" in str(refused.value) and "--take-over" in str(refused.value)
     assert app.post("/api/reset", headers={"x-lease": dashboard}).status_code == 200  # still held
 
-    headers = run._take_control("http://testserver", None, take_over=True)
+    headers = run._take_control("http://127.0.0.1", None, take_over=True)
     assert "took control from 'dashboard-ab12'" in capsys.readouterr().err
     assert app.post("/api/reset", headers={"x-lease": dashboard}).status_code == 409
     assert app.post("/api/reset", headers=headers).status_code == 200
@@ -101,8 +101,8 @@ def test_take_over_is_needed_to_take_control_and_says_whom_it_was_taken_from(
 
 def test_taking_free_control_names_nobody(app, monkeypatch, capsys):
     monkeypatch.setattr(run, "_http", through(app))
-    headers = run._take_control("http://testserver", None, take_over=True)  # from whoever
+    headers = run._take_control("http://127.0.0.1", None, take_over=True)  # from whoever
     assert app.delete("/api/lease", headers=headers).status_code == 200
     capsys.readouterr()
-    run._take_control("http://testserver", None, take_over=True)
+    run._take_control("http://127.0.0.1", None, take_over=True)
     assert "took control" not in capsys.readouterr().err

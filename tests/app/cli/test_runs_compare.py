@@ -75,7 +75,7 @@ def test_compare_from_a_server_prints_the_same_table(folder, capsys, monkeypatch
             A,
             B,
             "--url",
-            "http://testserver",
+            "http://127.0.0.1",
             "--json",
             "--plot",
             str(plot),
@@ -83,5 +83,5 @@ def test_compare_from_a_server_prints_the_same_table(folder, capsys, monkeypatch
         assert main(args) == 0
         assert json.loads(capsys.readouterr().out) == local
         assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-        assert main(["runs", "compare", A, "gone", "--url", "http://testserver"]) == 2
+        assert main(["runs", "compare", A, "gone", "--url", "http://127.0.0.1"]) == 2
         assert "404 no run 'gone'" in capsys.readouterr().err

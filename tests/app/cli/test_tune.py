@@ -26,7 +26,7 @@ from app.tuning.twin_check import OfferJob, Tracking, Verdict, offer
 from hardware.bus import PositionGains
 from tests.support.app_client import make_client
 
-URL = "http://testserver"
+URL = "http://127.0.0.1"
 MODEL = JointModel(1.0, 55.0, 0.75, 0.008)
 
 

@@ -138,6 +138,7 @@ def _post_then_disconnect(client, path: str, body: dict) -> tuple[int, dict]:
         "client": ("test", 1),
         "server": ("testserver", 80),
         "headers": [
+            (b"host", b"127.0.0.1"),
             (b"content-type", b"application/json"),
             (b"content-length", str(len(payload)).encode()),
             (b"x-lease", client.headers["x-lease"].encode()),
