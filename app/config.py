@@ -353,10 +353,12 @@ class LoopSettings(_Section):
 class ControlSettings(_Section):
     """How the loop turns goals into servo goals (app/control/gravity.py)."""
 
-    gravity_compensation: bool = Field(
-        False,
+    gravity_compensation: bool | None = Field(
+        None,
         description="shift each joint's servo goal by its predicted sag under gravity "
-        "(gravity torque / the position loop's stiffness), so the arm rests on its goal",
+        "(gravity torque / the position loop's stiffness), so the arm rests on its goal; "
+        "unset: on for a rotary Delta that has gravity (the twin, real servos), off on "
+        "the emulator (its servos carry no load) and for linear Deltas",
     )
     payload_kg: float = Field(
         0.0, ge=0, le=2.0, description="load on the platform the compensation holds up [kg]"
@@ -576,6 +578,18 @@ class Settings(BaseSettings):
         """The servos on the bus in bus order: the three legs, then the wrist if enabled."""
         joints = list(self.hardware.joints)
         return joints + [self.wrist] if self.wrist.enabled else joints
+
+    def gravity_on(self, carries_load: bool = True) -> bool:
+        """Whether the loop compensates gravity on a bus that ``carries_load`` (a real or
+        simulated arm; a fake or the emulator's servos carry none): ``[control]
+        gravity_compensation`` when set, else on for a rotary Delta whose bus carries a
+        load, except on the emulator backend."""
+        wanted = self.control.gravity_compensation
+        if wanted is None:
+            return (
+                carries_load and self.robot.type == "rotary" and self.hardware.backend != "emulated"
+            )
+        return wanted
 
     @model_validator(mode="after")
     def _gravity_model(self) -> Settings:

@@ -119,7 +119,13 @@ class BusStats:
 
 @runtime_checkable
 class ServoBus(Protocol):
-    """A bus of position-controlled joint servos, addressed in joint order."""
+    """A bus of position-controlled joint servos, addressed in joint order.
+
+    An optional class attribute ``carries_load`` (True on the Dynamixel driver and the
+    twin's buses) says the servos move links under gravity, so the loop's gravity
+    compensation applies by default (app/config.py ``Settings.gravity_on``); fakes and
+    the emulator leave it out.
+    """
 
     def connect(self) -> None:
         """Open the port and check every configured servo answers a ping.

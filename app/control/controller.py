@@ -89,7 +89,8 @@ class Controller:
         # [control] gravity_compensation: servo goals shifted by the predicted sag (the
         # loop's commanded joints stay the goal's, so status and following errors see it)
         self.gravity: GravityOffset | None = None
-        if settings.control.gravity_compensation:
+        # unset: on where the bus carries a load (the twin, real servos; `carries_load`)
+        if settings.gravity_on(getattr(bus, "carries_load", False)):
             self.gravity = gravity_offset(
                 dynamics_robot(self.robot),
                 settings.control.payload_kg,

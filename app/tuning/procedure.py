@@ -386,7 +386,7 @@ class TuningManager:
             run.target,
             current=joint_gains([run.current[sid] for sid in run.servo_ids]),
             lead_s=settings.runs.feedforward_lead_s,
-            gravity=settings.control.gravity_compensation,
+            gravity=self.controller.gravity is not None,  # as the loop does
         )
         run.advance("checking")
         if self.twin_check is not None:

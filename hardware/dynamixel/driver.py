@@ -98,6 +98,8 @@ class DynamixelConfig:
 class DynamixelBus:
     """The control loop's bus: SI units in and out, one write and one read per tick."""
 
+    carries_load = True  # real or simulated links under gravity (the loop compensates)
+
     def __init__(self, config: DynamixelConfig) -> None:
         self.config = config
         self.ids = tuple(joint.servo_id for joint in config.joints)

@@ -61,6 +61,8 @@ _FRAME_SIZE = 38
 class ProcessSimBus:
     """ServoBus on a `SimBus` in a child process (joint order = the calibrations' order)."""
 
+    carries_load = True  # real or simulated links under gravity (the loop compensates)
+
     def __init__(self, config: SimBusConfig | None = None) -> None:
         self.config = replace(config or SimBusConfig(), realtime=False)  # the child paces it
         self.joints = self.config.twin.joints

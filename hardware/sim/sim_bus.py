@@ -101,6 +101,8 @@ def _disconnect_all() -> None:
 class SimBus:
     """ServoBus on the MuJoCo twin (joint order = the calibrations' order)."""
 
+    carries_load = True  # real or simulated links under gravity (the loop compensates)
+
     def __init__(self, config: SimBusConfig | None = None) -> None:
         self.config = config or SimBusConfig()
         self.twin = DeltaTwin(self.config.twin)
