@@ -117,3 +117,46 @@ def test_mavlink_odometry_is_converted_from_ned(tracker):
     np.testing.assert_allclose(sample.pose.rotation @ [1, 0, 0], [1, 0, 0], atol=1e-9)
     np.testing.assert_allclose(velocity, [0.5, 0.0, 0.0], atol=1e-9)  # forward = east
     np.testing.assert_allclose(sample.angular_velocity_rad_s, [0, 0, -0.1])  # FRD yaw -> FLU
+
+
+def _good(t: float) -> bytes:
+    return json.dumps({"t": t, "position": [0.0, 0.0, 1.0], "quaternion": [1, 0, 0, 0]}).encode()
+
+
+@pytest.mark.parametrize(
+    ("poison", "reason"),
+    [
+        (b'{"t": ' + b"9" * 400 + b', "position": [0, 0, 1], "quaternion": [1, 0, 0, 0]}', "large"),
+        (b"[" * 30_000 + b"]" * 30_000, "deep"),
+        (b'{"t": 1, "position": [' + b"9" * 400 + b', 0, 1], "quaternion": [1, 0, 0, 0]}', "large"),
+    ],
+    ids=["huge-t", "deep-array", "huge-position"],
+)
+def test_udp_listener_survives_a_poison_datagram_and_names_it(tracker, poison, reason):
+    listener = UdpPoseListener(tracker, _free_port()).start()
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+            sender.sendto(poison, ("127.0.0.1", listener.port))
+            wait_for(lambda: listener.errors == 1, "the poison datagram counted")
+            sender.sendto(_good(1.0), ("127.0.0.1", listener.port))
+            wait_for(lambda: tracker.accepted == 1, "a good datagram after the poison one")
+        status = listener.status()
+        assert status["alive"] is True and status["errors"] == 1
+        assert reason in status["last_error"]
+    finally:
+        listener.stop()
+
+
+def test_a_dead_udp_listener_says_so_and_restarts(tracker):
+    listener = UdpPoseListener(tracker, _free_port()).start()
+    try:
+        listener.socket.close()  # a socket error: the thread cannot go on
+        wait_for(lambda: not listener.status()["alive"], "the listener seen dead")
+        assert listener.status()["last_error"]
+        listener.restart()
+        assert listener.status()["alive"] is True and listener.status()["restarts"] == 1
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+            sender.sendto(_good(1.0), ("127.0.0.1", listener.port))
+        wait_for(lambda: tracker.accepted == 1, "a datagram accepted after the restart")
+    finally:
+        listener.stop()

@@ -106,8 +106,11 @@ def get_pose_status(
 ) -> dict[str, Any]:
     """The pose input's health for ``body`` (the drone's by default, or the platform
     marker's): state (ok/stale/lost/none), age, rate, counters (and the UDP input's
-    refused datagrams)."""
-    return world.tracker_for(body).status() | {"udp_errors": world.udp_errors()}
+    refused datagrams), and ``sources``: each pose source, what it accepts (open, token,
+    trusted, signed, refused), whether its listener is alive, its counters and last
+    error."""
+    status = world.tracker_for(body).status()
+    return status | {"udp_errors": world.udp_errors(), "sources": world.sources()}
 
 
 @router.websocket("/mav/pose")
