@@ -73,3 +73,28 @@ def test_a_dead_udp_input_shows_in_the_status_and_reset_restarts_it(udp):
         lambda: ok_json(client.get("/api/mav/pose"))["accepted"] == accepted + 1,
         "a datagram accepted after the reset",
     )
+
+
+def test_with_a_token_every_pose_source_needs_it_or_says_why_not(tmp_path):
+    from starlette.websockets import WebSocketDisconnect
+
+    token, port = "s3cret-token", _free_port()
+    world = {"udp_port": port, "mavlink_url": f"udpin:127.0.0.1:{_free_port()}"}
+    with make_client(tmp_path, server={"token": token}, world=world) as client:
+        rules = {s["name"]: s["rule"] for s in ok_json(client.get("/api/mav/pose"))["sources"]}
+        assert rules == {
+            "http": "token",
+            "websocket": "token",
+            "udp": "token",
+            "mavlink": "refused",
+        }
+        body = {"t": 1.0, "position": [0.0, 0.0, 1.0], "quaternion": [1.0, 0.0, 0.0, 0.0]}
+        assert client.post("/api/mav/pose", json=body).status_code == 401
+        with pytest.raises(WebSocketDisconnect), client.websocket_connect("/api/mav/pose") as ws:
+            ws.receive_json()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+            sender.sendto(_datagram(5.0), ("127.0.0.1", port))
+            wait_for(lambda: _source(client, "udp")["refused"] == 1, "the tokenless datagram")
+            sender.sendto(_datagram(6.0, token=token), ("127.0.0.1", port))
+            wait_for(lambda: _source(client, "udp")["accepted"] == 1, "the datagram with it")
+        assert ok_json(client.get("/api/mav/pose"))["accepted"] == 1
