@@ -153,3 +153,10 @@ def test_every_bad_websocket_frame_gets_an_error_and_the_stream_goes_on(client):
         ws.send_text("not json")  # answered: the connection is still open after the good one
         assert "JSON" in ws.receive_json()["error"]
     assert ok_json(client.get("/api/mav/pose"))["accepted"] == accepted + 1
+
+
+def test_a_bad_body_query_names_the_field_and_the_reason(client):
+    response = client.get("/api/mav/pose?body=moon")
+    assert response.status_code == 422
+    detail = response.json()["detail"]
+    assert detail.startswith("query.body: ") and "'drone' or 'platform'" in detail
