@@ -40,6 +40,7 @@ Example file::
 
 from __future__ import annotations
 
+import hashlib
 import math
 import tomllib
 from contextvars import ContextVar
@@ -490,6 +491,29 @@ class WorldSettings(_Section):
     mavlink_url: str | None = Field(
         None, description="pymavlink connection for ODOMETRY, e.g. udpin:0.0.0.0:14550"
     )
+    udp_trusted: bool = Field(
+        False,
+        description="with server.token set: take UDP poses without a token (a trusted "
+        'local bridge); otherwise each datagram carries the token as "token"',
+    )
+    mavlink_trusted: bool = Field(
+        False,
+        description="with server.token set: take MAVLink ODOMETRY unsigned (a trusted "
+        "link); otherwise it needs mavlink_signing_key or is refused",
+    )
+    mavlink_signing_key: str | None = Field(
+        None,
+        min_length=8,
+        description="MAVLink2 signing passphrase (key: its SHA-256, as MAVProxy's 'signing "
+        "setup'): unsigned or wrongly signed messages are refused",
+    )
+
+    @property
+    def mavlink_signing_key_bytes(self) -> bytes | None:
+        """The 32-byte signing key: SHA-256 of ``mavlink_signing_key`` (None without)."""
+        if self.mavlink_signing_key is None:
+            return None
+        return hashlib.sha256(self.mavlink_signing_key.encode()).digest()
 
 
 class ProgramSettings(_Section):

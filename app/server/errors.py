@@ -62,10 +62,15 @@ def _error(status: int, detail: str, **extra: Any) -> JSONResponse:
 
 
 def _field_errors(exc: RequestValidationError) -> str:
-    """'position_m.1: Input should be a finite number' per error; never echoes raw input."""
+    """'position_m.1: Input should be a finite number' per error, 'query.body: Input should
+    be ...' for a query parameter; never echoes raw input. Only a leading 'body' (where a
+    JSON body's field came from) is left out, never a field's own name."""
     parts = []
     for error in exc.errors():
-        location = ".".join(str(p) for p in error["loc"] if p != "body") or "body"
+        loc = list(error["loc"])
+        if loc and loc[0] == "body":
+            loc = loc[1:]
+        location = ".".join(str(p) for p in loc) or "body"
         parts.append(f"{location}: {error['msg']}")
     return "; ".join(parts)
 

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from app.control.errors import GoalRejected
 from app.world.drone_sim import DroneSimParams, SimulatedDrone
 from app.world.hold import HoldSource, PoseProvider, SimulatedDroneProvider, TrackerProvider
-from app.world.inputs import MavlinkPoseListener, UdpPoseListener
+from app.world.inputs import MavlinkPoseListener, PoseInput, UdpPoseListener
 from app.world.poses import PoseTracker
 from hardware.bus import SimulatedBus
 from kinematics import Pose
@@ -57,12 +57,26 @@ class WorldService:
         # a motion-capture marker on the platform (body "platform" on the pose input): a
         # calibration run's measurement (app/calibration/procedure.py pose_input)
         self.platform = PoseTracker(world.stale_after_s, world.lost_after_s, world.max_jump_m)
-        self._listeners: list = []
+        self._listeners: list[PoseInput] = []
+        token = controller.settings.server.token
         if world.udp_port is not None:
-            listener = UdpPoseListener(self.tracker, world.udp_port, platform=self.platform)
+            listener = UdpPoseListener(
+                self.tracker,
+                world.udp_port,
+                platform=self.platform,
+                token=token,
+                trusted=world.udp_trusted,
+            )
             self._listeners.append(listener.start())
         if world.mavlink_url is not None:
-            self._listeners.append(MavlinkPoseListener(self.tracker, world.mavlink_url).start())
+            listener = MavlinkPoseListener(
+                self.tracker,
+                world.mavlink_url,
+                token=token,
+                trusted=world.mavlink_trusted,
+                signing_key=world.mavlink_signing_key_bytes,
+            )
+            self._listeners.append(listener.start())
 
     def tracker_for(self, body: str) -> PoseTracker:
         """The tracker of ``body`` ("drone" or "platform"); ValueError for another."""
@@ -74,7 +88,37 @@ class WorldService:
     def udp_errors(self) -> int | None:
         """Datagrams the UDP pose input refused (None without one)."""
         udp = [x for x in self._listeners if isinstance(x, UdpPoseListener)]
-        return udp[0].errors if udp else None
+        return udp[0].errors + udp[0].refused if udp else None
+
+    def sources(self) -> list[dict[str, Any]]:
+        """Every pose source and what it takes (GET /api/mav/pose ``sources``): http and
+        websocket (rule "token" when a token is set, else "open"; no counters of their own),
+        udp and mavlink (enabled when configured; alive, rule, counters, last_error)."""
+        rule = "open" if self.controller.settings.server.token is None else "token"
+        blank = {"alive": None, "accepted": None, "errors": None, "refused": None}
+        blank |= {"restarts": None, "last_error": None}
+        out = [
+            {"name": name, "enabled": True, "rule": rule, **blank} for name in ("http", "websocket")
+        ]
+        running = {listener.name: listener for listener in self._listeners}
+        world = self.controller.settings.world
+        token = self.controller.settings.server.token
+        for name, trusted in (("udp", world.udp_trusted), ("mavlink", world.mavlink_trusted)):
+            if name in running:
+                out.append(running[name].status())
+                continue
+            off = "open" if token is None else ("trusted" if trusted else "refused")
+            out.append({"name": name, "enabled": False, "rule": off, **blank})
+        return out
+
+    def restart_inputs(self) -> None:
+        """Restart every listener thread that has died (POST /api/reset); one that cannot
+        be reopened says why in its ``last_error`` and stays down."""
+        for listener in self._listeners:
+            try:
+                listener.restart()
+            except OSError as exc:
+                listener.last_error = f"restart failed: {exc}"
 
     def close(self) -> None:
         for listener in self._listeners:

@@ -132,3 +132,31 @@ def test_telemetry_carries_the_world_frame_during_a_hold(client):
         world["error_m"], np.subtract(world["goal_m"], world["measured_m"]), atol=1e-12
     )
     wait_for(lambda: ok_json(client.get(f"/api/runs/{run_id}"))["state"] != "running", "run")
+
+
+def test_every_bad_websocket_frame_gets_an_error_and_the_stream_goes_on(client):
+    accepted = ok_json(client.get("/api/mav/pose"))["accepted"]
+    huge = '{"t": ' + "9" * 400 + ', "position": [0, 0, 1.5], "quaternion": [1, 0, 0, 0]}'
+    with client.websocket_connect("/api/mav/pose") as ws:
+        for frame, reason in (
+            (b'{"t": 1}', "binary"),
+            (huge, "large"),
+            ("[" * 30_000 + "]" * 30_000, "deep"),
+            ("[1, 2]", "object"),
+        ):
+            if isinstance(frame, bytes):
+                ws.send_bytes(frame)
+            else:
+                ws.send_text(frame)
+            assert reason in ws.receive_json()["error"]
+        ws.send_text(json.dumps(_pose(9000.0)))
+        ws.send_text("not json")  # answered: the connection is still open after the good one
+        assert "JSON" in ws.receive_json()["error"]
+    assert ok_json(client.get("/api/mav/pose"))["accepted"] == accepted + 1
+
+
+def test_a_bad_body_query_names_the_field_and_the_reason(client):
+    response = client.get("/api/mav/pose?body=moon")
+    assert response.status_code == 422
+    detail = response.json()["detail"]
+    assert detail.startswith("query.body: ") and "'drone' or 'platform'" in detail

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import asyncio
-import json
 import math
 from dataclasses import asdict
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, WebSocket
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.control.errors import GoalRejected
@@ -25,7 +24,7 @@ from app.server.api.models import Accepted, Finite, Vector3
 from app.server.api.responses import PoseAccepted, PoseInputStatus, RunStarted
 from app.server.errors import CONTROL, INVALID, UNAUTHORISED
 from app.world.drone_sim import DroneSimParams
-from app.world.inputs import body_of, sample_from_json
+from app.world.inputs import body_of, parse_pose, sample_from_json
 from app.world.service import WorldService
 from kinematics import PoseError
 
@@ -106,27 +105,33 @@ def get_pose_status(
 ) -> dict[str, Any]:
     """The pose input's health for ``body`` (the drone's by default, or the platform
     marker's): state (ok/stale/lost/none), age, rate, counters (and the UDP input's
-    refused datagrams)."""
-    return world.tracker_for(body).status() | {"udp_errors": world.udp_errors()}
+    refused datagrams), and ``sources``: each pose source, what it accepts (open, token,
+    trusted, signed, refused), whether its listener is alive, its counters and last
+    error."""
+    status = world.tracker_for(body).status()
+    return status | {"udp_errors": world.udp_errors(), "sources": world.sources()}
 
 
 @router.websocket("/mav/pose")
 async def stream_poses(websocket: WebSocket, world: WorldDep) -> None:
-    """A stream of pose JSON objects (same fields as POST, ``body`` included); bad ones are
-    answered with an error."""
+    """A stream of pose JSON objects (same fields as POST, ``body`` included), one per text
+    frame. Every bad frame (binary, not JSON, nested too deep, a number beyond a float, a
+    bad field or body) is answered ``{"error": "..."}`` and the stream goes on."""
     if not websocket_token_ok(websocket):
         await websocket.close(code=1008, reason="missing or wrong token (?token=)")
         return
     await websocket.accept()
-    try:
-        while True:
-            text = await websocket.receive_text()
-            try:
-                _push(world, json.loads(text))
-            except (ValueError, KeyError, TypeError, PoseError) as exc:
-                await websocket.send_json({"error": str(exc)})
-    except WebSocketDisconnect:
-        return
+    while True:
+        message = await websocket.receive()
+        if message["type"] == "websocket.disconnect":
+            return
+        text = message.get("text")
+        try:
+            if text is None:
+                raise PoseError("a pose is a JSON text frame, got a binary frame")
+            _push(world, parse_pose(text))
+        except (ValueError, KeyError, TypeError, PoseError) as exc:
+            await websocket.send_json({"error": str(exc)})
 
 
 @router.post("/hold", response_model=Accepted, responses=CONTROL)

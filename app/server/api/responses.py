@@ -132,6 +132,30 @@ class BusStatusOut(_Out):
     )
 
 
+class PoseSourceOut(_Out):
+    """One pose source (http, websocket, udp, mavlink) and what it accepts."""
+
+    name: str = Field(description="http | websocket | udp | mavlink")
+    enabled: bool = Field(description="udp and mavlink: configured ([world] udp_port, mavlink_url)")
+    rule: str = Field(
+        description="what it takes: open (no server.token) | token (the token with each "
+        "request, frame or datagram) | trusted ([world] udp_trusted / mavlink_trusted) | "
+        "signed (MAVLink2 signing, [world] mavlink_signing_key) | refused (a token is set "
+        "and MAVLink is neither trusted nor signed: every message is refused)"
+    )
+    alive: bool | None = Field(
+        description="udp and mavlink: the listener thread runs (false: dead, see last_error; "
+        "POST /api/reset restarts it); null for the others"
+    )
+    accepted: int | None = Field(description="samples the tracker kept from this input")
+    errors: int | None = Field(description="messages refused as malformed")
+    refused: int | None = Field(description="messages refused by the rule (token, signature)")
+    restarts: int | None = Field(description="times the listener was restarted")
+    last_error: str | None = Field(
+        description="the last refused message's reason, or why the input stopped"
+    )
+
+
 class PoseInputStatus(_Out):
     """A pose input's health (the drone's, or a platform marker's: ``body``)."""
 
@@ -147,7 +171,10 @@ class PoseInputStatus(_Out):
     udp_errors: int | None = Field(
         None,
         description="GET only, with [world] udp_port: datagrams refused (not JSON, a bad "
-        "field or body), of both bodies",
+        "field or body, a missing or wrong token), of both bodies",
+    )
+    sources: list[PoseSourceOut] | None = Field(
+        None, description="GET only: every pose source, what it accepts and its counters"
     )
 
 

@@ -12,7 +12,13 @@ from fastapi import APIRouter, Header, HTTPException, Request
 from app.control.authority import LeaseHeld
 from app.server import estop
 from app.server.api import serialize
-from app.server.api.deps import AuthorityDep, ControlClient, ControllerDep, TokenChecked
+from app.server.api.deps import (
+    AuthorityDep,
+    ControlClient,
+    ControllerDep,
+    TokenChecked,
+    WorldDep,
+)
 from app.server.api.models import (
     Accepted,
     GoalRequest,
@@ -93,8 +99,10 @@ async def post_estop(request: Request, controller: ControllerDep):
 
 
 @router.post("/reset", response_model=Accepted, responses=CONTROL)
-async def post_reset(controller: ControllerDep, _: ControlClient):
-    """Clear e-stop and faults; reboots servos that report hardware errors."""
+async def post_reset(controller: ControllerDep, world: WorldDep, _: ControlClient):
+    """Clear e-stop and faults; reboots servos that report hardware errors; restarts a pose
+    input (UDP, MAVLink) whose listener died (GET /api/mav/pose ``sources``)."""
+    await asyncio.to_thread(world.restart_inputs)
     return await _outcome(controller.reset())
 
 
