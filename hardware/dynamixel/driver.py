@@ -39,8 +39,7 @@ from hardware.dynamixel.control_table import (
     Reg,
     current_to_ampere,
     decode,
-    rad_s2_to_acceleration,
-    rad_s_to_velocity,
+    profile_units,
     velocity_to_rad_s,
     voltage_to_volt,
 )
@@ -209,11 +208,20 @@ class DynamixelBus:
         return self._state_from(raw, alerts)
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
-        if velocity_rad_s < 0 or acceleration_rad_s2 < 0:
-            raise ValueError("profile velocity and acceleration must be >= 0 (0 = unlimited)")
+        """Profile Velocity [rad/s] and Acceleration [rad/s^2] on all joints (0 = unlimited).
+
+        Each is rounded to register units (`profile_units`); a positive request below
+        half a unit is written as 1 unit (0.024 rad/s, 0.375 rad/s^2), never as 0, which
+        the XM430 reads as unlimited; a value so raised is logged as a warning naming the
+        value written.
+
+        Raises ValueError for a negative or non-finite value; NotConnectedError, CommError,
+        ServoStatusError.
+        """
+        velocity, acceleration = profile_units(velocity_rad_s, acceleration_rad_s2)
         n = len(self.ids)
-        self._write_all(Reg.PROFILE_ACCELERATION, [rad_s2_to_acceleration(acceleration_rad_s2)] * n)
-        self._write_all(Reg.PROFILE_VELOCITY, [rad_s_to_velocity(velocity_rad_s)] * n)
+        self._write_all(Reg.PROFILE_ACCELERATION, [acceleration] * n)
+        self._write_all(Reg.PROFILE_VELOCITY, [velocity] * n)
 
     def set_gains(self, gains: PositionGains | Sequence[PositionGains]) -> None:
         each = per_joint(gains, len(self.ids))

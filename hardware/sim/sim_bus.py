@@ -32,7 +32,7 @@ from hardware.dynamixel.control_table import (
     ampere_to_current,
     current_to_ampere,
     hardware_error_names,
-    rad_s2_to_acceleration,
+    profile_units,
     rad_s_to_velocity,
     velocity_to_rad_s,
 )
@@ -176,11 +176,11 @@ class SimBus:
             return self._state()
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
-        if velocity_rad_s < 0 or acceleration_rad_s2 < 0:
-            raise ValueError("profile velocity and acceleration must be >= 0 (0 = unlimited)")
-        # through the register units, so the quantization matches the real servo's
-        velocity = velocity_to_rad_s(rad_s_to_velocity(velocity_rad_s))
-        acceleration = acceleration_to_rad_s2(rad_s2_to_acceleration(acceleration_rad_s2))
+        # through the register units, so the quantization matches the real servo's (and a
+        # positive request below half a unit is 1 unit, never 0 = unlimited)
+        units = profile_units(velocity_rad_s, acceleration_rad_s2)
+        velocity = velocity_to_rad_s(units[0])
+        acceleration = acceleration_to_rad_s2(units[1])
         with self._transaction("write PROFILE"):
             self._update(
                 profile_velocity_rad_s=[velocity] * self.n,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 
 import numpy as np
@@ -73,6 +74,16 @@ def test_gains_and_profile_reach_the_servo_models(bus: SimBus) -> None:
     assert bus.read_gains() == [PositionGains(p=700 + k, feedforward_2nd=k) for k in range(3)]
     with pytest.raises(ValueError, match="joints"):
         bus.set_gains([PositionGains()] * 4)
+
+
+def test_a_small_profile_stays_limited_in_the_twin(bus: SimBus) -> None:
+    bus.set_profile(0.01, 0.1)  # both round to 0 units: must become 1 unit, not unlimited
+    cmd = bus.commands[0]
+    assert cmd.profile_velocity_rad_s == pytest.approx(0.229 * 2 * math.pi / 60)
+    assert cmd.profile_acceleration_rad_s2 == pytest.approx(214.577 * 2 * math.pi / 3600)
+    bus.set_profile(0.0, 0.0)
+    cmd = bus.commands[0]
+    assert (cmd.profile_velocity_rad_s, cmd.profile_acceleration_rad_s2) == (0.0, 0.0)
 
 
 def test_operating_mode_is_refused_while_torque_is_on(bus: SimBus) -> None:
