@@ -144,6 +144,11 @@ class PoseInputStatus(_Out):
     restarts: int = Field(
         0, description="times the stream started afresh: a sample after lost_after_s of none"
     )
+    refused_frames: dict[str, int] = Field(
+        default_factory=dict,
+        description="MAVLink ODOMETRY messages refused for a frame not taken, by field and "
+        "frame, e.g. {'child_frame_id MAV_FRAME_LOCAL_ENU': 3}",
+    )
     udp_errors: int | None = Field(
         None,
         description="GET only, with [world] udp_port: datagrams refused (not JSON, a bad "
