@@ -153,3 +153,17 @@ def test_each_state_carries_the_simulated_time_it_was_taken_at(bus: SimBus) -> N
     after = bus.read_state()
     assert after.sim_time_s == pytest.approx(before.sim_time_s + 0.05)
     assert after.sim_time_s == bus.twin.time_s
+
+
+def test_an_overload_shuts_the_servo_down_and_its_torque_reads_off(bus: SimBus) -> None:
+    bus.torque(True)
+    assert bus.read_state().torque_enabled == (True, True, True)
+    bus.twin.servos[0].hardware_error = int(HardwareErrorFlag.OVERLOAD)
+    bus.advance(0.01)
+    state = bus.read_state()
+    # the XM430's Shutdown (63) turns Torque Enable off for an overload, as on the servo
+    assert state.hardware_errors == (("overload",), (), ())
+    assert state.torque_enabled == (False, True, True)
+    assert not bus.commands[0].torque_enabled
+    bus.reboot([1])
+    assert bus.read_state().torque_enabled == (False, True, True)
