@@ -60,6 +60,10 @@ class JointState:
     two reads with the same simulated time are the same state, the second one stale (the
     simulator did not step in between). A real bus's state is fresh by construction: a read
     either gets every servo's reply or raises.
+    torque_enabled: per joint, the servo's Torque Enable (64) as read from the servo, not
+    as last written: False for a servo whose Shutdown turned its torque off after an
+    overload or other hardware error (the arm then sags however torque was asked); None
+    where a bus does not know it.
     """
 
     position_rad: np.ndarray
@@ -71,6 +75,7 @@ class JointState:
     hardware_errors: tuple[tuple[str, ...], ...]
     stamp_s: float
     sim_time_s: float | None = None
+    torque_enabled: tuple[bool, ...] | None = None
 
     @property
     def faulted(self) -> bool:
@@ -178,6 +183,9 @@ class ServoBus(Protocol):
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
         """Profile Velocity [rad/s] and Acceleration [rad/s^2] on all joints (0 = unlimited).
+
+        A positive value too small for one register unit is written as one unit, never as
+        0 (unlimited); only 0 asked is unlimited.
 
         Raises ValueError for a negative value; NotConnectedError, CommError,
         ServoStatusError.

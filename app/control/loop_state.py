@@ -126,7 +126,7 @@ class LoopState:
             tick=self.tick,
             start_m=self.start_m.copy(),
             mode=self.mode,
-            torque=self.torque,
+            torque=self.torque and self._servos_hold(),
             estopped=self.estopped,
             faults=tuple(self.faults),
             faults_dropped=self.faults_dropped,
@@ -145,6 +145,7 @@ class LoopState:
             temperature_c=state.temperature_c if state else nan3,
             moving=tuple(bool(m) for m in state.moving) if state else (False,) * 3,
             hardware_errors=state.hardware_errors if state else ((),) * 3,
+            torque_enabled=_torque_read(state),
             missed_reads=self.misses.total,
             phase=self.phase if self.source else "",
             lateness_ms=self.lateness_s * 1e3,
@@ -159,6 +160,20 @@ class LoopState:
             phi_commanded_rad=_or_nan(self.phi_commanded_rad),
             phi_goal_rad=_or_nan(self.phi_goal_rad),
         )
+
+    def _servos_hold(self) -> bool:
+        """No servo (legs, wrist) reads its Torque Enable off at the last read: one whose
+        Shutdown dropped it (an overload) does not hold the arm, whatever was asked.
+        Servos whose bus does not say count as holding."""
+        read = [*_torque_read(self.joints), self.wrist.torque_enabled if self.wrist else None]
+        return False not in read
+
+
+def _torque_read(state: JointState | None) -> tuple[bool | None, ...]:
+    """Each leg servo's Torque Enable as read (None: not known)."""
+    if state is None or state.torque_enabled is None:
+        return (None,) * 3
+    return tuple(state.torque_enabled)
 
 
 def _or_nan(value: float | None) -> float:

@@ -66,6 +66,7 @@ class WristReading:
     current_a: float
     temperature_c: float
     hardware_errors: tuple[str, ...]
+    torque_enabled: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -107,6 +108,9 @@ class Snapshot:
     temperature_c: np.ndarray = field(default_factory=lambda: _NAN3)
     moving: tuple[bool, ...] = (False, False, False)
     hardware_errors: tuple[tuple[str, ...], ...] = ((), (), ())
+    # per leg servo, its Torque Enable as read from it (None: not known); ``torque`` is
+    # the torque asked for and held: False once any servo reads it off (a shutdown)
+    torque_enabled: tuple[bool | None, ...] = (None, None, None)
     missed_reads: int = 0
     phase: str = ""
     lateness_ms: float = 0.0

@@ -84,6 +84,7 @@ class WristBus:
             float(state.current_a[k]),
             float(state.temperature_c[k]),
             tuple(state.hardware_errors[k]),
+            None if state.torque_enabled is None else bool(state.torque_enabled[k]),
         )
         return JointState(
             position_rad=state.position_rad[:k],
@@ -95,6 +96,7 @@ class WristBus:
             hardware_errors=tuple(state.hardware_errors[:k]),
             stamp_s=state.stamp_s,
             sim_time_s=state.sim_time_s,
+            torque_enabled=None if state.torque_enabled is None else state.torque_enabled[:k],
         )
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:

@@ -252,16 +252,113 @@ class UdpPoseListener(PoseInput):
             self.accepted += 1
 
 
+# MAVLink MAV_FRAME values (common.xml) that ODOMETRY may name
+MAV_FRAME_LOCAL_NED = 1
+MAV_FRAME_BODY_NED = 8
+MAV_FRAME_BODY_FRD = 12
+MAV_FRAME_LOCAL_FRD = 20
+# the pose's frame_id: an earth-fixed local frame, z down (NED, or FRD: x along some
+# fixed heading); either becomes the z-up world the same way (x <-> y, z -> -z)
+POSE_FRAMES = {
+    MAV_FRAME_LOCAL_NED: "MAV_FRAME_LOCAL_NED",
+    MAV_FRAME_LOCAL_FRD: "MAV_FRAME_LOCAL_FRD",
+}
+# the velocity's child_frame_id in the body: FRD. MAV_FRAME_BODY_NED is, for velocities,
+# the same as MAV_FRAME_BODY_FRD (common.xml).
+BODY_VELOCITY_FRAMES = {
+    MAV_FRAME_BODY_FRD: "MAV_FRAME_BODY_FRD",
+    MAV_FRAME_BODY_NED: "MAV_FRAME_BODY_NED",
+}
+
+
+class FrameRefused(PoseError):
+    """An ODOMETRY frame this input does not take. ``field`` is "frame_id" or
+    "child_frame_id"; ``key`` names field and frame ("child_frame_id MAV_FRAME_LOCAL_ENU"),
+    the key it is counted under in the pose input's status (``refused_frames``)."""
+
+    def __init__(self, field: str, frame: int, reason: str) -> None:
+        self.field, self.frame = field, frame
+        self.key = f"{field} {_frame_name(frame)}"
+        super().__init__(f"ODOMETRY {self.key}: {reason}")
+
+
+def _frame_name(frame: int) -> str:
+    try:
+        from pymavlink.dialects.v20 import common
+
+        entry = common.enums["MAV_FRAME"].get(int(frame))
+    except (ImportError, KeyError, TypeError, ValueError):
+        entry = None
+    return entry.name if entry is not None else f"MAV_FRAME {frame}"
+
+
+def odometry_velocity_enu(
+    child_frame_id: int, frame_id: int, velocity: np.ndarray, rotation: np.ndarray
+) -> np.ndarray:
+    """An ODOMETRY velocity (3,) [m/s] in ``child_frame_id`` as a world (ENU, z up) vector.
+
+    Body frames (MAV_FRAME_BODY_FRD, MAV_FRAME_BODY_NED: FRD for velocities) go FRD -> FLU,
+    then through ``rotation`` (3, 3), the body (FLU) to world (ENU) attitude. An earth frame
+    (MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_FRD) goes NED -> ENU (x <-> y, z -> -z) and must
+    be the pose's ``frame_id``: two different earth frames have an unknown heading between
+    them. Raises FrameRefused (field "child_frame_id") for any other frame.
+    """
+    if child_frame_id in BODY_VELOCITY_FRAMES:
+        return rotation @ frd_to_flu(velocity)
+    if child_frame_id in POSE_FRAMES:
+        if child_frame_id != frame_id:
+            raise FrameRefused(
+                "child_frame_id",
+                child_frame_id,
+                f"an earth-frame velocity must be in the pose's frame_id {_frame_name(frame_id)}",
+            )
+        return ned_to_enu(velocity)
+    raise FrameRefused(
+        "child_frame_id",
+        child_frame_id,
+        "the velocity is taken in MAV_FRAME_BODY_FRD, MAV_FRAME_BODY_NED, or the pose's "
+        "MAV_FRAME_LOCAL_NED / MAV_FRAME_LOCAL_FRD",
+    )
+
+
 def sample_from_odometry(msg: Any):
-    """A PoseSample in the project's frames from a MAVLink ODOMETRY message (NED/FRD)."""
+    """A PoseSample in the project's frames from a MAVLink ODOMETRY message.
+
+    Pose: ``frame_id`` MAV_FRAME_LOCAL_NED or MAV_FRAME_LOCAL_FRD (z down, earth-fixed)
+    -> world ENU (z up); attitude FRD body -> NED becomes FLU body -> ENU, (w, x, y, z).
+    Velocity [m/s]: in ``child_frame_id`` (see `odometry_velocity_enu`), returned in the
+    world. Angular velocity [rad/s]: body FRD -> FLU.
+
+    Raises FrameRefused (a PoseError naming the field and frame) for a frame not taken;
+    PoseError / ValueError for bad values.
+    """
+    if msg.frame_id not in POSE_FRAMES:
+        raise FrameRefused(
+            "frame_id",
+            msg.frame_id,
+            "the pose is taken in MAV_FRAME_LOCAL_NED or MAV_FRAME_LOCAL_FRD",
+        )
     position = ned_to_enu(np.array([msg.x, msg.y, msg.z]))
     quaternion = attitude_ned_frd_to_enu_flu(np.asarray(msg.q, dtype=np.float64))
-    # ODOMETRY velocity is in the child frame (body FRD) by default: rotate it to the world
-    body_velocity = np.array([msg.vx, msg.vy, msg.vz])
+    body_velocity = np.array([msg.vx, msg.vy, msg.vz], dtype=np.float64)
     omega = frd_to_flu(np.array([msg.rollspeed, msg.pitchspeed, msg.yawspeed]))
     sample = make_sample(msg.time_usec * 1e-6, position, quaternion, None, omega)
-    world_velocity = sample.pose.rotation @ frd_to_flu(body_velocity)
+    world_velocity = odometry_velocity_enu(
+        msg.child_frame_id, msg.frame_id, body_velocity, sample.pose.rotation
+    )
     return make_sample(sample.t_s, position, quaternion, world_velocity, omega)
+
+
+def push_odometry(tracker: PoseTracker, msg: Any) -> bool:
+    """Decode ``msg`` (`sample_from_odometry`) and push it into ``tracker``: the push's
+    result. A refused frame is counted in ``tracker`` (its status's ``refused_frames``)
+    and re-raised, like every other error."""
+    try:
+        sample = sample_from_odometry(msg)
+    except FrameRefused as exc:
+        tracker.refuse(exc.key)
+        raise
+    return tracker.push(sample)
 
 
 class MavlinkPoseListener(PoseInput):
@@ -328,8 +425,8 @@ class MavlinkPoseListener(PoseInput):
 
     def _odometry(self, msg: Any) -> None:
         try:
-            sample = sample_from_odometry(msg)
+            pushed = push_odometry(self.tracker, msg)
         except ValueError as exc:
             raise PoseError(str(exc)) from None
-        if self.tracker.push(sample):
+        if pushed:
             self.accepted += 1

@@ -87,6 +87,7 @@ class PoseTracker:
         self.dropped = 0
         self.jumps = 0
         self.restarts = 0
+        self.refused_frames: dict[str, int] = {}
         self._rate_hz = 0.0
 
     def push(self, sample: PoseSample) -> bool:
@@ -117,6 +118,12 @@ class PoseTracker:
             self._previous, self._latest = latest, sample
             self.accepted += 1
             return True
+
+    def refuse(self, key: str) -> None:
+        """Count a message its source refused for a frame it does not take, under ``key``
+        (e.g. "child_frame_id MAV_FRAME_LOCAL_ENU"): ``refused_frames`` in the status."""
+        with self._lock:
+            self.refused_frames[key] = self.refused_frames.get(key, 0) + 1
 
     def latest(self) -> tuple[PoseSample | None, np.ndarray]:
         """(latest sample, its velocity [m/s]: supplied, else from the last two samples)."""
@@ -152,4 +159,5 @@ class PoseTracker:
             "dropped": self.dropped,
             "jumps": self.jumps,
             "restarts": self.restarts,
+            "refused_frames": dict(self.refused_frames),
         }

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import enum
 import functools
+import logging
 import math
 from dataclasses import dataclass
 from typing import TypeVar
@@ -231,9 +232,46 @@ def rad_s2_to_acceleration(rad_s2: float) -> int:
     return round(rad_s2 / RAD_S2_PER_ACCELERATION_UNIT)
 
 
+def profile_units(velocity_rad_s: float, acceleration_rad_s2: float) -> tuple[int, int]:
+    """(Profile Velocity, Profile Acceleration) register units for a requested profile.
+
+    velocity_rad_s [rad/s] and acceleration_rad_s2 [rad/s^2], each >= 0, are rounded to
+    the nearest unit (0.229 rpm, 214.577 rev/min^2). The XM430 reads 0 as *unlimited*, so
+    a positive request that rounds to 0 is written as 1, the smallest limited value: a
+    gentle profile never becomes full speed. Only a request of exactly 0 gives 0. A
+    value so raised is logged as a warning naming what is written instead.
+
+    Raises ValueError for a negative or non-finite value, naming the field.
+    """
+    out = []
+    for name, value, convert, convert_back in (
+        ("velocity_rad_s", velocity_rad_s, rad_s_to_velocity, velocity_to_rad_s),
+        (
+            "acceleration_rad_s2",
+            acceleration_rad_s2,
+            rad_s2_to_acceleration,
+            acceleration_to_rad_s2,
+        ),
+    ):
+        if not math.isfinite(value) or value < 0:
+            raise ValueError(f"profile {name} must be finite and >= 0 (0 = unlimited), got {value}")
+        units = convert(value)
+        if value > 0 and units == 0:
+            units = 1
+            _log.warning(
+                "profile %s %.6g rounds to 0 units (unlimited): writing 1 unit (%.6g) instead",
+                name,
+                value,
+                convert_back(1),
+            )
+        out.append(units)
+    return out[0], out[1]
+
+
 def register_at(address: int) -> Reg | None:
     """The register that starts at `address`, or None."""
     return _BY_ADDRESS.get(address)
 
 
 _BY_ADDRESS = {reg.address: reg for reg in Reg}
+_log = logging.getLogger(__name__)

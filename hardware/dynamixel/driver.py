@@ -6,11 +6,17 @@ Current (126) .. Present Temperature block, widened by four bytes so the Moving 
 in the same packet. The sync read is sent with the SDK's GroupSyncRead and its replies
 taken one per servo, each matched to the request by id and length (SdkLink.receive: a
 late or duplicated reply to another request is discarded), so each servo's error byte is
-seen: when its alert bit (0x80) is set, Hardware Error Status (70) is read and reported by
-name. A read in which any servo is missing, late, corrupt or answers as another id is
-retried whole (up to `max_tries`) and otherwise raises CommError naming the servos; no
-state is ever assembled from a partial reply. Configuration writes go one servo at a time
-and wait for each status.
+seen: when its alert bit (0x80) is set, Torque Enable (64) .. Hardware Error Status (70) is
+read in one packet and the errors reported by name. A read in which any servo is missing,
+late, corrupt or answers as another id is retried whole (up to `max_tries`) and otherwise
+raises CommError naming the servos; no state is ever assembled from a partial reply.
+Configuration writes go one servo at a time and wait for each status.
+
+Each state's `torque_enabled` is each servo's Torque Enable (64) as last *read* from it,
+never as last written: it is read at connect, after every torque write (torque(),
+write_register) and reboot, and with the errors of every servo whose alert bit is set. A
+servo turns its own torque off only by its Shutdown (63), which latches a hardware error and
+so sets the alert bit: an overload that drops torque shows in the next state.
 
 At connect each servo's Operating Mode, Homing Offset and Min/Max Position Limit are read:
 a joint range the servo cannot reach in its mode (the encoder's seam, hardware/seam.py) is
@@ -39,8 +45,7 @@ from hardware.dynamixel.control_table import (
     Reg,
     current_to_ampere,
     decode,
-    rad_s2_to_acceleration,
-    rad_s_to_velocity,
+    profile_units,
     velocity_to_rad_s,
     voltage_to_volt,
 )
@@ -107,6 +112,7 @@ class DynamixelBus:
         self._goal_writer: sdk.GroupSyncWrite | None = None
         self._state_reader: sdk.GroupSyncRead | None = None
         self._setups: dict[int, ServoSetup] = {}  # per servo id, read at connect
+        self._torque_on: dict[int, bool] = {}  # Torque Enable (64) as last read, per id
 
     # -- ServoBus ------------------------------------------------------------------------
     def connect(self, verify_calibration: bool = True) -> None:
@@ -139,6 +145,7 @@ class DynamixelBus:
                 expected = self.config.expected_model
                 raise BusError(wrong, "ping", f"model {models}, expected {expected}")
             self.read_setups(self.ids)
+            self.read_torque(self.ids)
             if verify_calibration:
                 self.check_calibration()
         except (BusError, CalibrationError):
@@ -167,6 +174,7 @@ class DynamixelBus:
         self.link.close()
         self._goal_writer = self._state_reader = None
         self._setups = {}
+        self._torque_on = {}
 
     def scan(self, ids: Sequence[int] | None = None) -> list[ServoInfo]:
         found = []
@@ -180,6 +188,12 @@ class DynamixelBus:
         return found
 
     def torque(self, enabled: bool) -> None:
+        """Torque Enable on all joints, then each servo's Torque Enable read back.
+
+        Raises NotConnectedError, CommError, ServoStatusError; HardwareError when enabling
+        a servo latched in a hardware fault (the servos after it are not written; what
+        each servo holds is read back all the same).
+        """
         if enabled:
             # Hold where the links are: a stale Goal Position would jump the arm on enable.
             # In Position Control Mode the count restarts at one turn as torque comes on.
@@ -188,6 +202,7 @@ class DynamixelBus:
                 if setup.mode == OperatingMode.POSITION:
                     hold[servo_id] = single_turn(hold[servo_id], setup.offset_in_force)
             self._sync_write_goal_ticks([hold[i] for i in self.ids])
+        refused: HardwareError | None = None
         for servo_id in self.ids:
             error = self.link.write(servo_id, Reg.TORQUE_ENABLE, int(enabled))
             if enabled and error & ALERT_BIT:
@@ -195,7 +210,11 @@ class DynamixelBus:
                 # bit alone: a servo whose register reads 0 has nothing latched.
                 names = self.link.hardware_errors(servo_id)
                 if names:
-                    raise HardwareError([servo_id], "write TORQUE_ENABLE", {servo_id: names})
+                    refused = HardwareError([servo_id], "write TORQUE_ENABLE", {servo_id: names})
+                    break
+        self.read_torque(self.ids)  # what the servos hold, not what was asked
+        if refused is not None:
+            raise refused
 
     def set_operating_mode(self, mode: OperatingMode) -> None:
         self._write_all(Reg.OPERATING_MODE, [int(mode)] * len(self.ids))
@@ -211,11 +230,20 @@ class DynamixelBus:
         return self._state_from(raw, alerts)
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
-        if velocity_rad_s < 0 or acceleration_rad_s2 < 0:
-            raise ValueError("profile velocity and acceleration must be >= 0 (0 = unlimited)")
+        """Profile Velocity [rad/s] and Acceleration [rad/s^2] on all joints (0 = unlimited).
+
+        Each is rounded to register units (`profile_units`); a positive request below
+        half a unit is written as 1 unit (0.024 rad/s, 0.375 rad/s^2), never as 0, which
+        the XM430 reads as unlimited; a value so raised is logged as a warning naming the
+        value written.
+
+        Raises ValueError for a negative or non-finite value; NotConnectedError, CommError,
+        ServoStatusError.
+        """
+        velocity, acceleration = profile_units(velocity_rad_s, acceleration_rad_s2)
         n = len(self.ids)
-        self._write_all(Reg.PROFILE_ACCELERATION, [rad_s2_to_acceleration(acceleration_rad_s2)] * n)
-        self._write_all(Reg.PROFILE_VELOCITY, [rad_s_to_velocity(velocity_rad_s)] * n)
+        self._write_all(Reg.PROFILE_ACCELERATION, [acceleration] * n)
+        self._write_all(Reg.PROFILE_VELOCITY, [velocity] * n)
 
     def set_gains(self, gains: PositionGains | Sequence[PositionGains]) -> None:
         each = per_joint(gains, len(self.ids))
@@ -269,6 +297,7 @@ class DynamixelBus:
             unconfirmed = [i for i in lost if self.link.read(i, Reg.HARDWARE_ERROR_STATUS) != 0]
             if not unconfirmed:
                 self._align_turns(targets)  # a reboot resets the count to one turn
+                self.read_torque(targets)  # back with torque off
                 return
         reason = "no status to a Reboot instruction and Hardware Error Status still set"
         raise CommError(unconfirmed, "reboot", reason, rounds)
@@ -305,6 +334,18 @@ class DynamixelBus:
         self.link.write(servo_id, reg, value)
         if reg in _SETUP_REGISTERS and servo_id in self.ids:
             self.read_setups([servo_id])
+        if reg == Reg.TORQUE_ENABLE and servo_id in self.ids:
+            self.read_torque([servo_id])
+
+    def read_torque(self, ids: Sequence[int] | None = None) -> dict[int, bool]:
+        """Read Torque Enable (64) of `ids` (default: every joint) afresh; every state's
+        `torque_enabled` reports what was read last. Returns it per servo id.
+
+        Raises NotConnectedError, CommError, ServoStatusError.
+        """
+        for servo_id in self.ids if ids is None else ids:
+            self._torque_on[servo_id] = self.link.read(servo_id, Reg.TORQUE_ENABLE) == 1
+        return dict(self._torque_on)
 
     def write_position_limits(self) -> None:
         """Copy each joint's calibrated angle limits into Min/Max Position Limit (EEPROM,
@@ -425,11 +466,10 @@ class DynamixelBus:
                 last = tries == self.link.max_tries
                 self.link.count_try(bool(failed), last)
                 if not failed:
-                    alerts = {
-                        i: self.link.hardware_errors(i)
-                        for i, (_, error) in replies.items()
-                        if error & ALERT_BIT
-                    }
+                    alerts = {}
+                    for i, (_, error) in replies.items():
+                        if error & ALERT_BIT:  # a shutdown may have turned its torque off
+                            self._torque_on[i], alerts[i] = self.link.torque_and_errors(i)
                     return {i: data for i, (data, _) in replies.items()}, alerts
             self.link.count_failure()
             reason = "; ".join(f"servo {i}: {why}" for i, why in failed.items())
@@ -481,6 +521,7 @@ class DynamixelBus:
 
         sign = np.array([cal.direction for cal in self.config.joints], dtype=float)
         ticks = column(Reg.PRESENT_POSITION)
+        torque = [self._torque_on.get(i) for i in self.ids]
         position = [cal.to_rad(t) for cal, t in zip(self.config.joints, ticks, strict=True)]
         return JointState(
             position_rad=np.array(position),
@@ -491,4 +532,5 @@ class DynamixelBus:
             moving=column(Reg.MOVING).astype(bool),
             hardware_errors=tuple(alerts.get(i, ()) for i in self.ids),
             stamp_s=time.monotonic(),
+            torque_enabled=None if None in torque else tuple(bool(t) for t in torque),
         )

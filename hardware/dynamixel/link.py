@@ -310,3 +310,18 @@ class SdkLink:
     def hardware_errors(self, servo_id: int) -> tuple[str, ...]:
         """Names of the Hardware Error Status (70) bits latched on `servo_id`."""
         return hardware_error_names(self.read(servo_id, Reg.HARDWARE_ERROR_STATUS))
+
+    def torque_and_errors(self, servo_id: int) -> tuple[bool, tuple[str, ...]]:
+        """(Torque Enable (64) on, names of the Hardware Error Status (70) bits) of
+        `servo_id`, in one read of 64 .. 70: what an alerting servo's shutdown left.
+
+        Raises CommError, ServoStatusError, NotConnectedError.
+        """
+        start, end = Reg.TORQUE_ENABLE, Reg.HARDWARE_ERROR_STATUS
+        size = end.address + end.size - start.address
+        params = [*start.address.to_bytes(2, "little"), *size.to_bytes(2, "little")]
+        name = f"read {start.name}..{end.name}"
+        status = self.ask(servo_id, name, Instruction.READ, params, size)
+        torque = decode(start, status.data)
+        errors = decode(end, status.data, end.address - start.address)
+        return torque == 1, hardware_error_names(errors)

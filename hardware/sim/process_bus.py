@@ -53,9 +53,11 @@ STALE_S = 2.0
 # shared frame: state written by the child, goal written by the parent (float64 slots);
 # room for four servos per column (three legs and a wrist), a bus uses its first n
 _W = 4
-_POS, _VEL, _CUR, _VOLT, _TEMP, _MOVING, _ERR = (slice(_W * k, _W * k + _W) for k in range(7))
-_STAMP, _PLATFORM, _GOAL_SEQ, _GOAL, _SIM_TIME = 28, slice(29, 32), 32, slice(33, 37), 37
-_FRAME_SIZE = 38
+_POS, _VEL, _CUR, _VOLT, _TEMP, _MOVING, _ERR, _TORQUE = (
+    slice(_W * k, _W * k + _W) for k in range(8)
+)
+_STAMP, _PLATFORM, _GOAL_SEQ, _GOAL, _SIM_TIME = 32, slice(33, 36), 36, slice(37, 41), 41
+_FRAME_SIZE = 42
 
 
 class ProcessSimBus:
@@ -165,6 +167,7 @@ class ProcessSimBus:
             hardware_errors=tuple(hardware_error_names(int(c)) for c in values[_ERR][:n]),
             stamp_s=float(values[_STAMP]),
             sim_time_s=float(values[_SIM_TIME]),
+            torque_enabled=tuple(bool(t > 0.5) for t in values[_TORQUE][:n]),
         )
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
@@ -283,7 +286,7 @@ def _serve(bus: SimBus, conn: Connection, frame: np.ndarray, lock: Any) -> None:
                 paused = bool(request[1][0])
                 conn.send((True, None))
             else:
-                _answer(bus, conn, *request)
+                _answer(bus, conn, *request, frame=frame, lock=lock)
         if paused:
             continue
         with lock:
@@ -300,11 +303,23 @@ def _serve(bus: SimBus, conn: Connection, frame: np.ndarray, lock: Any) -> None:
             _publish(bus, frame, lock)
 
 
-def _answer(bus: SimBus, conn: Connection, method: str, args: tuple, reply: bool) -> None:
+def _answer(
+    bus: SimBus,
+    conn: Connection,
+    method: str,
+    args: tuple,
+    reply: bool,
+    *,
+    frame: np.ndarray | None = None,
+    lock: Any = None,
+) -> None:
     try:
         result = (True, getattr(bus, method)(*args))
     except (BusError, ValueError) as exc:
         result = (False, exc)
+    if frame is not None:  # a torque change shows in the next read, not a step later
+        with lock:
+            frame[_TORQUE][: bus.n] = [c.torque_enabled for c in bus.commands]
     if reply:
         conn.send(result)
 
@@ -322,5 +337,6 @@ def _publish(bus: SimBus, frame: np.ndarray, lock: Any) -> None:
         )
         frame[_VOLT][:n], frame[_TEMP][:n] = state.voltage_v, state.temperature_c
         frame[_MOVING][:n], frame[_ERR][:n] = state.moving, codes
+        frame[_TORQUE][:n] = state.torque_enabled
         frame[_STAMP], frame[_PLATFORM] = state.stamp_s, platform
         frame[_SIM_TIME] = state.sim_time_s

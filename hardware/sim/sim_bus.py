@@ -32,7 +32,7 @@ from hardware.dynamixel.control_table import (
     ampere_to_current,
     current_to_ampere,
     hardware_error_names,
-    rad_s2_to_acceleration,
+    profile_units,
     rad_s_to_velocity,
     velocity_to_rad_s,
 )
@@ -42,6 +42,9 @@ from kinematics.identification import MeasurementFrame
 
 FIRMWARE_VERSION = 46
 MOVING_THRESHOLD_UNITS = Reg.MOVING_THRESHOLD.value.default  # looked up once: enums are slow
+# Shutdown (63) at its factory value (overheating, electrical shock, overload): the errors
+# for which the XM430 turns its own Torque Enable off
+SHUTDOWN_MASK = Reg.SHUTDOWN.value.default
 MAX_CATCH_UP_S = 0.25  # as the emulator: after a stall, simulated time runs slow, never fast
 
 
@@ -146,6 +149,7 @@ class SimBus:
 
     def torque(self, enabled: bool) -> None:
         with self._transaction("write TORQUE_ENABLE"):
+            self._shut_down()
             if enabled:
                 faulted = {
                     i: hardware_error_names(s.hardware_error)
@@ -173,16 +177,17 @@ class SimBus:
 
     def read_state(self) -> JointState:
         with self._transaction("sync read MOVING..PRESENT_TEMPERATURE"):
+            self._shut_down()
             # the platform at the same instant, for measure_platform(at_last_read=True)
             self._platform_at_read = self.twin.platform_m.copy()
             return self._state()
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
-        if velocity_rad_s < 0 or acceleration_rad_s2 < 0:
-            raise ValueError("profile velocity and acceleration must be >= 0 (0 = unlimited)")
-        # through the register units, so the quantization matches the real servo's
-        velocity = velocity_to_rad_s(rad_s_to_velocity(velocity_rad_s))
-        acceleration = acceleration_to_rad_s2(rad_s2_to_acceleration(acceleration_rad_s2))
+        # through the register units, so the quantization matches the real servo's (and a
+        # positive request below half a unit is 1 unit, never 0 = unlimited)
+        units = profile_units(velocity_rad_s, acceleration_rad_s2)
+        velocity = velocity_to_rad_s(units[0])
+        acceleration = acceleration_to_rad_s2(units[1])
         with self._transaction("write PROFILE"):
             self._update(
                 profile_velocity_rad_s=[velocity] * self.n,
@@ -259,6 +264,17 @@ class SimBus:
         self._stats = replace(self._stats, transactions=self._stats.transactions + 1)
         return self.lock
 
+    def _shut_down(self) -> None:
+        """Torque Enable off on each servo that latched an error its Shutdown (63) names,
+        as the XM430 does: it then stays off after a reboot until torque() turns it on."""
+        on = [c.torque_enabled for c in self.commands]
+        kept = [
+            t and not s.hardware_error & SHUTDOWN_MASK
+            for t, s in zip(on, self.twin.servos, strict=True)
+        ]
+        if kept != on:
+            self._update(torque_enabled=kept)
+
     def _servos(self):
         return zip(self.ids, self.twin.servos, strict=True)
 
@@ -291,6 +307,7 @@ class SimBus:
             hardware_errors=tuple(hardware_error_names(s.hardware_error) for s in twin.servos),
             stamp_s=time.monotonic(),
             sim_time_s=twin.time_s,
+            torque_enabled=tuple(c.torque_enabled for c in self.commands),
         )
 
     def _run(self) -> None:

@@ -122,12 +122,15 @@ function checkStale() {
 
 function servoRow(j, i, torque) {
   const errors = j.hardware_errors[i] || [];
+  // the servo's own Torque Enable where the bus reads it (a shutdown turns it off)
+  const read = (j.torque_enabled || [])[i];
+  const held = read === true || read === false ? read : torque;
   const errorCell = errors.length
     ? `<td class="bad">${errors.map(escape).join(", ")}</td>`
     : `<td class="ok">none</td>`;
   const reboot = errors.length
     ? `<button type="button" data-reboot="${j.servo_ids[i]}">Reboot</button>`
-    : torque ? "torque on" : "relaxed";
+    : held ? "torque on" : "relaxed";
   return `<tr><th scope="row">${j.servo_ids[i]}</th><td>${deg(j.position_rad[i])}</td>` +
     `<td>${deg(j.commanded_rad[i])}</td><td>${deg(j.velocity_rad_s[i], 0)}</td>` +
     `<td>${fixed(j.current_a[i], 3)}</td><td>${fixed(j.voltage_v[i], 1)}</td>` +

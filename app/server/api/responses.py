@@ -50,6 +50,10 @@ class JointsStatus(_Out):
     temperature_c: MaybeVector3
     moving: list[bool]
     hardware_errors: list[list[str]] = Field(description="per servo, its hardware error flags")
+    torque_enabled: list[bool | None] = Field(
+        description="per servo, Torque Enable as read from it (null: the bus does not say); "
+        "false for a servo whose shutdown (overload, overheating) turned its torque off"
+    )
 
 
 class PlatformStatus(_Out):
@@ -168,6 +172,11 @@ class PoseInputStatus(_Out):
     restarts: int = Field(
         0, description="times the stream started afresh: a sample after lost_after_s of none"
     )
+    refused_frames: dict[str, int] = Field(
+        default_factory=dict,
+        description="MAVLink ODOMETRY messages refused for a frame not taken, by field and "
+        "frame, e.g. {'child_frame_id MAV_FRAME_LOCAL_ENU': 3}",
+    )
     udp_errors: int | None = Field(
         None,
         description="GET only, with [world] udp_port: datagrams refused (not JSON, a bad "
@@ -184,7 +193,10 @@ class StatusOut(_Out):
     mode: str
     backend: str = Field(description="sim | emulated | dynamixel")
     backend_description: str
-    torque: bool
+    torque: bool = Field(
+        description="torque asked for and held: false once any servo reads its Torque Enable "
+        "off (a shutdown after an overload); joints.torque_enabled says which"
+    )
     estopped: bool
     estop_received_unix_s: float | None = Field(
         description="wall-clock time [s since the Unix epoch] the last e-stop press reached "

@@ -46,6 +46,7 @@ def status(controller: Controller) -> dict[str, Any]:
             "temperature_c": floats(snap.temperature_c),
             "moving": list(snap.moving),
             "hardware_errors": [list(e) for e in snap.hardware_errors],
+            "torque_enabled": list(snap.torque_enabled),
         },
         "ee": {
             "position_m": floats(snap.point_measured_m),

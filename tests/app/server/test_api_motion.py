@@ -139,6 +139,27 @@ def test_hardware_error_faults_with_servo_and_reason_and_reset_reboots(client, f
         emulator.clear_faults()
 
 
+def test_a_servo_shut_down_by_an_overload_shows_torque_off(client, fresh):
+    emulator = client.app.state.backend.emulator
+    torque_on(fresh)
+    status = _status(fresh)
+    assert status["torque"] and status["joints"]["torque_enabled"] == [True, True, True]
+    try:
+        emulator.raise_hardware_error(1, 1 << 5)  # overload: the servo's Shutdown drops torque
+        wait_for(lambda: _status(fresh)["mode"] == "fault", "the overload fault")
+        status = _status(fresh)
+        assert emulator.servo(1).table.get(Reg.TORQUE_ENABLE) == 0
+        assert status["torque"] is False  # the arm is not held, whatever was asked
+        assert status["joints"]["torque_enabled"] == [False, True, True]
+        assert status["joints"]["hardware_errors"] == [["overload"], [], []]
+        (fault,) = status["faults"]  # the shutdown is visible, and why
+        assert fault["servo_id"] == 1 and fault["reason"] == "servo 1: hardware error overload"
+    finally:
+        emulator.clear_faults()
+    ok_json(fresh.post("/api/reset"))
+    wait_for(lambda: _status(fresh)["faults"] == [], "the fault to clear")
+
+
 def test_missed_reads_fault_after_the_limit(client, fresh):
     emulator = client.app.state.backend.emulator
     emulator.inject(3, unplugged=True)

@@ -146,6 +146,25 @@ def test_profile_in_si_units(bus: DynamixelBus, emulator: ServoEmulator) -> None
         bus.set_profile(-1.0, 0.0)
 
 
+def test_a_small_profile_is_written_as_the_smallest_limit_never_as_unlimited(
+    bus: DynamixelBus, emulator: ServoEmulator, caplog: pytest.LogCaptureFixture
+) -> None:
+    # 0.01 rad/s is 0.42 of a 0.229 rpm unit and 0.1 rad/s^2 0.27 of a 214.577 rev/min^2
+    # unit: rounded they would be 0, which the XM430 reads as no limit at all.
+    bus.set_profile(velocity_rad_s=0.01, acceleration_rad_s2=0.1)
+    for i in IDS:
+        table = emulator.servo(i).table
+        assert (table.get(Reg.PROFILE_VELOCITY), table.get(Reg.PROFILE_ACCELERATION)) == (1, 1)
+    said = [r.getMessage() for r in caplog.records if "writing 1 unit" in r.getMessage()]
+    assert len(said) == 2 and "velocity_rad_s 0.01" in said[0]
+    caplog.clear()
+    bus.set_profile(velocity_rad_s=0.0, acceleration_rad_s2=0.0)  # 0 asked: unlimited
+    for i in IDS:
+        table = emulator.servo(i).table
+        assert (table.get(Reg.PROFILE_VELOCITY), table.get(Reg.PROFILE_ACCELERATION)) == (0, 0)
+    assert not [r for r in caplog.records if "writing 1 unit" in r.getMessage()]
+
+
 def test_gains(bus: DynamixelBus, emulator: ServoEmulator) -> None:
     bus.set_gains(PositionGains(p=900, i=10, d=20, feedforward_1st=30, feedforward_2nd=40))
     items = (

@@ -99,3 +99,29 @@ def test_an_alert_bit_with_nothing_latched_names_nothing(
     assert bus.read_state().hardware_errors == ((), (), ())
     bus.torque(True)
     assert emulator.servo(1).table.get(Reg.TORQUE_ENABLE) == 1
+
+
+@pytest.mark.parametrize(("flag", "name", "shuts_down"), BITS, ids=[b[1] for b in BITS])
+def test_the_state_carries_the_torque_each_servo_reads_back(
+    bus: DynamixelBus, emulator: ServoEmulator, flag, name: str, shuts_down: bool
+) -> None:
+    assert bus.read_state().torque_enabled == (False, False, False)  # as connect read it
+    bus.torque(True)
+    assert bus.read_state().torque_enabled == (True, True, True)
+    emulator.raise_hardware_error(1, flag)
+    state = bus.read_state()
+    # what servo 1's Torque Enable (64) reads after the error, not what was last written
+    assert state.hardware_errors == ((name,), (), ())
+    assert state.torque_enabled == (not shuts_down, True, True)
+    bus.reboot([1])
+    assert bus.read_state().torque_enabled == (False, True, True)  # back with torque off
+    bus.torque(False)
+    assert bus.read_state().torque_enabled == (False, False, False)
+
+
+def test_torque_written_behind_the_bus_is_read_back(
+    bus: DynamixelBus, emulator: ServoEmulator
+) -> None:
+    bus.torque(True)
+    bus.write_register(2, Reg.TORQUE_ENABLE, 0)
+    assert bus.read_state().torque_enabled == (True, False, True)

@@ -43,7 +43,9 @@ def test_the_relaxed_arm_falls_then_holds_a_goal(bus: ProcessSimBus) -> None:
     assert [info.servo_id for info in bus.scan()] == [1, 2, 3]
     # powered up with torque off: gravity swings the upper links down (theta grows)
     wait_for(lambda: bus.read_state().position_rad.min() > 1.0, "the arm to fall")
+    assert bus.read_state().torque_enabled == (False, False, False)
     bus.torque(True)
+    wait_for(lambda: bus.read_state().torque_enabled == (True,) * 3, "torque on in the frame")
     bus.write_goal([0.3, 0.4, 0.5])
 
     def holding() -> bool:

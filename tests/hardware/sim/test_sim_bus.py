@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 
 import numpy as np
@@ -75,6 +76,16 @@ def test_gains_and_profile_reach_the_servo_models(bus: SimBus) -> None:
         bus.set_gains([PositionGains()] * 4)
 
 
+def test_a_small_profile_stays_limited_in_the_twin(bus: SimBus) -> None:
+    bus.set_profile(0.01, 0.1)  # both round to 0 units: must become 1 unit, not unlimited
+    cmd = bus.commands[0]
+    assert cmd.profile_velocity_rad_s == pytest.approx(0.229 * 2 * math.pi / 60)
+    assert cmd.profile_acceleration_rad_s2 == pytest.approx(214.577 * 2 * math.pi / 3600)
+    bus.set_profile(0.0, 0.0)
+    cmd = bus.commands[0]
+    assert (cmd.profile_velocity_rad_s, cmd.profile_acceleration_rad_s2) == (0.0, 0.0)
+
+
 def test_operating_mode_is_refused_while_torque_is_on(bus: SimBus) -> None:
     with pytest.raises(BusError):
         bus.set_operating_mode(OperatingMode.VELOCITY)
@@ -142,3 +153,17 @@ def test_each_state_carries_the_simulated_time_it_was_taken_at(bus: SimBus) -> N
     after = bus.read_state()
     assert after.sim_time_s == pytest.approx(before.sim_time_s + 0.05)
     assert after.sim_time_s == bus.twin.time_s
+
+
+def test_an_overload_shuts_the_servo_down_and_its_torque_reads_off(bus: SimBus) -> None:
+    bus.torque(True)
+    assert bus.read_state().torque_enabled == (True, True, True)
+    bus.twin.servos[0].hardware_error = int(HardwareErrorFlag.OVERLOAD)
+    bus.advance(0.01)
+    state = bus.read_state()
+    # the XM430's Shutdown (63) turns Torque Enable off for an overload, as on the servo
+    assert state.hardware_errors == (("overload",), (), ())
+    assert state.torque_enabled == (False, True, True)
+    assert not bus.commands[0].torque_enabled
+    bus.reboot([1])
+    assert bus.read_state().torque_enabled == (False, True, True)
