@@ -311,6 +311,8 @@ def _run(args: argparse.Namespace) -> int:
         refusal = _refusal(exc)
         print(f"error: {exc.code} {refusal.get('detail', exc.reason)}", file=sys.stderr)
         for v in refusal.get("violations") or []:
+            if "kind" not in v:  # a body field the server refused: its detail says it
+                continue
             print(
                 f"  line {v['line']}: {v['kind']} at t = {v['t_s']:.3f} s, "
                 f"{_mm(v['point_m'])}: {v['message']}",

@@ -47,6 +47,7 @@ from app.server.api import (
 )
 from app.server.api.deps import require_read_token
 from app.server.backends import open_backend
+from app.server.bodies import StrictJSON
 from app.server.errors import install_error_handlers
 from app.server.estop import EstopFirst, EstopListener
 from app.server.limits import RequestLimits
@@ -174,6 +175,7 @@ def create_app(
     # one authority for motion: the HTTP routes and the 3D scene check the same lease
     app.state.authority = Authority(settings.server.token, settings.server.lease_timeout_s)
     install_error_handlers(app)
+    app.add_middleware(StrictJSON)  # JSON bodies read strictly, once within the size limit
     app.add_middleware(RequestLimits, settings=settings)  # before any body is read
     # other sites' pages and DNS rebinding: refused before the token, a body or a route
     app.add_middleware(OriginCheck, policy=OriginPolicy.from_settings(settings.server))

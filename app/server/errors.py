@@ -61,18 +61,36 @@ def _error(status: int, detail: str, **extra: Any) -> JSONResponse:
     return JSONResponse({"detail": detail, **extra}, status_code=status)
 
 
-def _field_errors(exc: RequestValidationError) -> str:
-    """'position_m.1: Input should be a finite number' per error, 'query.body: Input should
-    be ...' for a query parameter; never echoes raw input. Only a leading 'body' (where a
-    JSON body's field came from) is left out, never a field's own name."""
-    parts = []
+FIELD_SHAPED = ("/api/programs/",)
+"""Routes whose 422 bodies carry ``line``, ``word`` and ``violations`` (the programs' own
+error shape, docs/gcode.md): a body refused before any program is read answers them too,
+``line`` and ``word`` null, ``violations`` one ``{field, reason}`` per problem."""
+
+
+def _problems(exc: RequestValidationError) -> list[tuple[str, str]]:
+    """(field, reason) per error: ('position_m.1', 'Input should be a finite number'), the
+    field dotted, 'body' for the body as a whole, 'query.body' for a query parameter;
+    never echoes raw input. Only a leading 'body' (where a JSON body's field came from)
+    is left out, never a field's own name."""
+    problems = []
     for error in exc.errors():
         loc = list(error["loc"])
         if loc and loc[0] == "body":
             loc = loc[1:]
-        location = ".".join(str(p) for p in loc) or "body"
-        parts.append(f"{location}: {error['msg']}")
-    return "; ".join(parts)
+        problems.append((".".join(str(p) for p in loc) or "body", error["msg"]))
+    return problems
+
+
+def invalid_body(path: str, problems: list[tuple[str, str]]) -> JSONResponse:
+    """The 422 of a request refused before its route ran: ``detail`` is
+    ``"field: reason"`` per problem, joined by ``"; "``; on the programs routes
+    (FIELD_SHAPED) also ``line`` and ``word`` (null: no program was read) and
+    ``violations``: ``[{"field", "reason"}]``."""
+    detail = "; ".join(f"{field}: {reason}" for field, reason in problems)
+    if not path.startswith(FIELD_SHAPED):
+        return _error(422, detail)
+    violations = [{"field": field, "reason": reason} for field, reason in problems]
+    return _error(422, detail, line=None, word=None, violations=violations)
 
 
 async def _offer(request: Request, exc: GoalRejected) -> tuple[str, dict[str, Any]]:
@@ -102,8 +120,8 @@ def install_error_handlers(app: FastAPI) -> None:
     """Map the project's exceptions to 401/409/422/503; anything else is a logged 500."""
 
     @app.exception_handler(RequestValidationError)
-    async def invalid_request(_: Request, exc: RequestValidationError) -> JSONResponse:
-        return _error(422, _field_errors(exc))
+    async def invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
+        return invalid_body(request.scope["path"], _problems(exc))
 
     @app.exception_handler(GoalRejected)
     async def goal_rejected(request: Request, exc: GoalRejected) -> JSONResponse:

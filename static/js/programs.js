@@ -198,11 +198,14 @@ function edited() {
 
 // ---- run and abort ----
 
-// The violations in a refused run's 422, wherever the server put them.
+// The check's violations in a refused run's 422, wherever the server put them (every
+// programs 422 has a violations list: empty for an unreadable program, {field, reason}
+// for a refused body; only the check's, with a kind, make a refused run).
 function refusedReport(body) {
   if (!body) return null;
   for (const r of [body, body.detail, body.report, body.detail && body.detail.report]) {
-    if (r && typeof r === "object" && Array.isArray(r.violations)) return r;
+    if (r && typeof r === "object" && Array.isArray(r.violations)
+        && r.violations.some((v) => v && typeof v === "object" && "kind" in v)) return r;
   }
   return null;
 }

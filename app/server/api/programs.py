@@ -120,15 +120,27 @@ class ProgramReportOut(BaseModel):
     notes: list[str]
 
 
+class FieldProblemOut(BaseModel):
+    field: str = Field(description="the body field at fault, dotted ('start_m.1'), or 'body'")
+    reason: str = Field(description="why it is refused")
+
+
 class ProgramErrorOut(BaseModel):
-    detail: str = Field(description="line N: WORD: reason")
-    line: int | None = Field(description="program line (1-based)")
-    word: str = Field(description="the word at fault ('' when none is)")
+    """Every 422 of the programs routes: a program that cannot be read (``line``, ``word``),
+    one that fails its check on /run (``violations``: the check's), or a body refused before
+    any program is read (``line`` and ``word`` null, ``violations``: field and reason)."""
 
-
-class ProgramRefusedOut(BaseModel):
-    detail: str = Field(description="the first violation: line N: kind: message")
-    violations: list[ViolationOut] = Field(description="all of them, as the check gives")
+    detail: str = Field(description="line N: WORD: reason, or field: reason")
+    line: int | None = Field(
+        None, description="program line (1-based); null where no line is at fault"
+    )
+    word: str | None = Field(
+        None, description="the word at fault ('' when none is; null when no program was read)"
+    )
+    violations: list[ViolationOut | FieldProblemOut] = Field(
+        default_factory=list,
+        description="the check's violations (/run), or each body field at fault and why",
+    )
 
 
 class LineErrorOut(BaseModel):
@@ -161,7 +173,7 @@ CHECK_UNAVAILABLE: dict[int, dict[str, Any]] = {
 }
 REFUSED: dict[int, dict[str, Any]] = {
     422: {
-        "model": ProgramRefusedOut,
+        "model": ProgramErrorOut,
         "description": "the program fails its check (its violations), or cannot be read "
         "(detail, line, word); nothing moves",
     }
@@ -220,10 +232,16 @@ def check(
     return report
 
 
+def program_error(
+    detail: str, line: int | None = None, word: str | None = None, violations: list | None = None
+) -> JSONResponse:
+    """A 422 in the programs' error shape (ProgramErrorOut): every key present."""
+    body = {"detail": detail, "line": line, "word": word, "violations": violations or []}
+    return JSONResponse(body, status_code=422)
+
+
 def _unreadable(exc: ProgramError) -> JSONResponse:
-    return JSONResponse(
-        {"detail": str(exc), "line": exc.line or None, "word": exc.word}, status_code=422
-    )
+    return program_error(str(exc), exc.line or None, exc.word)
 
 
 def _unavailable(exc: WorkerError) -> JSONResponse:
@@ -294,7 +312,7 @@ def _refused(checked: CheckedProgram) -> JSONResponse:
         f"line {first['line']}: {first['kind']}: {first['message']} "
         f"({len(violations)} violation(s); the program was not run)"
     )
-    return JSONResponse({"detail": detail, "violations": violations}, status_code=422)
+    return program_error(detail, first["line"], None, violations)
 
 
 @router.post(
@@ -319,7 +337,7 @@ def dry_run_program(
     except ProgramError as exc:
         return _unreadable(exc)
     except DryRunRefused as exc:
-        return JSONResponse({"detail": str(exc)}, status_code=422)
+        return program_error(str(exc))
     except WorkerError as exc:
         return _unavailable(exc)
     return result.to_dict()
@@ -351,10 +369,7 @@ async def run_program(
     program = checked[0]
     report = program.report
     if not program.path.segments:  # empty, or comments only: a run of it would be nothing
-        return JSONResponse(
-            {"detail": "gcode: the program has no move or dwell: nothing to run"},
-            status_code=422,
-        )
+        return program_error("gcode: the program has no move or dwell: nothing to run")
     # the check took time: the path starts where the robot was then; if it has moved since,
     # the run would add an approach the report never showed. Check again from where it is.
     now, _ = _start(controller)
@@ -368,12 +383,9 @@ async def run_program(
         distance = float(np.linalg.norm(np.asarray(body.start_m) - report.start_m))
         if distance > START_TOLERANCE_M:
             where = ", ".join(f"{v * 1e3:.1f}" for v in report.start_m)
-            return JSONResponse(
-                {
-                    "detail": f"start_m: a program runs from where the robot is, ({where}) mm, "
-                    f"{distance * 1e3:.1f} mm from start_m; leave start_m out or move there"
-                },
-                status_code=422,
+            return program_error(
+                f"start_m: a program runs from where the robot is, ({where}) mm, "
+                f"{distance * 1e3:.1f} mm from start_m; leave start_m out or move there"
             )
     if not report.ok:
         return _refused(program)
