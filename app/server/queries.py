@@ -6,12 +6,15 @@ refused goal) is up to seconds of NumPy and Python for a far point, and
 hold the GIL the 200 Hz loop needs: four clients asking for far points pulled the loop
 from ~160 Hz to 104-135 Hz (issue 28). So :class:`WorkspaceQueries` runs them in worker
 processes (``app.programs.workers.ProgramWorkers``: spawned, nice +10, killed past a
-bound) with at most ``slots`` at a time and none queued, and keeps the last answers
-(a repeated query costs a dictionary look-up):
+bound) with at most ``slots`` (one: the other core stays the loop's) at a time, a few
+more waiting their turn (the page asks for three sections and a nearest point at once),
+and keeps the last answers (a repeated query costs a dictionary look-up):
 
-- a query while every slot is busy is refused at once (:class:`QueriesBusy`: the route
-  answers 503 with Retry-After; a refused goal's 422 falls back to the gate's own
-  nearest workspace point, computed with the refusal, so it is still a 422);
+- a query beyond the queue is refused at once, and one that waited ``wait_s`` in it is
+  refused then (:class:`QueriesBusy`: the route answers 503 with Retry-After; a refused
+  goal's 422 falls back to the gate's own nearest workspace point, computed with the
+  refusal, so it is still a 422); waiting costs the loop's process no CPU, and the queue
+  is short so that waiting requests never fill the server's thread pool;
 - a query that takes longer than ``timeout_s`` has its worker killed (503).
 
 No request can make the loop's process do more than look up or hand over a query.
@@ -34,10 +37,16 @@ from app.server import sections
 SLOTS = 1  # worker processes at once (~150 MB; one core stays the loop's); a second is refused
 TIMEOUT_S = 20.0  # the longest a query may take, its worker's start included [s]
 CACHE_SIZE = 512  # answers kept (a section is ~30 kB)
+QUEUE = 4  # queries that may wait for the worker (the page asks for 3 sections at once)
+WAIT_S = 15.0  # the longest a query waits for the worker before it is refused [s]
 
 
 class QueriesBusy(WorkerError):
-    """Every slot is answering a query: refused at once (503, Retry-After)."""
+    """The worker and every place in its queue are taken, or the wait for the worker ran
+    out (503, Retry-After)."""
+
+
+BUSY = "busy: the server is answering other workspace queries; try again shortly"
 
 
 class WorkspaceQueries:
@@ -46,8 +55,18 @@ class WorkspaceQueries:
     Raises QueriesBusy or another WorkerError (the message says why) besides what the
     query raises itself (ValueError)."""
 
-    def __init__(self, settings: Settings, slots: int = SLOTS, timeout_s: float = TIMEOUT_S):
+    def __init__(
+        self,
+        settings: Settings,
+        slots: int = SLOTS,
+        timeout_s: float = TIMEOUT_S,
+        queue: int = QUEUE,
+        wait_s: float = WAIT_S,
+    ):
         self._workers = ProgramWorkers(settings, slots, timeout_s)
+        self._slots = threading.Semaphore(slots)  # queries in a worker
+        self._places = threading.Semaphore(slots + queue)  # in a worker or waiting for one
+        self.wait_s = wait_s
         self._answers: OrderedDict[tuple, tuple[Gate, Any]] = OrderedDict()
         self._lock = threading.Lock()
         self.asked = 0  # queries answered in a worker (not from the kept answers)
@@ -70,24 +89,39 @@ class WorkspaceQueries:
             if kept is not None and kept[0] is gate:  # the same gate object, not a reused id
                 self._answers.move_to_end(key)
                 return kept[1]
-        try:
-            answer = self._workers.call(query, gate, *args)
-        except ChecksBusy as exc:
-            raise QueriesBusy(
-                "busy: the server is answering other workspace queries; try again shortly"
-                if "stopping" not in str(exc)
-                else "the server is stopping: no workspace queries now"
-            ) from None
-        except WorkerError as exc:  # its worker overran (killed) or died
-            kind = "took too long" if "longer" in str(exc) else "ended before answering"
-            raise WorkerError(
-                f"the workspace query {kind} (its worker was stopped); try again"
-            ) from None
+        answer = self.call(query, gate, *args)
         with self._lock:
             self.asked += 1
             self._answers[key] = (gate, answer)
             while len(self._answers) > CACHE_SIZE:
                 self._answers.popitem(last=False)
+        return answer
+
+    def call(self, function: Callable[..., Any], *args: Any) -> Any:
+        """``function(*args)`` in the worker, through the queue (what every query takes;
+        tests give their own module-level function). Raises QueriesBusy (no place in the
+        queue, or the wait ran out, or the server is stopping) or WorkerError (the worker
+        overran or died)."""
+        if not self._places.acquire(blocking=False):  # a flood: refused at once
+            raise QueriesBusy(BUSY)
+        try:
+            if not self._slots.acquire(timeout=self.wait_s):
+                raise QueriesBusy(BUSY)
+            try:
+                answer = self._workers.call(function, *args)
+            finally:
+                self._slots.release()
+        except QueriesBusy:
+            raise
+        except ChecksBusy:  # closed: the server is stopping
+            raise QueriesBusy("the server is stopping: no workspace queries now") from None
+        except WorkerError as exc:  # its worker overran (killed) or died
+            kind = "took too long" if "longer" in str(exc) else "ended before answering"
+            raise WorkerError(
+                f"the workspace query {kind} (its worker was stopped); try again"
+            ) from None
+        finally:
+            self._places.release()
         return answer
 
     def close(self) -> None:

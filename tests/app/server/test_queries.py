@@ -16,7 +16,7 @@ import pytest
 from app.config import load_settings
 from app.control.commands import CommandContext
 from app.server import sections
-from app.server.queries import QueriesBusy, WorkspaceQueries
+from app.server.queries import WAIT_S, QueriesBusy, WorkspaceQueries
 from tests.support.app_client import make_client
 from tests.support.lease import take_lease
 from tests.support.wait import wait_for
@@ -60,16 +60,38 @@ def test_a_repeated_query_is_answered_from_the_kept_answers(queries, gate):
     assert again is cut and cut.reachable.any()
 
 
-def test_a_query_while_every_worker_is_busy_is_refused_at_once(queries, gate):
-    blocked = threading.Thread(target=queries._workers.call, args=(_sleep, 3.0), daemon=True)
-    blocked.start()
-    wait_for(lambda: not queries._workers._free, "the only slot taken")
-    with pytest.raises(QueriesBusy, match="busy"):
-        queries.nearest(gate, FAR + 2e-3, 0.0)
-    blocked.join()
-    np.testing.assert_allclose(
-        queries.nearest(gate, FAR + 2e-3, 0.0), sections.nearest(gate, FAR + 2e-3, 0.0)
-    )
+def test_a_query_waits_its_turn_and_one_beyond_the_queue_is_refused_at_once(gate):
+    queries = WorkspaceQueries(load_settings(), slots=1, timeout_s=60, queue=1, wait_s=60)
+    try:
+        blocked = threading.Thread(target=queries.call, args=(_sleep, 3.0), daemon=True)
+        blocked.start()
+        wait_for(lambda: not queries._workers._free, "the only worker busy")
+        waited: list = []
+        waiting = threading.Thread(
+            target=lambda: waited.append(queries.nearest(gate, FAR + 2e-3, 0.0)), daemon=True
+        )
+        waiting.start()  # takes the one place in the queue
+        wait_for(lambda: not queries._places._value, "the queue full")
+        with pytest.raises(QueriesBusy, match="busy"):
+            queries.nearest(gate, FAR + 3e-3, 0.0)
+        waiting.join(timeout=120)
+        np.testing.assert_allclose(waited[0], sections.nearest(gate, FAR + 2e-3, 0.0))
+        blocked.join()
+    finally:
+        queries.close()
+
+
+def test_a_query_that_waited_too_long_is_refused(gate):
+    queries = WorkspaceQueries(load_settings(), slots=1, timeout_s=60, queue=1, wait_s=0.0)
+    try:
+        blocked = threading.Thread(target=queries.call, args=(_sleep, 3.0), daemon=True)
+        blocked.start()
+        wait_for(lambda: not queries._workers._free, "the only worker busy")
+        with pytest.raises(QueriesBusy, match="busy"):
+            queries.nearest(gate, FAR + 4e-3, 0.0)
+        blocked.join()
+    finally:
+        queries.close()
 
 
 def _sleep(seconds: float) -> None:
@@ -97,13 +119,14 @@ def test_the_routes_answer_from_the_workers_and_say_when_busy(client):
     np.testing.assert_allclose(refused.json()["nearest_m"], answer["nearest_m"], atol=1e-12)
     assert queries.asked == asked + 1  # the same point: the kept answer
 
+    queries.wait_s = 0.0  # no waiting for the worker here: busy at once
     blockers = [
-        threading.Thread(target=queries._workers.call, args=(_sleep, 3.0), daemon=True)
+        threading.Thread(target=queries.call, args=(_sleep, 3.0), daemon=True)
         for _ in range(queries._workers.slots)
     ]
     for blocker in blockers:
         blocker.start()
-    wait_for(lambda: not queries._workers._free, "every slot taken")
+    wait_for(lambda: not queries._workers._free, "every worker busy")
     busy = client.get("/api/workspace/nearest", params={**far, "x_m": 0.56})
     assert busy.status_code == 503 and "busy" in busy.json()["detail"]
     assert busy.headers["retry-after"] == "1"
@@ -112,3 +135,4 @@ def test_the_routes_answer_from_the_workers_and_say_when_busy(client):
     assert still.status_code == 422 and len(still.json()["nearest_m"]) == 3
     for blocker in blockers:
         blocker.join()
+    queries.wait_s = WAIT_S
