@@ -115,11 +115,12 @@ def run_dry_run(job: CheckJob, feedforward: bool) -> tuple[CheckedProgram, DryRu
     return checked, dry_run(checked, job.settings, feedforward=feedforward, gate=job.gate)
 
 
-def _start_worker(settings: Settings) -> None:
+def _start_worker(settings: Settings, nice: int = WORKER_NICE) -> None:
     """A new worker: lower priority, SIGINT left to the server, the gate's first workspace
     projection paid now (cached per process by kinematics.projection)."""
     with contextlib.suppress(OSError):
-        os.nice(WORKER_NICE)
+        if nice:
+            os.nice(nice)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     CommandContext.from_settings(settings)
 
@@ -150,14 +151,23 @@ class ProgramWorkers:
         settings: passed to each worker when it starts (to warm the gate's projection).
         slots: jobs running at once (each a worker process of up to ~1 GB in a long check).
         timeout_s: the longest a job may take, its worker's start included [s].
+        nice: added to each worker's niceness (WORKER_NICE: the loop's process first;
+            0 for short queries a person waits for, which a busy machine would starve).
 
     The methods block the calling thread (a request's) until the answer, and raise
     ChecksBusy, WorkerCrashed or WorkerTimeout (each a WorkerError) besides what the job
     itself raises. Safe from any thread. :meth:`close` kills the workers.
     """
 
-    def __init__(self, settings: Settings, slots: int = 2, timeout_s: float = 300.0) -> None:
+    def __init__(
+        self,
+        settings: Settings,
+        slots: int = 2,
+        timeout_s: float = 300.0,
+        nice: int = WORKER_NICE,
+    ) -> None:
         self.settings, self.slots, self.timeout_s = settings, slots, timeout_s
+        self.nice = nice
         self._lock = threading.Lock()
         self._free = list(range(slots))
         self._executors: list[ProcessPoolExecutor | None] = [None] * slots
@@ -258,7 +268,10 @@ class ProgramWorkers:
                 executor = None
             if executor is None:  # no process yet: it starts on the first submit
                 executor = ProcessPoolExecutor(
-                    1, mp_context=SPAWN, initializer=_start_worker, initargs=(self.settings,)
+                    1,
+                    mp_context=SPAWN,
+                    initializer=_start_worker,
+                    initargs=(self.settings, self.nice),
                 )
                 self._executors[slot] = executor
             return executor

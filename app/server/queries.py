@@ -5,7 +5,7 @@ refused goal) is up to seconds of NumPy and Python for a far point, and
 ``sections.section`` a few hundred ms for a new level; run in the server's process they
 hold the GIL the 200 Hz loop needs: four clients asking for far points pulled the loop
 from ~160 Hz to 104-135 Hz (issue 28). So :class:`WorkspaceQueries` runs them in worker
-processes (``app.programs.workers.ProgramWorkers``: spawned, nice +10, killed past a
+processes (``app.programs.workers.ProgramWorkers``: spawned, not niced, killed past a
 bound) with at most ``slots`` (one: the other core stays the loop's) at a time, a few
 more waiting their turn (the page asks for three sections and a nearest point at once),
 and keeps the last answers (a repeated query costs a dictionary look-up):
@@ -35,7 +35,10 @@ from app.programs.workers import ChecksBusy, ProgramWorkers, WorkerError
 from app.server import sections
 
 SLOTS = 1  # worker processes at once (~150 MB; one core stays the loop's); a second is refused
-TIMEOUT_S = 20.0  # the longest a query may take, its worker's start included [s]
+TIMEOUT_S = 60.0  # the longest a query may take, its worker's start included [s]
+# the worker's niceness: not lowered, since a person waits for the answer and a niced
+# worker beside other busy processes took over 20 s; one worker leaves a core to the loop
+NICE = 0
 CACHE_SIZE = 512  # answers kept (a section is ~30 kB)
 QUEUE = 4  # queries that may wait for the worker (the page asks for 3 sections at once)
 WAIT_S = 15.0  # the longest a query waits for the worker before it is refused [s]
@@ -63,7 +66,7 @@ class WorkspaceQueries:
         queue: int = QUEUE,
         wait_s: float = WAIT_S,
     ):
-        self._workers = ProgramWorkers(settings, slots, timeout_s)
+        self._workers = ProgramWorkers(settings, slots, timeout_s, nice=NICE)
         self._slots = threading.Semaphore(slots)  # queries in a worker
         self._places = threading.Semaphore(slots + queue)  # in a worker or waiting for one
         self.wait_s = wait_s
