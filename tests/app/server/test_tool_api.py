@@ -53,13 +53,19 @@ def _motion(client: TestClient) -> dict:
 def test_a_goal_given_as_a_tip_brings_the_tip_there(tooled):
     response = tooled.post("/api/goal", json={"position_m": TIP.tolist()})
     assert response.status_code == 200, response.text
-    # P-only factory gains leave a small sag under gravity: within 3 mm
+    # within 3 mm (the gravity offset takes most of the factory gains' sag)
     wait_at(tooled, TIP, "the tool tip at the goal", within_m=0.003)
     ee = _status(tooled)["ee"]
     tip, platform = np.array(ee["position_m"]), np.array(ee["platform_m"])
     np.testing.assert_allclose(tip - platform, OFFSET, atol=1e-12)
     assert ee["phi_rad"] == 0.0 and _status(tooled)["goal"]["position_m"] == TIP.tolist()
-    np.testing.assert_allclose(ee["commanded_m"], TIP, atol=1e-9)
+    # the jerk-limited move ends exactly at the goal (with the gravity offset on, the
+    # measured tip is within 3 mm before the command's last micrometres are done)
+    wait_for(
+        lambda: np.allclose(_status(tooled)["ee"]["commanded_m"], TIP, rtol=0, atol=1e-9),
+        "the commanded tip exactly at the goal",
+        seen=lambda: _status(tooled)["ee"]["commanded_m"],
+    )
     # the twin's own body, not the encoders: its platform is 5 cm above the goal
     assert np.linalg.norm(np.array(ee["external_m"]) - TIP) < 0.003
     wait_for(
