@@ -129,17 +129,22 @@ def format_checked(checked: dict[str, Any]) -> list[str]:
         f"{'on' if checked['gravity_compensation'] else 'off'}; goal: RMSE x, y < "
         f"{limits['rmse_xy_m'] * 1e3:g} mm, z < {limits['rmse_z_m'] * 1e3:g} mm, PWM at its "
         f"limit <= {limits['at_limit'] * 100:g} %, overshoot <= {limits['overshoot_pct']:g} %, "
-        f"rest < {limits['rest_m'] * 1e3:g} mm):"
+        f"rest < {limits['rest_m'] * 1e3:g} mm, 70 mm go-to overshoot <= "
+        f"{limits['long_overshoot_m'] * 1e3:g} mm and within {limits['settle_band_m'] * 1e3:g} mm "
+        f"in {limits['settle_s']:g} s):"
     ]
     for c in checked["candidates"]:
         g = c["gains"]
         at_limit = max(c["plain"]["at_limit"], c["lead"]["at_limit"]) * 100
         mark = "*" if c["candidate"] == checked["chosen"] else " "
+        long = c.get("long_move") or {"overshoot_m": [], "settle_s": []}
         lines.append(
             f" {mark}{c['candidate']:>2}: P {_per_servo(g, 'p')}, I {_per_servo(g, 'i')}, "
             f"D {_per_servo(g, 'd')}: RMSE plain {_mm(c['plain']['rmse_m'])} mm, lead "
             f"{_mm(c['lead']['rmse_m'])} mm, at limit {at_limit:.1f} %, overshoot "
-            f"{c['overshoot_pct']:.1f} %, rest <= {max(c['rest_m']) * 1e3:.2f} mm; "
+            f"{c['overshoot_pct']:.1f} %, rest <= {max(c['rest_m']) * 1e3:.2f} mm, go-to "
+            f"overshoot {max(long['overshoot_m'], default=0.0) * 1e3:.2f} mm, settled in "
+            f"{max(long['settle_s'], default=0.0):.2f} s; "
             f"misses {', '.join(c['failed']) or 'nothing'}"
         )
     lines.append(f"chosen: candidate {checked['chosen']}: {checked['reason']}")

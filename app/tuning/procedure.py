@@ -118,6 +118,10 @@ def candidate_out(number: int, c: Candidate, servo_ids: tuple[int, ...]) -> dict
         },
         "overshoot_pct": v.overshoot_pct,
         "rest_m": list(v.rest_m),
+        "long_move": {
+            "overshoot_m": list(v.long.overshoot_m),
+            "settle_s": list(v.long.settle_s),
+        },
         "failed": list(v.failed),
         "passes": v.passes,
     }

@@ -1,6 +1,6 @@
 """Gains checked on the MuJoCo twin before they are offered (issue 21's goal), simulated time.
 
-Three checks, each with a gain set per joint written to the three servo models (one set
+Four checks, each with a gain set per joint written to the three servo models (one set
 for all, or one per joint in joint order; IK goals
 streamed at 200 Hz as Goal Position ticks, the firmware's 1 ms period, the physics'
 own time step; no wall clock, so the figures do not depend on the machine's load):
@@ -16,6 +16,13 @@ own time step; no wall clock, so the figures do not depend on the machine's load
 - `rest`: from (0, 0, -0.24) m a 1 s minimum-jerk move to each of five points across the
   workspace (benchmarks/sag_at_rest.py's), then 1.5 s at rest; the true platform's
   distance from the goal [m].
+- `long_move`: what an operator does next (issue 28): a 70 mm go-to from (0, 0, -0.24) m
+  along x and down z, on the loop's own jerk-limited path at the jog limits (ruckig,
+  `MoveSource`); the true platform's overshoot past the goal along the move [m] after
+  the path ends, and the time [s] from the path's end until it stays within
+  `Limits.settle_band_m` of the goal (an integral that winds up during the move shows
+  here: the servo model clamps the integral term at the PWM limit, as the firmware's
+  anti-windup).
 """
 
 from __future__ import annotations
@@ -27,6 +34,8 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from app.control.gravity import GravityOffset, loop_stiffness_nm_rad
+from app.control.sources import Limits as PathLimits
+from app.control.sources import MoveSource
 from app.tuning.gains import Plant, Suggestion, Target, d_limit, suggest
 from hardware.bus import PositionGains, per_joint
 from hardware.dynamixel.control_table import RAD_PER_TICK
@@ -44,6 +53,9 @@ REST_POINTS_M = (
     (-0.03, -0.06, -0.27),
     (0.05, 0.05, -0.29),
 )
+LONG_MOVES_M = ((0.07, 0.0, -0.24), (0.0, 0.0, -0.31))  # 70 mm from HOME_M
+# the jog limits' defaults (app/config.py [jog]): what a go-to runs at
+GOTO_LIMITS = PathLimits(velocity=0.5, acceleration=4.0, jerk=100.0)
 AT_LIMIT = 0.999  # a PWM at or above this fraction of the limit counts as saturated
 JOINTS = (1, 2, 3)
 FACTORY = PositionGains()  # the XM430's own gains (P 800, no I, D or feed-forward)
@@ -226,23 +238,84 @@ def rest(
 
 
 @dataclass(frozen=True)
+class LongMove:
+    """The `long_move` figures per move (LONG_MOVES_M's order): overshoot_m [m] past the
+    goal along the move after the path ends (0: none), settle_s [s] from the path's end
+    until the platform stays within the band (`after_s` when it never does)."""
+
+    overshoot_m: tuple[float, ...]
+    settle_s: tuple[float, ...]
+
+
+def long_move(
+    gains: Gains,
+    settle_band_m: float = 0.0007,
+    after_s: float = 2.0,
+    gravity: bool = False,
+    goals_m: Sequence[Sequence[float]] = LONG_MOVES_M,
+    limits: PathLimits = GOTO_LIMITS,
+) -> LongMove:
+    """Each 70 mm go-to of the module docstring with `gains`, watched `after_s` [s] after
+    the path ends; `gravity` as for `sinusoid`. Raises ValueError for a band or a time
+    <= 0."""
+    if settle_band_m <= 0 or after_s <= 0:
+        raise ValueError("settle_band_m, after_s: must be > 0")
+    gains = joint_gains(gains)
+    robot = THESIS_DELTA
+    offset = _offset(gains, gravity)
+    overshoots, settles = [], []
+    for point in goals_m:
+        twin = DeltaTwin()
+        per_tick = _per_tick(twin)
+        goal = np.asarray(point, dtype=np.float64)
+        path = MoveSource(HOME_M, goal, limits, None, joint_space=False)
+        q = robot.ik(HOME_M).joints
+        twin.reset(q)
+        _send(twin, q, gains, offset)
+        twin.advance(0.5)
+        along = (goal - HOME_M) / np.linalg.norm(goal - HOME_M)
+        ticks = math.ceil(path.duration_s * RATE_HZ)
+        past, outside_until = 0.0, 0.0
+        for k in range(ticks + round(after_s * RATE_HZ)):
+            q = robot.ik(path.next(1.0 / RATE_HZ).point_m, near=q).joints
+            _send(twin, q, gains, offset)
+            twin.step(per_tick)
+            if k + 1 < ticks:
+                continue
+            since_end = (k + 1) / RATE_HZ - path.duration_s
+            error = twin.platform_m - goal
+            past = max(past, float(error @ along))
+            if float(np.linalg.norm(error)) > settle_band_m:
+                outside_until = min(max(since_end, 0.0) + 1.0 / RATE_HZ, after_s)
+        overshoots.append(past)
+        settles.append(outside_until)
+    return LongMove(tuple(overshoots), tuple(settles))
+
+
+@dataclass(frozen=True)
 class Limits:
     """Issue 21's goal: RMSE x, y under rmse_xy_m [m], z under rmse_z_m [m] (half of thesis
     Table 6.1's 8.1 / 8.7 / 14.7 mm), PWM at its limit at most at_limit of the run, step
-    overshoot at most overshoot_pct [%], error at rest under rest_m [m] at every point."""
+    overshoot at most overshoot_pct [%], error at rest under rest_m [m] at every point;
+    issue 28's long move: overshoot past the goal at most long_overshoot_m [m], within
+    settle_band_m [m] of the goal at most settle_s [s] after the path ends."""
 
     rmse_xy_m: float = 0.0040
     rmse_z_m: float = 0.0074
     at_limit: float = 0.01
     overshoot_pct: float = 5.0
     rest_m: float = 0.0002
+    long_overshoot_m: float = 0.002
+    settle_band_m: float = 0.0007
+    settle_s: float = 0.5
 
 
 @dataclass(frozen=True)
 class Verdict:
     """The twin's figures for one gain set: the sinusoid without (`plain`) and with
     (`lead`) the loop's lead, the step's overshoot_pct [%], rest_m [m] at five points, and
-    `failed`: the names of the limits it misses (empty: it passes). `lead` and `plain`
+    `failed`: the names of the limits it misses (empty: it passes), and the long move's
+    figures (`long`: `LongMove`; none in a verdict made without it). `lead` and `plain`
     both must pass the PWM limit; the RMSE limits must hold for at least one of them (the
     loop runs with or without lead)."""
 
@@ -252,6 +325,7 @@ class Verdict:
     overshoot_pct: float
     rest_m: tuple[float, ...]
     failed: tuple[str, ...]
+    long: LongMove = LongMove((), ())
 
     @property
     def passes(self) -> bool:
@@ -278,7 +352,7 @@ def check(
     limits: Limits = Limits(),
     gravity: bool = False,
 ) -> Verdict:
-    """All three checks of `gains` on the twin and the limits they miss (`Verdict`);
+    """All four checks of `gains` on the twin and the limits they miss (`Verdict`);
     `gravity`: with the loop's gravity offset (``[control] gravity_compensation``), which
     acts only where the gains have no integral. `gains`: one set for all joints, or one
     per joint."""
@@ -286,6 +360,7 @@ def check(
     lead = sinusoid(gains, seconds, lead_s, gravity=gravity)
     overshoot = step(gains, gravity=gravity)
     rest_m = tuple(rest(gains, gravity=gravity))
+    long = long_move(gains, limits.settle_band_m, gravity=gravity)
     failed = []
     if _tracking_fails(plain, limits) and _tracking_fails(lead, limits):
         failed += _tracking_fails(lead, limits)
@@ -295,7 +370,11 @@ def check(
         failed.append("overshoot_pct")
     if max(rest_m) >= limits.rest_m:
         failed.append("rest_m")
-    return Verdict(plain, lead, lead_s, overshoot, rest_m, tuple(failed))
+    if max(long.overshoot_m) > limits.long_overshoot_m:
+        failed.append("long_overshoot_m")
+    if max(long.settle_s) > limits.settle_s:
+        failed.append("settle_s")
+    return Verdict(plain, lead, lead_s, overshoot, rest_m, tuple(failed), long)
 
 
 @dataclass(frozen=True)
@@ -361,6 +440,8 @@ def excess(v: Verdict, limits: Limits = Limits()) -> float:
         "at_limit": max(v.plain.at_limit, v.lead.at_limit) / limits.at_limit,
         "overshoot_pct": v.overshoot_pct / limits.overshoot_pct,
         "rest_m": max(v.rest_m) / limits.rest_m,
+        "long_overshoot_m": max(v.long.overshoot_m, default=0.0) / limits.long_overshoot_m,
+        "settle_s": max(v.long.settle_s, default=0.0) / limits.settle_s,
     }
     return sum(ratios[name] for name in v.failed)
 

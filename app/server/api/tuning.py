@@ -86,13 +86,23 @@ class TrackingOut(BaseModel):
     at_limit: float
 
 
+class LongMoveOut(BaseModel):
+    """The 70 mm go-tos on the loop's jerk-limited path (along x, down z from (0, 0,
+    -0.24) m): per move, overshoot_m [m] past the goal after the path ends and settle_s
+    [s] until the tip stays within the limits' settle_band_m of the goal (the watch's
+    length, 2 s, when it never does)."""
+
+    overshoot_m: list[float]
+    settle_s: list[float]
+
+
 class CandidateOut(BaseModel):
     """One gain set checked on the twin (app/tuning/twin_check.py): its number (1: the
     first tried), the target variant the rule was given (pwm_fraction: the D cap's
     headroom; overshoot_pct: the model's allowance; integral), the gains per servo id
     (the legs not tuned keep theirs), the sinusoid without (plain) and with (lead) the
-    loop's lead, the 20 mm z step's overshoot_pct [%], rest_m [m] at five points, and the
-    limits it misses (failed)."""
+    loop's lead, the 20 mm z step's overshoot_pct [%], rest_m [m] at five points, the
+    long_move's overshoot and settling, and the limits it misses (failed)."""
 
     candidate: int
     target: dict[str, Any]
@@ -101,6 +111,7 @@ class CandidateOut(BaseModel):
     lead: TrackingOut
     overshoot_pct: float
     rest_m: list[float]
+    long_move: LongMoveOut
     failed: list[str]
     passes: bool
 
