@@ -21,16 +21,23 @@ preflight (OPTIONS) and ``GET /ready`` (204, nothing done: the page keeps its ke
 connection warm with it, since a fresh connection cost the browser tens of ms under load)
 a 501; it reads no body beyond 1 kB (larger: left unread, the connection closed), holds
 at most MAX_CONNECTIONS connections, and only the page's own origin (the dashboard's port)
-may read its answer. Stopping needs no token anywhere (whoever sees the
-robot about to hurt someone may stop it), so this grants nothing that /api/estop did not.
+may read its answer. A new connection always gets in: when all are held, the one that
+has waited longest since it last finished a request (or opened) is closed for it, so
+idle or trickling connections (a slowloris) cannot lock a press out; once a request's
+first byte is in, each read of its header waits at most HEADER_TIMEOUT_S. Stopping
+needs no token anywhere (whoever sees the robot about to hurt someone may stop it), so
+this grants nothing that /api/estop did not.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import re
+import socket
 import threading
+import time
 from concurrent.futures import TimeoutError as FutureTimeout
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
@@ -47,7 +54,8 @@ SCOPE_KEY = "deltadash.estop"  # the latched command's Future, for the route
 ANSWER_TIMEOUT_S = 2.0  # the route's COMMAND_TIMEOUT_S
 IDLE_TIMEOUT_S = 30.0  # a kept-alive connection idle this long is closed
 MAX_BODY_BYTES = 1024  # a body is never needed; a larger one is not read (connection closed)
-MAX_CONNECTIONS = 32  # beyond, a new connection is closed at once
+MAX_CONNECTIONS = 32  # beyond, the longest-waiting one is closed for the new one
+HEADER_TIMEOUT_S = 2.0  # each read of a request's line and headers, after its first byte
 _PRESS = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 
@@ -91,6 +99,25 @@ class _Handler(BaseHTTPRequestHandler):
     server: _Server
     timeout = IDLE_TIMEOUT_S
     protocol_version = "HTTP/1.1"
+
+    def handle_one_request(self) -> None:
+        """One request: IDLE_TIMEOUT_S for its first byte, then HEADER_TIMEOUT_S per read
+        of the rest; the connection counts as active again once answered."""
+        try:
+            self.connection.settimeout(IDLE_TIMEOUT_S)
+            if not self.rfile.peek(1):  # type: ignore[attr-defined]  # a BufferedReader
+                self.close_connection = True
+                return
+            self.connection.settimeout(HEADER_TIMEOUT_S)
+            super().handle_one_request()
+        except (ConnectionError, TimeoutError, OSError):
+            self.close_connection = True  # gone, closed for a newer one, or too slow
+        finally:
+            self.server.touch(self.connection)
+
+    def finish(self) -> None:
+        with contextlib.suppress(OSError):  # the client left before the answer was flushed
+            super().finish()
 
     def do_POST(self) -> None:  # noqa: N802 (http.server's naming)
         parts = urlsplit(self.path)
@@ -162,17 +189,32 @@ class _Server(ThreadingHTTPServer):
     daemon_threads = True
     controller: Any
     page_port: int
-    _open = 0
-    _lock = threading.Lock()
+
+    def __init__(self, address: tuple[str, int], handler: type[_Handler]) -> None:
+        super().__init__(address, handler)
+        self._lock = threading.Lock()
+        self._since: dict[Any, float] = {}  # open connection -> when it last was active
+
+    @property
+    def open_connections(self) -> int:
+        with self._lock:
+            return len(self._since)
+
+    def touch(self, request: Any) -> None:
+        with self._lock:
+            if request in self._since:
+                self._since[request] = time.monotonic()
 
     def process_request(self, request: Any, client_address: Any) -> None:
         with self._lock:
-            full = self._open >= MAX_CONNECTIONS
-            if not full:
-                self._open += 1
-        if full:
-            self.shutdown_request(request)
-            return
+            evict = None
+            if len(self._since) >= MAX_CONNECTIONS:
+                evict = min(self._since, key=self._since.__getitem__)
+                del self._since[evict]
+            self._since[request] = time.monotonic()
+        if evict is not None:
+            with contextlib.suppress(OSError):  # its thread's read fails and it ends
+                evict.shutdown(socket.SHUT_RDWR)
         super().process_request(request, client_address)
 
     def process_request_thread(self, request: Any, client_address: Any) -> None:
@@ -180,7 +222,7 @@ class _Server(ThreadingHTTPServer):
             super().process_request_thread(request, client_address)
         finally:
             with self._lock:
-                self._open -= 1
+                self._since.pop(request, None)
 
     def origin_allowed(self, origin: str) -> bool:
         """The dashboard's pages: any host name, the HTTP server's port."""

@@ -132,3 +132,27 @@ def test_one_kept_alive_connection_serves_presses_and_a_large_body_is_not_read(f
     finally:
         connection.close()
     assert wait_for(lambda: status(fresh)["estopped"], "the e-stop with a large body")
+
+
+def test_connections_held_open_or_trickling_cannot_lock_a_press_out(fresh):
+    """A slowloris: every one of the listener's connections held by a client that sends
+    nothing, or a header one byte at a time. A new press still gets in (the longest-waiting
+    connection is closed for it) and stops the robot."""
+    import socket
+
+    from app.server.estop import MAX_CONNECTIONS
+
+    port = ok_json(fresh.get("/api/info"))["estop_port"]
+    held = []
+    try:
+        for k in range(MAX_CONNECTIONS + 4):
+            s = socket.create_connection(("127.0.0.1", port), timeout=10)
+            if k % 2:
+                s.sendall(b"POST /est")  # a header begun, never finished
+            held.append(s)
+        code, _, body = call(f"http://127.0.0.1:{port}/estop?press=through-the-crowd")
+        assert code == 200, body
+        assert wait_for(lambda: status(fresh)["estopped"], "the press through a full listener")
+    finally:
+        for s in held:
+            s.close()
