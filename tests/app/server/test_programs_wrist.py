@@ -31,7 +31,14 @@ def test_a_program_with_a_words_turns_the_wrist_on_the_twin(tmp_path: Path) -> N
         take_lease(client)
         ok_json(client.post("/api/torque", json={"enabled": True}))
         control = client.app.state.controller
-        wait_for(lambda: math.isfinite(control.snapshot().phi_measured_rad), "the wrist read")
+        # holding the wrist where it is: commanded where it was read (the program starts
+        # from the commanded angle; CI read it once before the hold had taken it up)
+        def holding() -> bool:
+            snap = control.snapshot()
+            measured, commanded = snap.phi_measured_rad, snap.phi_commanded_rad
+            return math.isfinite(measured) and abs(commanded - measured) <= TOLERANCE_RAD
+
+        wait_for(holding, "the wrist read and held where it is")
         start = control.snapshot().phi_commanded_rad
         report = ok_json(client.post("/api/programs/check", json={"gcode": PROGRAM}))
         assert report["ok"], report["violations"]
