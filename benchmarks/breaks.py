@@ -1,6 +1,6 @@
 """Deliberate breaks of the product, and which tests catch each (issue 29 §2).
 
-Usage: python benchmarks/breaks.py [--only 03,07] [--full] [--python PY]
+Usage: python benchmarks/breaks.py [--only 03,07] [--full | --tests SEL ...] [--python PY]
                                    [--markdown FILE] [--keep] [--check]
 
 Each patch in benchmarks/breaks/ (NN-short-name.patch, listed in manifest.toml with its
@@ -13,15 +13,18 @@ product code (kinematics/, hardware/, app/, static/). For each break this script
 3. runs ``PY -m pytest -q -p no:cacheprovider SELECTION --junitxml=...`` from inside the
    copy, where SELECTION is the manifest's ``tests`` (``--full``: the whole suite,
    ``tests -m "not browser"``; a break only browser tests can catch, ``browser = true``,
-   runs its selection instead);
+   runs its selection instead; ``--tests`` replaces every break's selection, to look for
+   a catching test in a wider net);
 4. reads the failing and erroring test ids from the junit XML.
 
 It prints a table (id, layer, what, caught, how many tests caught it, the first few) and
 with ``--markdown FILE`` writes it as Markdown. The exit status is 1 if any break was not
 caught (no failing test), 2 if a patch does not apply or the manifest is inconsistent.
+A pytest killed by a signal (the shared machine's other work can end it) is run once more;
+the note says so.
 
 ``--check`` only verifies that the manifest lists every patch once and that each applies
-cleanly to HEAD (a second or so; tests/test_breaks.py runs it), so patches do not rot as
+cleanly to the working tree (a second or so; tests/test_breaks.py runs it), so patches do not rot as
 the code moves on: a patch that no longer applies is rewritten against the new code, and
 a break the suite no longer catches is a finding, not a patch to drop.
 
@@ -149,16 +152,14 @@ def apply(patch: Path, folder: Path, check_only: bool = False) -> None:
     command = ["git", "apply", "--check" if check_only else "--whitespace=nowarn", str(patch)]
     done = subprocess.run(command, cwd=folder, capture_output=True, text=True)
     if done.returncode != 0:
-        raise ManifestError(f"{patch.name} does not apply to HEAD: {done.stderr.strip()}")
+        raise ManifestError(f"{patch.name} does not apply in {folder}: {done.stderr.strip()}")
 
 
-def check(breaks: list[Break]) -> None:
-    """Every patch applies cleanly to one pristine copy of HEAD (each on its own)."""
-    with tempfile.TemporaryDirectory(prefix="deltadash-breaks-") as tmp:
-        folder = Path(tmp)
-        pristine_copy(folder)
-        for item in breaks:
-            apply(item.patch, folder, check_only=True)
+def check(breaks: list[Break], folder: Path = ROOT) -> None:
+    """Every patch applies cleanly (each on its own) to the tree in ``folder``: this
+    checkout's working tree by default, which ``git apply --check`` leaves as it is."""
+    for item in breaks:
+        apply(item.patch, folder, check_only=True)
 
 
 def failing_tests(junit: Path) -> list[str]:
@@ -177,7 +178,9 @@ def failing_tests(junit: Path) -> list[str]:
     return found
 
 
-def run_one(item: Break, python: str, full: bool, keep: bool) -> Outcome:
+def run_one(
+    item: Break, python: str, full: bool, keep: bool, tests: list[str] | None = None
+) -> Outcome:
     """Apply one break to a pristine copy and run its selection; the failing tests."""
     outcome = Outcome(item)
     tmp = Path(tempfile.mkdtemp(prefix=f"deltadash-break-{item.id}-"))
@@ -188,17 +191,24 @@ def run_one(item: Break, python: str, full: bool, keep: bool) -> Outcome:
         junit = tmp / "junit.xml"
         selection = list(item.tests) if (item.browser or not full) else ["tests"]
         marker = ["-m", "not browser"] if full and not item.browser else []
+        if tests:
+            selection, marker = list(tests), []
         env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(folder), *_pythonpath()])}
         command = [python, "-m", "pytest", "-q", "-p", "no:cacheprovider", *marker]
         command += [*selection, f"--junitxml={junit}"]
         started = time.monotonic()
         done = subprocess.run(command, cwd=folder, env=env, capture_output=True, text=True)
+        if done.returncode < 0:  # killed by a signal: not an answer; once more
+            outcome.note = f"rerun after signal {-done.returncode}"
+            junit.unlink(missing_ok=True)
+            started = time.monotonic()
+            done = subprocess.run(command, cwd=folder, env=env, capture_output=True, text=True)
         outcome.seconds = time.monotonic() - started
         outcome.returncode = done.returncode
         outcome.caught_by = failing_tests(junit)
         if done.returncode not in (0, 1):  # 2-5: interrupted, internal error, usage, none
             tail = (done.stdout + done.stderr).strip().splitlines()[-3:]
-            outcome.note = f"pytest exit {done.returncode}: {' / '.join(tail)}"
+            outcome.note += f" pytest exit {done.returncode}: {' / '.join(tail)}"
         if keep:
             (tmp / "pytest.log").write_text(done.stdout + done.stderr)
             outcome.note = (outcome.note + f" kept {tmp}").strip()
@@ -237,6 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", help="comma-separated ids, e.g. 03,07")
     parser.add_argument("--full", action="store_true", help='whole suite (-m "not browser")')
+    parser.add_argument("--tests", nargs="+", help="run these tests for every break instead")
     parser.add_argument("--python", default=sys.executable, help="interpreter to run pytest")
     parser.add_argument("--markdown", type=Path, help="write the table to this file")
     parser.add_argument("--keep", action="store_true", help="keep each copy and pytest's log")
@@ -252,12 +263,12 @@ def main(argv: list[str] | None = None) -> int:
             breaks = [b for b in breaks if b.id in wanted]
         if args.check:
             check(breaks)
-            print(f"{len(breaks)} patches listed once and applying cleanly to HEAD")
+            print(f"{len(breaks)} patches listed once, each applying cleanly to the tree")
             return 0
         outcomes = []
         started = time.monotonic()
         for item in breaks:
-            outcome = run_one(item, args.python, args.full, args.keep)
+            outcome = run_one(item, args.python, args.full, args.keep, args.tests)
             outcomes.append(outcome)
             mark = "caught" if outcome.caught else "NOT CAUGHT"
             first = ", ".join(outcome.caught_by[:SHOWN])
