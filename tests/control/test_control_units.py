@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -90,6 +92,18 @@ def test_gate_refuses_non_finite_outside_and_joint_limits(gate):
         gate.check_point([0.4, 0, -0.2])
     with pytest.raises(GoalRejected, match="joint 1"):
         gate.check_joints(np.array([2.0, 0.3, 0.3]))
+
+
+def test_gate_refuses_joints_too_close_to_a_singularity(gate):
+    """Joints inside their limits whose 1/cond(J) is below min_dexterity are refused; the
+    gate's own margin is what decides (issue 29, break 05: the check had no test)."""
+    joints = np.array([0.3, 0.3, 0.3])  # 1/cond(J) = 0.954
+    np.testing.assert_array_equal(gate.check_joints(joints), joints)
+    strict = dataclasses.replace(gate, min_dexterity=0.99)
+    with pytest.raises(GoalRejected, match="singularity"):
+        strict.check_joints(joints)
+    with pytest.raises(GoalRejected, match="singularity"):
+        strict.solve(THESIS_DELTA.fk(joints).points, joints)
 
 
 def test_joint_speed_is_limited_per_tick(gate):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hardware.dynamixel.control_table import Reg
-from tests.support.app_client import robot_seen, ticks, torque_on
+from tests.support.app_client import robot_seen, settle_at, ticks, torque_on, unmoved
 from tests.support.wait import ok_json, wait_for
 
 
@@ -44,6 +44,37 @@ def test_goal_is_reached_and_the_loop_keeps_counting(fresh):
     assert status["goal"]["position_m"] == goal
     before = status["loop"]["ticks"]
     wait_for(lambda: _status(fresh)["loop"]["ticks"] > before + 20, "more ticks")
+
+
+def _robot(client) -> dict:
+    status = _status(client)
+    return {
+        "goal_m": status["goal"]["position_m"],
+        "commanded_m": status["ee"]["commanded_m"],
+        "torque": status["torque"],
+        "mode": status["mode"],
+    }
+
+
+def test_a_refused_goal_moves_nothing(fresh):
+    """A goal the gate refuses (422) leaves the goal and the command as they were: nothing
+    is queued before the checks (issue 29, break 13: no test watched the robot after a
+    422 with torque on)."""
+    home = [0.0, 0.0, -0.22]
+    settle_at(fresh, home)
+    wait_for(
+        # to 1e-12 m: the approach's last ticks move it by nanometres, which `unmoved` sees
+        lambda: np.allclose(_robot(fresh)["commanded_m"], home, rtol=0, atol=1e-12),
+        "the approach to the goal done",
+        seen=lambda: _robot(fresh),
+    )
+    before = _robot(fresh)
+    response = fresh.post("/api/goal", json={"position_m": [0.4, 0.0, -0.2]})
+    assert response.status_code == 422, response.text
+    now = ticks(fresh)
+    wait_for(lambda: ticks(fresh) > now + 40, "40 more ticks")
+    after = _robot(fresh)
+    assert unmoved(before, after), (before, after)
 
 
 def test_jog_steps_add_up_and_clamp_at_the_boundary(fresh):
