@@ -36,17 +36,16 @@ is); done -> applied.
 
 While a run is planned, moving or fitting it holds the controller's ``MotionOwner``
 (app/control/owner.py): no other run, jog, goal or move can start, even between its poses,
-until it ends or is aborted.
+until it ends or is aborted. The lifecycle (start, the thread, abort, the ending, close)
+is app/procedures/lifecycle.py's; this module supplies the steps.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import threading
 import time
-import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -68,8 +67,9 @@ from app.calibration.probe import (
 from app.config import LegSettings
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
-from app.control.owner import Claim
 from app.control.state import Snapshot
+from app.procedures.lifecycle import Ending, ProcedureManager, ProcedureRun, Stopped
+from app.procedures.states import CALIBRATION_RUNNING, State
 from hardware.calibration import JointCalibration, merge_joints, read_config, write_config
 from hardware.encoder import RAD_PER_TICK
 from kinematics import PerLegRotaryDelta, RotaryDelta
@@ -83,10 +83,7 @@ REST_SPEED_RAD_S = 0.02  # and every joint's speed below this (about 1 deg/s)
 MOVE_TIMEOUT_S = 60.0
 MEASURE_WAIT_S = 3.0  # at rest, a measurement may be missing this long before the run fails
 SPREAD_LIMIT_M = 0.003  # a reading this far from its rest's median: the run fails
-Ending = tuple[str, str | None]  # the state a run ends in (done/refused/failed), its error
-STOP_TIMEOUT_S = 5.0
-POLL_S = 0.005
-RUNNING = ("planned", "moving", "fitting")  # the states abort stops
+RUNNING = CALIBRATION_RUNNING  # the states abort stops
 
 
 def external(snapshot: Snapshot) -> np.ndarray:
@@ -142,12 +139,8 @@ def _keep_measured(run: CalibrationRun) -> None:
         log.exception("calibration run %s: its pairs could not be kept", run.run_id)
 
 
-class Stopped(Exception):
-    """The run cannot go on (fault, e-stop, torque off, shutdown); the message says why."""
-
-
 @dataclass
-class CalibrationRun:
+class CalibrationRun(ProcedureRun):
     """One calibration: its plan, progress, result and files (``folder``)."""
 
     run_id: str
@@ -155,7 +148,7 @@ class CalibrationRun:
     poses: int
     plan: Plan
     folder: Path
-    state: str = "planned"
+    state: str = State.PLANNED
     pose: int = 0  # poses measured so far
     error: str | None = None
     result: FitResult | None = None
@@ -172,11 +165,6 @@ class CalibrationRun:
     offsets_at_start_rad: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)
     aborted: threading.Event = field(default_factory=threading.Event, repr=False)
     created_unix_s: float = field(default_factory=time.time)
-
-    def advance(self, state: str, error: str | None = None) -> None:
-        """The run's thread moves on to ``state``; an aborted run stays aborted."""
-        if not self.aborted.is_set():
-            self.state, self.error = state, error if error is not None else self.error
 
     def summary(self) -> dict[str, Any]:
         """The list's entry (GET /api/calibration): id, state, what was fitted, RMSEs."""
@@ -235,34 +223,29 @@ def _num(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-class CalibrationManager:
-    """Starts calibration runs on one controller and keeps them (in memory) by id."""
+class CalibrationManager(ProcedureManager[CalibrationRun]):
+    """Starts calibration runs on one controller and keeps them (in memory) by id; the
+    lifecycle (abort, running, close, get) is ``ProcedureManager``'s."""
+
+    kind, prefix, route = "calibration", "cal", "/api/calibration"
+    running_states = RUNNING
+    failures = (CalibrationError,)
 
     def __init__(
         self,
         controller: Controller,
         folder: Path,
-        busy: Callable[[], str | None] = lambda: None,
         config_path: Path | None = None,
         measure: Measure = external,
         probe: Touch | None = None,
         pose_measure: Measure | None = None,
     ) -> None:
-        self.controller, self.folder, self.busy = controller, Path(folder), busy
+        super().__init__(controller, folder)
         self.config_path, self.probe = config_path, probe
         # the measurements a motion run may use, by name (MEASUREMENTS)
         self.measures: dict[str, Measure] = {"external": measure}
         if pose_measure is not None:
             self.measures["pose-input"] = pose_measure
-        self._runs: dict[str, CalibrationRun] = {}
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
-        self._lock = threading.Lock()
-        self._claim: Claim | None = None  # the robot, held by the run in progress
-
-    def _stop_motion(self) -> None:
-        """The arm holds where it is commanded (returns once the loop has stopped it)."""
-        self.controller.stop_any().result(timeout=STOP_TIMEOUT_S)
 
     def nominal(self) -> PerLegRotaryDelta:
         """The controller's model in use now as a per-leg one (what a run is fitted
@@ -282,39 +265,9 @@ class CalibrationManager:
             ok[k] = gate.inside(points[k])
         return ok
 
-    def get(self, run_id: str) -> CalibrationRun | None:
-        return self._runs.get(run_id)
-
     def list(self) -> list[CalibrationRun]:
         """This server's runs (kept in memory), newest first."""
         return sorted(self._runs.values(), key=lambda r: r.created_unix_s, reverse=True)
-
-    def abort(self, run_id: str) -> CalibrationRun:
-        """Stop the run ``run_id`` now: the motion stops (the robot holds where it is
-        commanded), the run ends ``aborted`` and the robot is free for other commands at
-        once (its thread, if still fitting, moves nothing more and ends on its own).
-
-        Raises:
-            KeyError: no run ``run_id`` (404).
-            MotionRefused: the run is not running (done, failed, aborted...) (409).
-        """
-        run = self._runs[run_id]
-        with self._lock:
-            if run.state not in RUNNING or run.aborted.is_set():
-                raise MotionRefused(
-                    f"run {run_id} is {run.state}: only a running run can be aborted"
-                )
-            run.aborted.set()
-            run.state, run.error = "aborted", "aborted by the operator"
-            if self._claim is not None:
-                self.controller.owner.release(self._claim, then=self._stop_motion)
-            self._save(run)  # under the lock: the thread's last save cannot land after it
-        return run
-
-    def running(self) -> bool:
-        """A run's thread is moving the arm or fitting."""
-        thread = self._thread  # None once its run has ended (_hold)
-        return thread is not None and thread.is_alive()
 
     def start(
         self,
@@ -340,13 +293,8 @@ class CalibrationManager:
                 measurement has nothing fresh now (409).
         """
         with self._lock:
-            if self.running():
-                raise MotionRefused("a calibration run is in progress")
-            # another procedure holds the robot (named, with its abort route), or a run
-            if (other := self.controller.owner.busy() or self.busy()) is not None:
-                raise MotionRefused(other)
-            snap = self.controller.snapshot()
-            _require_motion(snap)
+            # a run in progress, a procedure holding the robot, a test run, no motion now
+            snap = self._may_start()
             model, offsets = self.controller.model, self.controller.joint_offsets_rad
             nominal = per_leg(model.robot)
             xy = None
@@ -357,13 +305,8 @@ class CalibrationManager:
                 chosen, xy = self._plan_probe(poses, parameters, plate_z_m, fit_plate_z)
             else:
                 raise CalibrationError(f"source: {source!r} is not 'motion' or 'probe'")
-            run_id = "cal-" + time.strftime("%Y%m%d-%H%M%S") + "-" + uuid.uuid4().hex[:4]
-            claim = self.controller.owner.claim(
-                f"calibration run {run_id}", f"POST /api/calibration/{run_id}/abort"
-            )
-            try:  # nothing may keep the robot held but a running thread
-                folder = self.folder / run_id
-                folder.mkdir(parents=True, exist_ok=True)
+
+            def make(run_id: str, folder: Path) -> CalibrationRun:
                 run = CalibrationRun(run_id, parameters, poses, chosen, folder)
                 run.source, run.plate_z_m, run.fit_plate_z, run.probe_xy = (
                     source,
@@ -374,17 +317,9 @@ class CalibrationManager:
                 run.measurement = measurement
                 run.nominal, run.model_version = nominal, model.version
                 run.offsets_at_start_rad = offsets
-                self._runs[run_id] = run
-                self._stop.clear()
-                self._claim = claim
-                self._thread = threading.Thread(
-                    target=self._hold, args=(run, claim), name="deltadash-calibration", daemon=True
-                )
-                self._thread.start()
-            except BaseException:
-                self.controller.owner.release(claim)
-                raise
-            return run
+                return run
+
+            return self._launch(make)
 
     def _require_measurement(self, measurement: str, snap: Snapshot) -> None:
         """A motion run starts only with a measurement that answers now."""
@@ -432,116 +367,52 @@ class CalibrationManager:
         fit_joints, holdout_joints = joints[: poses - n_held], joints[poses - n_held :]
         return Plan(fit_joints, holdout_joints, model.observability(model.initial, fit_joints)), xy
 
-    def close(self) -> None:
-        self._stop.set()
-        thread = self._thread
-        if thread is not None:
-            thread.join(timeout=5.0)
+    # ---- the run's thread: its steps ----
+    def _steps(self, run: CalibrationRun) -> Ending:
+        """Moves, measures and fits; the state the run ends in (done, refused), with its
+        error. Raises Stopped (and the like) to fail the run."""
+        if run.source == "probe":
+            return self._steps_probe(run)
+        run.advance(State.MOVING)
+        for q in run.plan.joints:
+            joints, measured = self._visit(run, q)
+            run.joints.append(joints)
+            run.measured.append(measured)
+            run.pose += 1
+        run.advance(State.FITTING)
+        holdout = len(run.plan.holdout_joints)
+        joints, measured = np.array(run.joints), np.array(run.measured)
+        write_pairs(run.folder / "pairs.csv", joints, measured, holdout)
+        assert run.nominal is not None
+        result = fit(run.nominal, joints, measured, holdout, run.parameters)
+        run.result = result
+        from app.calibration.report import write_report  # matplotlib: only when needed
 
-    # ---- the run's thread ----
-    def _hold(self, run: CalibrationRun, claim: Claim) -> None:
-        """The thread: its motions are ``claim``'s; the robot is free again when it ends."""
-        owner = self.controller.owner
-        owner.bind(claim)
-        ending: Ending = ("failed", "internal error: the run's thread ended early")
-        try:
-            ending = self._execute(run)
-        finally:
-            # one step under the lock, so an abort finds the run either running (and stops
-            # it) or ended: the robot freed, result.json written, then the state published;
-            # a client that sees the run ended finds its files and the robot free, and may
-            # start the next run at once
-            with self._lock:
-                if self._claim is claim:
-                    self._claim = None
-                owner.release(claim)
-                try:
-                    self._save(run, ending)
-                except Exception:  # a full disk, a bug in the view: the run still ends
-                    log.exception("calibration run %s: result.json not written", run.run_id)
-                run.advance(*ending)
-                if self._thread is threading.current_thread():
-                    self._thread = None  # not running from here on (running())
+        write_report(run.folder / "report.png", result, f"calibration {run.run_id}")
+        return _judge(result)
 
-    def _execute(self, run: CalibrationRun) -> Ending:
-        """Moves, measures and fits; the state the run ends in, with its error."""
-        try:
-            if run.source == "probe":
-                return self._execute_probe(run)
-            run.advance("moving")
-            for q in run.plan.joints:
-                joints, measured = self._visit(run, q)
-                run.joints.append(joints)
-                run.measured.append(measured)
-                run.pose += 1
-            run.advance("fitting")
-            holdout = len(run.plan.holdout_joints)
-            joints, measured = np.array(run.joints), np.array(run.measured)
-            write_pairs(run.folder / "pairs.csv", joints, measured, holdout)
-            assert run.nominal is not None
-            result = fit(run.nominal, joints, measured, holdout, run.parameters)
-            run.result = result
-            from app.calibration.report import write_report  # matplotlib: only when needed
+    def _steps_probe(self, run: CalibrationRun) -> Ending:
+        """A probe run's steps: the touches (the arm is not moved on the twin), the fit."""
+        assert self.probe is not None and run.probe_xy is not None and run.plate_z_m is not None
+        run.advance(State.MOVING)
+        joints = self.probe(run.probe_xy, run.plate_z_m, 0)
+        run.joints = list(joints)
+        run.pose = len(joints)
+        run.advance(State.FITTING)
+        holdout = len(run.plan.holdout_joints)
+        plate = np.full(len(joints), run.plate_z_m)
+        write_touches(run.folder / "touches.csv", joints, plate, holdout)
+        assert run.nominal is not None
+        result = probe_fit(run.nominal, joints, plate, holdout, run.parameters, run.fit_plate_z)
+        run.result = result
+        from app.calibration.report import write_report  # matplotlib: only when needed
 
-            write_report(run.folder / "report.png", result, f"calibration {run.run_id}")
-            return _judge(result)
-        except (Stopped, CalibrationError, GoalRejected, MotionRefused) as exc:
-            _keep_measured(run)
-            return "failed", str(exc)
-        except Exception as exc:  # a bug ends the run, saying so, never the server
-            log.exception("calibration run %s failed", run.run_id)
-            _keep_measured(run)
-            return "failed", f"internal error: {exc!r}"
+        title = f"probe calibration {run.run_id} (plate at z = {run.plate_z_m * 1e3:.1f} mm)"
+        write_report(run.folder / "report.png", result, title)
+        return _judge(result)
 
-    def _execute_probe(self, run: CalibrationRun) -> Ending:
-        try:
-            assert self.probe is not None and run.probe_xy is not None and run.plate_z_m is not None
-            run.advance("moving")
-            joints = self.probe(run.probe_xy, run.plate_z_m, 0)
-            run.joints = list(joints)
-            run.pose = len(joints)
-            run.advance("fitting")
-            holdout = len(run.plan.holdout_joints)
-            plate = np.full(len(joints), run.plate_z_m)
-            write_touches(run.folder / "touches.csv", joints, plate, holdout)
-            assert run.nominal is not None
-            result = probe_fit(run.nominal, joints, plate, holdout, run.parameters, run.fit_plate_z)
-            run.result = result
-            from app.calibration.report import write_report  # matplotlib: only when needed
-
-            title = f"probe calibration {run.run_id} (plate at z = {run.plate_z_m * 1e3:.1f} mm)"
-            write_report(run.folder / "report.png", result, title)
-            return _judge(result)
-        except (Stopped, CalibrationError, GoalRejected, MotionRefused) as exc:
-            return "failed", str(exc)
-        except Exception as exc:  # a bug ends the run, saying so, never the server
-            log.exception("calibration run %s failed", run.run_id)
-            return "failed", f"internal error: {exc!r}"
-
-    def _save(self, run: CalibrationRun, ending: Ending | None = None) -> None:
-        """The run's result.json (as it is, or as it will be once it ends in ``ending``;
-        an aborted run stays aborted)."""
-        body = run.view()
-        if ending is not None and not run.aborted.is_set():
-            body["state"], body["error"] = ending[0], ending[1] or body["error"]
-        (run.folder / "result.json").write_text(json.dumps(body, indent=1))
-
-    def _wait(
-        self, run: CalibrationRun, what: str, until: Callable[[Snapshot], bool], timeout_s: float
-    ) -> Snapshot:
-        deadline = time.monotonic() + timeout_s
-        while True:
-            snap = self.controller.snapshot()
-            if self._stop.is_set():
-                raise Stopped("the server is shutting down")
-            if run.aborted.is_set():
-                raise Stopped("aborted by the operator")
-            _require_motion(snap, Stopped)
-            if until(snap):
-                return snap
-            if time.monotonic() > deadline:
-                raise Stopped(f"timed out after {timeout_s:g} s waiting for {what}")
-            time.sleep(POLL_S)
+    def _ended_early(self, run: CalibrationRun) -> None:
+        _keep_measured(run)  # a probe run has no measured pairs: nothing to keep
 
     def _fresh(self, after: int) -> Callable[[Snapshot], bool]:
         return lambda snap: snap.tick > after
@@ -650,7 +521,7 @@ class CalibrationManager:
             if self.config_path is not None:
                 write_calibration(self.config_path, settings_joints, total, robot)
                 written = str(self.config_path)
-            run.state = "applied"
+            run.state = State.APPLIED
         self._save(run)
         return {
             "run_id": run_id,
@@ -699,9 +570,9 @@ def write_calibration(
 def _judge(result: FitResult) -> Ending:
     """done when the fit beats the current model on the held-out data, else refused."""
     if result.better:
-        return "done", None
+        return State.DONE, None
     return (
-        "refused",
+        State.REFUSED,
         f"the fit is worse on the held-out poses than the current model "
         f"({result.holdout_rmse_m * 1e3:.3f} mm vs "
         f"{result.holdout_before_m * 1e3:.3f} mm): it is not offered",
@@ -720,12 +591,3 @@ def offsets_into_zero_ticks(
         )
         for j, o in zip(joints, offsets_rad, strict=True)
     ]
-
-
-def _require_motion(snap: Snapshot, error: type[Exception] = MotionRefused) -> None:
-    if snap.estopped:
-        raise error("e-stop is active: POST /api/reset first")
-    if snap.faults:
-        raise error(f"fault: {snap.faults[0].reason}; POST /api/reset first")
-    if not snap.torque:
-        raise error('torque is off: POST /api/torque {"enabled": true} first')

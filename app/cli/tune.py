@@ -19,11 +19,13 @@ import sys
 import time
 from typing import Any
 
+from app.procedures.states import TUNING_RUNNING
+
 _EPILOG = (
     "Exit 0: gains suggested (and applied when asked) or reverted; 1: the run failed; "
     "2: bad input or the server refused; 130: Ctrl-C (the run is aborted: the arm holds)."
 )
-STAGES = ("planned", "moving", "step", "chirp", "fitting", "checking")
+STAGES = TUNING_RUNNING  # the running states, in order: the progress bar's stages
 
 
 def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:

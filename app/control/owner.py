@@ -9,6 +9,12 @@ the run manager's runs through them) asks ``permit()`` first, which refuses
 (``MotionRefused``, HTTP 409) any caller but the claiming thread, naming the procedure and
 how to stop it. E-stop, torque and reset never ask: they always work.
 
+It is also the one place that says whether a new mover may start (``busy``): a claim, or
+a mover that is not a claim but must not be overlapped by one, which registers how it
+answers (``add_mover``: the run manager's test runs, which the loop plays and which a
+procedure's thread may start under its own claim). A procedure starts only when ``busy``
+says nothing, and ``claim`` refuses while it says something.
+
 ``release`` ends the claim; an abort releases it first and then stops the motion under
 the same lock (see ``MotionOwner.release``), so a motion the procedure's thread had in
 flight is queued before the stop, and none can follow it.
@@ -44,16 +50,32 @@ class MotionOwner:
         self._claim: Claim | None = None
         self._lock = threading.RLock()
         self._local = threading.local()  # .claim: the claim the calling thread works for
+        self._movers: list[Callable[[], str | None]] = []  # add_mover's, in order
+
+    def add_mover(self, busy: Callable[[], str | None]) -> None:
+        """A mover that holds no claim (the run manager) answers :meth:`busy` too, after
+        the claim: ``busy()`` says why another mover may not start (e.g. "run ... is in
+        progress; abort it first"), or None. It is asked under this owner's lock: it must
+        not wait, nor call back into the owner."""
+        with self._lock:
+            self._movers.append(busy)
 
     def busy(self) -> str | None:
-        """Why a motion may not start now (a procedure holds the robot), or None."""
-        claim = self._claim
-        if claim is None:
+        """Why another mover (a procedure, a test run) may not start now, or None: the
+        claim that holds the robot (named, with how to stop it), else the first mover of
+        :meth:`add_mover` that is busy."""
+        with self._lock:
+            claim = self._claim
+            if claim is not None:
+                return f"{claim.what} is in progress; {claim.stop} to stop it"
+            for mover in self._movers:
+                if (why := mover()) is not None:
+                    return why
             return None
-        return f"{claim.what} is in progress; {claim.stop} to stop it"
 
     def claim(self, what: str, stop: str) -> Claim:
-        """Take the robot for ``what``. Raises MotionRefused while another claim holds it."""
+        """Take the robot for ``what``. Raises MotionRefused while another claim holds it
+        or another mover is busy (:meth:`busy`'s answer)."""
         with self._lock:
             if (why := self.busy()) is not None:
                 raise MotionRefused(why)

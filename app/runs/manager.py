@@ -58,6 +58,9 @@ class RunManager:
         self._runs: dict[str, Run] = {}
         self._active: tuple[Run, TrajectorySource] | None = None
         self._lock = threading.Lock()
+        # one mover at a time: a procedure asks the controller's owner whether it may
+        # start, and the owner asks this manager whether a run is in progress
+        controller.owner.add_mover(self.busy)
         self._load_saved()
 
     def _load_saved(self) -> None:
@@ -205,17 +208,19 @@ class RunManager:
             return self._launch(kind, params, 0.0, source, None, model)
 
     def busy(self) -> str | None:
-        """Why another motion may not start now (a run in progress), or None."""
-        if self._active is not None and self._active[0].state == "running":
-            return f"run {self._active[0].run_id} is in progress; abort it first"
+        """Why another mover may not start now (a run in progress), or None. The
+        controller's ``MotionOwner`` asks it (``add_mover``): procedures ask the owner."""
+        active = self._active
+        if active is not None and active[0].state == "running":
+            return f"run {active[0].run_id} is in progress; abort it first"
         return None
 
     def _refuse_if_busy(self) -> None:
         # a procedure (calibration, tuning) holds the robot: only its own thread may start
         # runs (app/control/owner.py); the controller checks again when the run starts
         self.controller.owner.check()
-        if self._active is not None and self._active[0].state == "running":
-            raise MotionRefused(f"run {self._active[0].run_id} is in progress; abort it first")
+        if (why := self.busy()) is not None:
+            raise MotionRefused(why)
 
     def _launch(
         self,

@@ -130,11 +130,11 @@ def create_app(
             # workspace queries (nearest point, sections) too: no request costs the loop
             app.state.queries = WorkspaceQueries(settings)
             # one mover at a time: a procedure claims controller.owner while it runs (every
-            # motion command asks it: app/control/owner.py), and starts only with no run
+            # motion command asks it: app/control/owner.py), and starts only when the owner
+            # says nothing holds the robot (the run manager answers it for its runs)
             app.state.calibration = CalibrationManager(
                 controller,
                 settings.runs.folder_path / "calibration",
-                busy=lambda: app.state.runs.busy(),
                 config_path=config_path,
                 probe=_twin_probe(settings, controller),
                 pose_measure=pose_input(app.state.world.platform),
@@ -143,7 +143,6 @@ def create_app(
                 controller,
                 app.state.runs,
                 settings.runs.folder_path / "tuning",
-                busy=lambda: app.state.runs.busy(),
                 config_path=config_path,
             )
             controller.pose_status = app.state.world.tracker.status

@@ -31,17 +31,16 @@ While it moves the arm (planned, moving, step, chirp) a run holds the controller
 step and chirp runs, until it ends or is aborted. Once the chirp run is recorded the run
 needs the robot no more: it lets go of it before fitting and checking, which take no
 motion (the operator may move the arm meanwhile; another tuning run waits for this one).
+The lifecycle (start, the thread, abort, the ending, close) is
+app/procedures/lifecycle.py's; this module supplies the steps.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import threading
-import time
 import tomllib
-import uuid
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -49,11 +48,11 @@ from typing import Any
 
 import tomli_w
 
-from app.calibration.procedure import Stopped, _require_motion
 from app.config import Settings
 from app.control.controller import Controller
-from app.control.errors import GoalRejected, MotionRefused
-from app.control.owner import Claim
+from app.control.errors import MotionRefused
+from app.procedures.lifecycle import Ending, ProcedureManager, ProcedureRun, Stopped
+from app.procedures.states import TUNING_RUNNING, State
 from app.programs.workers import (
     ChecksBusy,
     ChecksStopped,
@@ -75,12 +74,9 @@ START_M = (0.0, 0.0, -0.24)  # where both runs start (the runs' default offset) 
 STEP = StepParams(size_m=0.004, duration_s=1.5, offset_m=START_M)
 CHIRP = ChirpParams(amplitude_m=0.003, f0_hz=0.5, f1_hz=8.0, duration_s=6.0, offset_m=START_M)
 MOVE_TIMEOUT_S = 60.0
-STOP_TIMEOUT_S = 5.0
 RUN_TIMEOUT_S = 120.0  # a starved twin runs slower than the wall clock
-POLL_S = 0.01
-RUNNING = ("planned", "moving", "step", "chirp", "fitting", "checking")  # abort stops these
+RUNNING = TUNING_RUNNING  # abort stops these
 CHECK_TIMEOUT_S = 900.0  # the twin check's worker is killed beyond this (a loaded machine)
-Ending = tuple[str, str | None]  # the state a run ends in (done/failed), its error
 TwinCheck = Callable[[OfferJob], Offer]
 
 
@@ -143,7 +139,7 @@ def checked_out(offer: Offer, job: OfferJob, servo_ids: tuple[int, ...]) -> dict
 
 
 @dataclass
-class TuningRun:
+class TuningRun(ProcedureRun):
     """One tuning: the joints (1..3) and target, progress, models and suggestions per
     joint, and its files (``folder``)."""
 
@@ -153,7 +149,7 @@ class TuningRun:
     servo_ids: tuple[int, ...]  # the legs' servo ids, joint order
     current: dict[int, PositionGains]  # the gains in use when it started, per servo id
     folder: Path
-    state: str = "planned"
+    state: str = State.PLANNED
     error: str | None = None
     runs: dict[str, str] = field(default_factory=dict)  # kind -> run id
     fits: list[JointFit] = field(default_factory=list)
@@ -162,11 +158,6 @@ class TuningRun:
     check: OfferJob | None = None  # the twin check asked for
     offer: Offer | None = None  # what it found (the suggestions are its chosen gains)
     aborted: threading.Event = field(default_factory=threading.Event, repr=False)
-
-    def advance(self, state: str, error: str | None = None) -> None:
-        """The run's thread moves on to ``state``; an aborted run stays aborted."""
-        if not self.aborted.is_set():
-            self.state, self.error = state, error if error is not None else self.error
 
     def servo(self, joint: int) -> int:
         return self.servo_ids[joint - 1]
@@ -209,69 +200,40 @@ class TuningRun:
         }
 
 
-class TuningManager:
+class TuningManager(ProcedureManager[TuningRun]):
     """Starts tuning runs on one controller (recording through ``runs``), keeps them in
-    memory by id, applies one and reverts it."""
+    memory by id, applies one and reverts it; the lifecycle (abort, running, close, get) is
+    ``ProcedureManager``'s: an abort also stops the step or chirp run and kills a twin
+    check in flight."""
+
+    kind, prefix, route = "tuning", "tune", "/api/tuning"
+    running_states = RUNNING
+    failures = (IdentificationError, TuningError)
+    poll_s = 0.01
 
     def __init__(
         self,
         controller: Controller,
         runs: RunManager,
         folder: Path,
-        busy: Callable[[], str | None] = lambda: None,
         config_path: Path | None = None,
         twin_check: TwinCheck | None = None,
     ) -> None:
-        self.controller, self.runs, self.folder, self.busy = controller, runs, Path(folder), busy
-        self.config_path = config_path
+        super().__init__(controller, folder)
+        self.runs, self.config_path = runs, config_path
         # the twin check of the candidates: None, in a worker process (`_check_in_worker`)
         self.twin_check = twin_check
         self._workers: ProgramWorkers | None = None  # the check's worker, while it runs
-        self._runs: dict[str, TuningRun] = {}
         self._previous: list[dict[int, PositionGains]] = []  # what apply replaced, last on top
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
-        self._lock = threading.Lock()
-        self._claim: Claim | None = None  # the robot, held by the run in progress
 
-    def get(self, run_id: str) -> TuningRun | None:
-        return self._runs.get(run_id)
+    def _interrupt(self) -> None:
+        if self._workers is not None:
+            self._workers.close()  # the check ends at once (ChecksStopped)
 
-    def abort(self, run_id: str) -> TuningRun:
-        """Stop the run ``run_id`` now: the move or the step or chirp run stops (the robot
-        holds where it is commanded), the run ends ``aborted`` and the robot is free for
-        other commands at once (its thread, if still fitting, moves nothing more); a twin
-        check in flight is killed (its worker process), and nothing is suggested.
-
-        Raises:
-            KeyError: no run ``run_id`` (404).
-            MotionRefused: the run is not running (done, failed, aborted...) (409).
-        """
-        run = self._runs[run_id]
-        with self._lock:
-            if run.state not in RUNNING or run.aborted.is_set():
-                raise MotionRefused(
-                    f"run {run_id} is {run.state}: only a running run can be aborted"
-                )
-            run.aborted.set()
-            run.state, run.error = "aborted", "aborted by the operator"
-            claim = self._claim  # None once the run has let go of the robot
-            if self._workers is not None:
-                self._workers.close()  # the check ends at once (ChecksStopped)
-
-            def stop() -> None:
-                for recorded in run.runs.values():  # the step or chirp run, if one is running
-                    self.runs.abort(recorded, f"tuning run {run_id} aborted")
-                self.controller.stop_any().result(timeout=STOP_TIMEOUT_S)
-
-            if claim is not None:
-                self.controller.owner.release(claim, then=stop)
-            self._save(run)  # under the lock: the thread's last save cannot land after it
-        return run
-
-    def running(self) -> bool:
-        thread = self._thread  # None once its run has ended (_hold)
-        return thread is not None and thread.is_alive()
+    def _halt(self, run: TuningRun) -> None:
+        for recorded in run.runs.values():  # the step or chirp run, if one is running
+            self.runs.abort(recorded, f"tuning run {run.run_id} aborted")
+        self._stop_motion()
 
     def start(self, joints: tuple[int, ...], target: Target) -> TuningRun:
         """Start a run (returns at once; its thread moves the arm).
@@ -284,99 +246,43 @@ class TuningManager:
         if not joints or len(set(joints)) != len(joints) or not set(joints) <= set(JOINTS):
             raise TuningError(f"joints = {list(joints)}: distinct joints of {list(JOINTS)}")
         with self._lock:
-            if self.running():
-                raise MotionRefused("a tuning run is in progress")
-            # another procedure holds the robot (named, with its abort route), or a run
-            if (other := self.controller.owner.busy() or self.busy()) is not None:
-                raise MotionRefused(other)
-            _require_motion(self.controller.snapshot())
+            # a run in progress, a procedure holding the robot, a test run, no motion now
+            self._may_start()
             current = self.controller.gains
             if any(g.i or g.d for g in current.values()):
                 raise MotionRefused(
                     "tuned gains are in use: the model is identified under P only; "
                     "POST /api/tuning/revert first"
                 )
-            run_id = "tune-" + time.strftime("%Y%m%d-%H%M%S") + "-" + uuid.uuid4().hex[:4]
-            claim = self.controller.owner.claim(
-                f"tuning run {run_id}", f"POST /api/tuning/{run_id}/abort"
-            )
-            try:  # nothing may keep the robot held but a running thread
-                folder = self.folder / run_id
-                folder.mkdir(parents=True, exist_ok=True)
-                servo_ids = tuple(self.controller.servo_ids)
-                run = TuningRun(run_id, tuple(joints), target, servo_ids, current, folder)
-                self._runs[run_id] = run
-                self._stop.clear()
-                self._claim = claim
-                self._thread = threading.Thread(
-                    target=self._hold, args=(run, claim), name="deltadash-tuning", daemon=True
+            servo_ids = tuple(self.controller.servo_ids)
+            return self._launch(
+                lambda run_id, folder: TuningRun(
+                    run_id, tuple(joints), target, servo_ids, current, folder
                 )
-                self._thread.start()
-            except BaseException:
-                self.controller.owner.release(claim)
-                raise
-            return run
-
-    def close(self) -> None:
-        with self._lock:
-            self._stop.set()
-            if self._workers is not None:
-                self._workers.close()
-        thread = self._thread
-        if thread is not None:
-            thread.join(timeout=5.0)
-
-    # ---- the run's thread ----
-    def _hold(self, run: TuningRun, claim: Claim) -> None:
-        """The thread: its motions are ``claim``'s; the robot is free again when it ends."""
-        owner = self.controller.owner
-        owner.bind(claim)
-        ending: Ending = ("failed", "internal error: the run's thread ended early")
-        try:
-            ending = self._execute(run)
-        finally:
-            # one step under the lock, so an abort finds the run either running (and stops
-            # it) or ended: the robot freed, result.json written, then the state published;
-            # a client that sees the run ended finds its files and the robot free, and may
-            # start the next run at once
-            with self._lock:
-                if self._claim is claim:
-                    self._claim = None
-                owner.release(claim)
-                try:
-                    self._save(run, *ending)
-                except Exception:  # a full disk, a bug in the view: the run still ends
-                    log.exception("tuning run %s: result.json not written", run.run_id)
-                run.advance(*ending)
-                if self._thread is threading.current_thread():
-                    self._thread = None  # not running from here on (running())
-
-    def _execute(self, run: TuningRun) -> Ending:
-        """Records, fits and checks; the state the run ends in, with its error."""
-        try:
-            logs = {}
-            for kind, params in (("step", STEP), ("chirp", CHIRP)):
-                run.advance("moving")
-                self._move_to_start(run)
-                run.advance(kind)
-                logs[kind] = self._record(run, kind, params)
-            self._let_go()  # no more motion: fitting and checking need no robot
-            run.advance("fitting")
-            chirp = (CHIRP.f0_hz, CHIRP.f1_hz, CHIRP.duration_s)
-            fits, bodes = identify(
-                read_csv_rows(logs["step"]), read_csv_rows(logs["chirp"]), chirp, run.joints
             )
-            run.fits = fits
-            from app.tuning.identify import bode_figure  # matplotlib's figure: only here
 
-            bode_figure(fits, bodes, run.folder / "bode.png")
-            self._suggest(run)
-            return "done", None
-        except (Stopped, IdentificationError, TuningError, GoalRejected, MotionRefused) as exc:
-            return "failed", str(exc)
-        except Exception as exc:  # a bug ends the run, saying so, never the server
-            log.exception("tuning run %s failed", run.run_id)
-            return "failed", f"internal error: {exc!r}"
+    # ---- the run's thread: its steps ----
+    def _steps(self, run: TuningRun) -> Ending:
+        """Records, fits and checks; the state the run ends in (done), with its error.
+        Raises Stopped (and the like) to fail the run."""
+        logs = {}
+        for kind, params in ((State.STEP, STEP), (State.CHIRP, CHIRP)):
+            run.advance(State.MOVING)
+            self._move_to_start(run)
+            run.advance(kind)
+            logs[kind] = self._record(run, kind.value, params)
+        self._let_go()  # no more motion: fitting and checking need no robot
+        run.advance(State.FITTING)
+        chirp = (CHIRP.f0_hz, CHIRP.f1_hz, CHIRP.duration_s)
+        fits, bodes = identify(
+            read_csv_rows(logs[State.STEP]), read_csv_rows(logs[State.CHIRP]), chirp, run.joints
+        )
+        run.fits = fits
+        from app.tuning.identify import bode_figure  # matplotlib's figure: only here
+
+        bode_figure(fits, bodes, run.folder / "bode.png")
+        self._suggest(run)
+        return State.DONE, None
 
     def _suggest(self, run: TuningRun) -> None:
         """The fitted joints' candidate gains checked on the twin (state ``checking``);
@@ -392,7 +298,7 @@ class TuningManager:
             lead_s=settings.runs.feedforward_lead_s,
             gravity=self.controller.gravity is not None,  # as the loop does
         )
-        run.advance("checking")
+        run.advance(State.CHECKING)
         if self.twin_check is not None:
             offered = self.twin_check(run.check)
         else:
@@ -446,48 +352,22 @@ class TuningManager:
                 self._workers = None
             workers.close()
 
-    def _let_go(self) -> None:
-        """The run needs the robot no more: its claim ends (an abort then stops nothing
-        the operator started since)."""
-        with self._lock:
-            claim, self._claim = self._claim, None
-        if claim is not None:
-            self.controller.owner.release(claim)
-
-    def _save(self, run: TuningRun, state: str | None = None, error: str | None = None) -> None:
-        """The run's result.json (as it is, or as it will be once it ends in ``state``
-        with ``error``; an aborted run stays aborted)."""
-        body = run.view()
-        if state is not None and not run.aborted.is_set():
-            body["state"], body["error"] = state, error or body["error"]
-        (run.folder / "result.json").write_text(json.dumps(body, indent=1))
-
-    def _wait(self, run: TuningRun, what: str, until: Callable[[], bool], timeout_s: float) -> None:
-        deadline = time.monotonic() + timeout_s
-        while not until():
-            if self._stop.is_set():
-                raise Stopped("the server is shutting down")
-            if run.aborted.is_set():
-                raise Stopped("aborted by the operator")
-            _require_motion(self.controller.snapshot(), Stopped)
-            if time.monotonic() > deadline:
-                raise Stopped(f"timed out after {timeout_s:g} s waiting for {what}")
-            time.sleep(POLL_S)
-
     def _move_to_start(self, run: TuningRun) -> None:
         self.controller.move(point=START_M).result(timeout=MOVE_TIMEOUT_S)
         self._wait(
             run,
             "the move to the start point",
-            lambda: self.controller.snapshot().mode == "idle",
+            lambda snap: snap.mode == "idle",
             MOVE_TIMEOUT_S,
+            met_first=True,
         )
 
     def _record(self, run: TuningRun, kind: str, params: Any) -> Path:
         """Run `params` through the run manager; the log's path once it is done."""
         recorded = self.runs.start(params, kind)
         run.runs[kind] = recorded.run_id
-        self._wait(run, f"the {kind} run", lambda: recorded.state != "running", RUN_TIMEOUT_S)
+        ended = lambda _: recorded.state != "running"  # noqa: E731
+        self._wait(run, f"the {kind} run", ended, RUN_TIMEOUT_S, met_first=True)
         if recorded.state != "done":
             raise Stopped(f"the {kind} run {recorded.run_id} ended {recorded.state}")
         return recorded.folder / "log.csv"
@@ -522,7 +402,7 @@ class TuningManager:
             wanted = {**before, **{sid: s.gains for sid, s in run.suggestions.items()}}
             in_use = self.controller.set_gains(wanted).result(timeout=5.0)
             self._previous.append(before)
-            run.state = "applied"
+            run.state = State.APPLIED
             written = self._write_config(in_use)
         self._save(run)
         gains = {str(k): gains_out(g) for k, g in in_use.items()}
@@ -549,7 +429,7 @@ class TuningManager:
                 how = f"; POST /api/tuning/{going[-1]}/abort to stop it" if going else ""
                 name = f"tuning run {going[-1]}" if going else "a tuning run"
                 raise MotionRefused(f"{name} is in progress: gains change once it ends{how}")
-            if (other := self.busy()) is not None:
+            if (other := self.controller.owner.busy()) is not None:  # a procedure, a run
                 raise MotionRefused(other)
             before = self.controller.gains
             if servo_id not in before:

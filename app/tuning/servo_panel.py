@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from app.calibration.procedure import _require_motion
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
+from app.procedures.lifecycle import require_motion
 from app.runs.paths import JointStepParams
 from app.tuning.identify import IdentificationError, record_of
 from hardware.dynamixel.control_table import RAD_PER_TICK, Reg
@@ -80,7 +80,7 @@ def plan_joint_step(
             f"{math.degrees(MIN_STEP_RAD):g} to {math.degrees(MAX_STEP_RAD):g} deg either way"
         )
     snap = controller.snapshot()
-    _require_motion(snap)
+    require_motion(snap)
     stale_ms = STALE_SHARE * controller.settings.safety.stale_feedback_s * 1e3
     if snap.stale and snap.feedback_age_ms > stale_ms:
         raise MotionRefused(

@@ -67,3 +67,21 @@ def test_an_ended_claims_thread_is_refused_and_release_runs_then_under_the_lock(
     assert isinstance(seen[0], MotionRefused) and "aborted" in str(seen[0])
     owner.check()  # everyone else moves again
     owner.release(claim)  # a second release does nothing
+
+
+def test_a_mover_without_a_claim_answers_busy_after_the_claim_and_stops_new_claims():
+    owner = MotionOwner()
+    running: dict[str, str | None] = {"why": "run r1 is in progress; abort it first"}
+    owner.add_mover(lambda: running["why"])
+    assert owner.busy() == "run r1 is in progress; abort it first"
+    with pytest.raises(MotionRefused, match="^run r1 is in progress; abort it first$"):
+        owner.claim("calibration run c1", "POST /api/calibration/c1/abort")
+    owner.check()  # a mover that holds no claim refuses no motion command itself
+    running["why"] = None
+    claim = owner.claim("calibration run c1", "POST /api/calibration/c1/abort")
+    running["why"] = "run r2 is in progress; abort it first"  # started by the claim's thread
+    assert owner.busy() == (
+        "calibration run c1 is in progress; POST /api/calibration/c1/abort to stop it"
+    )
+    owner.release(claim)
+    assert owner.busy() == "run r2 is in progress; abort it first"

@@ -176,7 +176,7 @@ def test_the_suggested_gains_are_the_twin_checks_choice_never_a_failed_set(clien
 
 @pytest.mark.slow  # a worker process started, then killed
 def test_an_abort_while_checking_kills_the_checks_worker_and_suggests_nothing(client):
-    from app.calibration.procedure import Stopped
+    from app.procedures.lifecycle import Stopped
 
     manager = client.app.state.tuning
     run = _fitted_run(client, joints=(1, 2, 3), name="abort")
