@@ -145,6 +145,8 @@ class Controller:
     def halt(self) -> None:
         """Stop ticking and wait for the thread (no torque change: see stop())."""
         self._stop.set()
+        if self._tick_clock is not None:
+            self._tick_clock.release()  # a simulated clock waiting to be driven lets go
         if self._thread is not None:
             self._thread.join(timeout=2.0)
         _RUNNING.discard(self)
@@ -222,6 +224,8 @@ class Controller:
             future.set_exception(RuntimeError("the control loop is not running"))
         else:
             self._commands.put((command, future))
+            if self._tick_clock is not None:
+                self._tick_clock.wake()  # a simulated clock runs a tick for it
         return future
 
     def submit_motion(self, command: Callable[[], Any]) -> Future:

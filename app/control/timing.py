@@ -100,6 +100,13 @@ class TickClock:
         """The tick's work is done (the next tick checks whether it ran past its deadline)."""
         self._ended = self.now()
 
+    def wake(self) -> None:
+        """A command was queued for the next tick (the real clock's ticks come anyway; a
+        simulated one that waits to be driven runs a tick for it: app/control/sim_time.py)."""
+
+    def release(self) -> None:
+        """The loop is stopping: never hold a tick back again (nothing to do in real time)."""
+
 
 class TimingRecorder:
     """Lateness and period of every tick, since start and over the last 10 s.

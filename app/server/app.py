@@ -116,7 +116,14 @@ def create_app(
         gc.collect()
         gc.freeze()
         with backend_opener(settings) as backend:
-            controller = Controller(settings, backend.bus, backend.kind, backend.description)
+            clock = getattr(backend, "sim_clock", None)  # simulated time (tests drive it)
+            controller = Controller(
+                settings,
+                backend.bus,
+                backend.kind,
+                backend.description,
+                **({} if clock is None else {"clock": clock.now, "tick_clock": clock}),
+            )
             controller.start()
             app.state.controller = controller
             app.state.estop_listener = _start_estop_listener(settings, controller)

@@ -9,6 +9,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from app.config import Settings
+from app.control.sim_time import SteppedClock
 from hardware.bus import ServoBus
 from hardware.calibration import JointCalibration
 from hardware.dynamixel.control_table import Reg
@@ -25,6 +26,9 @@ class Backend:
     kind: str  # sim | emulated | dynamixel
     description: str
     emulator: ServoEmulator | None = None  # for fault injection in tests and demos
+    # simulated time (app/control/sim_time.py): the loop's clock, driven by whoever opened
+    # the backend; None: the loop runs in real time
+    sim_clock: SteppedClock | None = None
 
 
 def _calibrations(settings: Settings) -> tuple[JointCalibration, ...]:
@@ -50,8 +54,9 @@ def _dynamixel(settings: Settings, port: str, emulated: bool = False) -> Dynamix
     return DynamixelBus(config)
 
 
-def _twin(settings: Settings) -> ServoBus:
-    """The simulated robot (hardware/sim) for this config's rotary Delta."""
+def _twin(settings: Settings, realtime: bool = True) -> ServoBus:
+    """The simulated robot (hardware/sim) for this config's rotary Delta; without
+    ``realtime`` an in-process `SimBus` whose physics steps only when told (`advance`)."""
     from hardware.sim import ProcessSimBus, SimBus, SimBusConfig, TwinConfig
 
     # built as drawn ([robot] L, l, R, r) or wrong on purpose ([hardware.sim]); never as a
@@ -61,20 +66,21 @@ def _twin(settings: Settings) -> ServoBus:
         raise ValueError("robot.type: the simulator models rotary Deltas; use backend 'emulated'")
     sim = settings.hardware.sim
     twin = TwinConfig(robot=robot, joints=_calibrations(settings), true_robot=sim.true_robot(robot))
-    bus = ProcessSimBus if settings.hardware.sim_process else SimBus
+    bus = ProcessSimBus if settings.hardware.sim_process and realtime else SimBus
     return bus(
         SimBusConfig(
             twin=twin,
             noise_std_m=sim.measurement_noise_m,
             measurement_frame_position_m=sim.measurement_frame_position_m,
             measurement_frame_rpy_rad=sim.measurement_frame_rpy_rad,
+            realtime=realtime,
         )
     )
 
 
 @contextlib.contextmanager
-def _emulator_thread(ids: list[int]) -> Iterator[ServoEmulator]:
-    emulator = ServoEmulator(ids)
+def _emulator_thread(ids: list[int], clock: SteppedClock | None = None) -> Iterator[ServoEmulator]:
+    emulator = ServoEmulator(ids) if clock is None else ServoEmulator(ids, clock=clock.now)
     with emulator.lock:
         for servo in emulator.servos:  # a tuned robot's bus: no 500 us reply delay
             servo.table.set(Reg.RETURN_DELAY_TIME, 0)
@@ -115,27 +121,43 @@ def _emulator_process(ids: list[int]) -> Iterator[str]:
 
 
 @contextlib.contextmanager
-def open_backend(settings: Settings, emulator_in_process: bool = False) -> Iterator[Backend]:
+def open_backend(
+    settings: Settings, emulator_in_process: bool = False, sim_time: bool = False
+) -> Iterator[Backend]:
     """Connect the configured bus for the duration of the ``with`` block.
 
     ``emulator_in_process`` runs the emulator as a thread of this process, so tests can
-    inject faults into it; the server runs it as a separate process.
+    inject faults into it; the server runs it as a separate process. ``sim_time``: the
+    loop runs on simulated time that moves only when driven (``Backend.sim_clock``,
+    app/control/sim_time.py): the twin steps in the loop's thread, the in-process
+    emulator's servos move by that clock. Raises ValueError for ``sim_time`` on real
+    servos or the emulator in a process of its own.
     """
     kind = settings.hardware.backend
+    clock: SteppedClock | None = None
+    if sim_time:
+        if kind == "dynamixel" or (kind == "emulated" and not emulator_in_process):
+            raise ValueError(
+                "sim_time: needs the twin (backend sim) or the emulator in this process"
+            )
+        clock = SteppedClock(settings.loop.rate_hz)
     ids = [joint.servo_id for joint in settings.bus_joints()]
     with contextlib.ExitStack() as stack:
         emulator: ServoEmulator | None = None
         if kind == "sim":
-            bus = _twin(settings)
+            bus = _twin(settings, realtime=clock is None)
             bus.connect()
             stack.callback(bus.disconnect)
-            yield Backend(bus, kind, "simulated robot: MuJoCo twin with XM430-W210 servo models")
+            if clock is not None:
+                clock.on_tick = bus.advance  # type: ignore[attr-defined]  # a SimBus
+            description = "simulated robot: MuJoCo twin with XM430-W210 servo models"
+            yield Backend(bus, kind, description, sim_clock=clock)
             return
         if kind == "dynamixel":
             port = settings.hardware.port
             description = f"Dynamixel servos on {port} at {settings.hardware.baud} bit/s"
         elif emulator_in_process:
-            emulator = stack.enter_context(_emulator_thread(ids))
+            emulator = stack.enter_context(_emulator_thread(ids, clock))
             port, description = emulator.port, f"emulated XM430-W210 bus on {emulator.port}"
         else:
             port = stack.enter_context(_emulator_process(ids))
@@ -143,4 +165,4 @@ def open_backend(settings: Settings, emulator_in_process: bool = False) -> Itera
         bus = _dynamixel(settings, port, emulated=kind == "emulated")
         bus.connect()
         stack.callback(bus.disconnect)
-        yield Backend(bus, kind, description, emulator)
+        yield Backend(bus, kind, description, emulator, sim_clock=clock)

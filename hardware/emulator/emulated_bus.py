@@ -60,12 +60,18 @@ class EmulatedBus:
         model: MotionModel | None = None,
         initial_ticks: int = 2048,
         clock: Callable[[], float] = time.monotonic,
+        boot_clock: Callable[[], float] | None = None,
     ) -> None:
+        """``clock`` [s] steps the servos' motion between packets; ``boot_clock`` [s] (the
+        same by default) times a Reboot's boot, which the bus master waits out in its own
+        time (a loop on simulated time blocks in the tick that reboots, so its clock
+        stands still meanwhile: give it the wall clock)."""
         self.servos = [EmulatedServo(servo_id) for servo_id in ids]
         if len({s.servo_id for s in self.servos}) != len(self.servos):
             raise ValueError("servo ids must be distinct")
         self.model: MotionModel = model or SimpleServoModel()
         self.clock = clock
+        self.boot_clock = boot_clock or clock
         self.packets_received = 0
         self.crc_errors = 0
         self.internal_errors = 0
@@ -174,11 +180,11 @@ class EmulatedBus:
         """The servo's after-effects; a Reboot leaves it deaf for its boot time."""
         servo.finish(packet.instruction, packet.params)
         if packet.instruction == Instruction.REBOOT:
-            servo.deaf_until = self.clock() + servo.faults.boot_s
+            servo.deaf_until = self.boot_clock() + servo.faults.boot_s
 
     def _alive(self) -> list[EmulatedServo]:
         """The servos that hear the bus now: plugged in and not booting."""
-        now = self.clock()
+        now = self.boot_clock()
         return [s for s in self.servos if not s.faults.unplugged and now >= s.deaf_until]
 
     def _listening(self, servo_id: int) -> EmulatedServo | None:

@@ -17,7 +17,7 @@ import select
 import threading
 import time
 import tty
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 from hardware.dynamixel.protocol import Packet
 from hardware.emulator.emulated_bus import EmulatedBus, Outgoing
@@ -37,8 +37,13 @@ class ServoEmulator:
         ids: Iterable[int] = (1, 2, 3),
         model: MotionModel | None = None,
         initial_ticks: int = 2048,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        self.bus = EmulatedBus(ids, model, initial_ticks)
+        """``clock`` [s]: what the servos' motion is stepped by between packets (a
+        simulated one moves them in simulated time; a Reboot's boot still takes wall
+        time, as the bus master waits it out)."""
+        boot = None if clock is time.monotonic else time.monotonic
+        self.bus = EmulatedBus(ids, model, initial_ticks, clock, boot)
         self.lock = threading.RLock()
         self.unread_replies = 0
         self._master, self._slave = os.openpty()
