@@ -8,6 +8,7 @@ and a display-rate thread. When on, it takes a free port, never the default 8080
 from __future__ import annotations
 
 import functools
+import os
 from pathlib import Path
 from typing import Any, Literal
 from urllib.parse import urljoin
@@ -18,8 +19,10 @@ from fastapi.testclient import TestClient
 from app.config import load_settings
 from app.server import create_app
 from app.server.backends import open_backend
+from tests.support.sim_time import driving
 from tests.support.wait import ok_json, wait_for
 
+REAL_TIME_ENV = "DELTADASH_TEST_REAL_TIME"
 # the Host the test client sends: a name of this machine (app/origins.py refuses "testserver")
 LOCAL = "http://127.0.0.1"
 
@@ -35,10 +38,26 @@ class LocalClient(TestClient):
         return super().websocket_connect(urljoin("ws://127.0.0.1", url), *args, **kwargs)
 
 
+class SimTimeClient(LocalClient):
+    """A `LocalClient` of an app whose loop runs on simulated time: inside its ``with``
+    block its clock is the one waits drive (tests/support/sim_time.py)."""
+
+    def __enter__(self) -> SimTimeClient:
+        super().__enter__()
+        self._driving = driving(self.app.state.backend.sim_clock)
+        self._driving.__enter__()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self._driving.__exit__(*exc)
+        super().__exit__(*exc)
+
+
 def make_client(
     runs_folder: Path,
     backend: Literal["emulated", "sim"] = "emulated",
     config_path: Path | None = None,
+    sim_time: bool | None = None,
     **overrides,
 ) -> TestClient:
     """A client of an app with its runs under ``runs_folder`` (a tmp_path); ``with`` starts it.
@@ -46,16 +65,22 @@ def make_client(
     ``backend`` "emulated" runs the servo emulator in-process (for fault injection), "sim"
     the MuJoCo twin. ``overrides`` are settings sections, merged over these defaults.
     ``config_path``: the config file the app says it runs from (an applied calibration is
-    written there); the settings do not come from it.
+    written there); the settings do not come from it. ``sim_time``: the loop runs on
+    simulated time, driven by the test's waits (tests/support/sim_time.py); by default
+    it does, unless ``$DELTADASH_TEST_REAL_TIME`` is 1 (the whole suite in real time, to
+    compare); False where real time is the point.
     """
     hardware = {"backend": backend, **overrides.pop("hardware", {})}
     server = {"scene": False, "viser_port": 0, **overrides.pop("server", {})}
     runs = {"folder": str(runs_folder), **overrides.pop("runs", {})}
     settings = load_settings(hardware=hardware, server=server, runs=runs, **overrides)
-    opener = open_backend
-    if backend == "emulated":
-        opener = functools.partial(open_backend, emulator_in_process=True)
-    return LocalClient(create_app(settings, backend_opener=opener, config_path=config_path))
+    if sim_time is None:
+        sim_time = os.environ.get(REAL_TIME_ENV) != "1"
+    opener = functools.partial(
+        open_backend, emulator_in_process=backend == "emulated", sim_time=sim_time
+    )
+    kind = SimTimeClient if sim_time else LocalClient
+    return kind(create_app(settings, backend_opener=opener, config_path=config_path))
 
 
 def cleared(client: TestClient) -> TestClient:

@@ -27,8 +27,16 @@ def wait_for(
 
     Fails after ``timeout_s`` naming ``what`` it waited for and, when ``seen`` is given,
     what ``seen()`` returned last (e.g. the measured position), so a timeout says how far
-    from done it was.
+    from done it was. With a simulated-time client open (tests/support/sim_time.py) the
+    loop's clock is advanced SIM_STEP_S between looks instead, and the wait fails once
+    ``timeout_s`` has passed both in simulated and in wall time (a condition may also
+    wait on work outside the loop: a worker process, a file).
     """
+    from tests.support.sim_time import driven
+
+    clock = driven()
+    if clock is not None:
+        return _wait_driven(clock, condition, what, timeout_s, seen)
     start = time.monotonic()
     while True:
         value = condition()
@@ -38,6 +46,27 @@ def wait_for(
             last = f"; last seen: {seen()!r}" if seen is not None else ""
             raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}{last}")
         time.sleep(poll_s)
+
+
+SIM_STEP_S = 0.02  # simulated time between two looks at a condition: 4 ticks at 200 Hz
+SIM_PAUSE_S = 0.002  # wall time between two looks: simulated time runs at most ~10x real
+
+
+def _wait_driven(clock, condition, what, timeout_s, seen) -> Any:
+    start, wall = clock.now(), time.monotonic()
+    while True:
+        value = condition()
+        if value:
+            return value
+        if clock.now() - start > timeout_s and time.monotonic() - wall > timeout_s:
+            last = f"; last seen: {seen()!r}" if seen is not None else ""
+            raise AssertionError(
+                f"timed out after {timeout_s:g} s (simulated and wall) waiting for {what}{last}"
+            )
+        clock.advance(SIM_STEP_S)
+        # let the app's other threads run: a condition may wait on their work (a report
+        # drawn, a worker's check), which a loop spinning at full speed would slow
+        time.sleep(SIM_PAUSE_S)
 
 
 def ok_json(response: Any, status: int = 200) -> Any:

@@ -93,8 +93,8 @@ def client(tmp_path_factory) -> Iterator[TestClient]:
         ok_json(client.post("/api/reset", headers=headers))
         ok_json(client.post("/api/torque", json={"enabled": True}, headers=headers))
         ok_json(client.post("/api/goal", json={"position_m": GOAL}, headers=headers))
-        wait_for(
-            lambda: np.allclose(robot(client)["commanded_m"], GOAL, atol=1e-6),
+        wait_for(  # to unmoved's 1 nm: the approach's last micrometre is still a motion
+            lambda: np.allclose(robot(client)["commanded_m"], GOAL, rtol=0, atol=1e-10),
             "the approach to the goal done",
         )
         ok_json(client.delete("/api/lease", headers=headers))

@@ -31,6 +31,7 @@ def test_a_program_with_a_words_turns_the_wrist_on_the_twin(tmp_path: Path) -> N
         take_lease(client)
         ok_json(client.post("/api/torque", json={"enabled": True}))
         control = client.app.state.controller
+
         # holding the wrist where it is: commanded where it was read (the program starts
         # from the commanded angle; CI read it once before the hold had taken it up)
         def holding() -> bool:
