@@ -98,6 +98,16 @@ class PositionGains:
     feedforward_1st: int = 0
     feedforward_2nd: int = 0
 
+    def as_dict(self) -> dict[str, int]:
+        """The short form the API and the config use: p, i, d, ff1, ff2 (register units)."""
+        return {
+            "p": self.p,
+            "i": self.i,
+            "d": self.d,
+            "ff1": self.feedforward_1st,
+            "ff2": self.feedforward_2nd,
+        }
+
 
 def per_joint(gains: PositionGains | Sequence[PositionGains], n: int) -> list[PositionGains]:
     """`gains` as one PositionGains per joint (n of them): a single set repeated, or a

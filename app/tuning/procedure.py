@@ -81,14 +81,8 @@ TwinCheck = Callable[[OfferJob], Offer]
 
 
 def gains_out(gains: PositionGains) -> dict[str, int]:
-    """The API's form of a servo's gains: p, i, d, ff1, ff2 (register units)."""
-    return {
-        "p": gains.p,
-        "i": gains.i,
-        "d": gains.d,
-        "ff1": gains.feedforward_1st,
-        "ff2": gains.feedforward_2nd,
-    }
+    """The API's form of a servo's gains (`PositionGains.as_dict`)."""
+    return gains.as_dict()
 
 
 def _finite(values: dict[str, float]) -> dict[str, float | None]:

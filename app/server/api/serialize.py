@@ -11,7 +11,6 @@ import numpy as np
 from app.control.controller import Controller
 from app.control.loop_health import classify
 from app.control.state import Snapshot
-from app.tuning.procedure import gains_out
 from app.world.heading import wrap
 
 
@@ -61,7 +60,7 @@ def status(controller: Controller) -> dict[str, Any]:
         "bus": {"missed_reads": snap.missed_reads, **asdict(controller.bus.stats)},
         "pose": controller.pose_status() if controller.pose_status else None,
         "phase": snap.phase,
-        "gains": {str(sid): gains_out(g) for sid, g in controller.gains.items()},
+        "gains": {str(sid): g.as_dict() for sid, g in controller.gains.items()},
     }
 
 

@@ -25,7 +25,6 @@ from app.server.api.deps import (
 from app.server.api.runs import start_run
 from app.server.api.tuning import ServoGains
 from app.server.errors import CONTROL, INVALID, UNAVAILABLE, ErrorBody
-from app.tuning.procedure import gains_out
 from app.tuning.servo_panel import (
     GAIN_LIMITS,
     KIND,
@@ -195,8 +194,8 @@ async def read_servo_gains(servo_id: int, controller: ControllerDep, tuning: Tun
     return {
         "servo_id": servo_id,
         "joint": joint,
-        "servo": gains_out(servo),
-        "in_use": gains_out(controller.gains[servo_id]),
+        "servo": servo.as_dict(),
+        "in_use": controller.gains[servo_id].as_dict(),
         "limits": {k: {"min": lo, "max": hi} for k, (lo, hi) in GAIN_LIMITS.items()},
         "step_rad": {"min": MIN_STEP_RAD, "max": MAX_STEP_RAD},
         "revertable": tuning.revertable,
@@ -226,7 +225,7 @@ async def write_servo_gains(
         raise MotionRefused("a calibration run is in progress: gains change once it ends")
     written = await asyncio.to_thread(tuning.write, servo_id, body.gains())
     servo = await _read(controller, servo_id)
-    return {"servo_id": servo_id, "servo": gains_out(servo), **written}
+    return {"servo_id": servo_id, "servo": servo.as_dict(), **written}
 
 
 @router.post(
