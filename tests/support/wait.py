@@ -50,6 +50,11 @@ def wait_for(
 
 SIM_STEP_S = 0.02  # simulated time between two looks at a condition: 4 ticks at 200 Hz
 SIM_PAUSE_S = 0.002  # wall time between two looks: simulated time runs at most ~10x real
+# a wait still open after this much simulated time most likely waits on wall-time work (a
+# worker's check, a report) or a long run: it then looks every SIM_SLOW_PAUSE_S, at most
+# ~2x real time, so a spinning loop does not starve that work on a loaded machine
+SIM_FAST_S = 2.0
+SIM_SLOW_PAUSE_S = 0.01
 
 
 def _wait_driven(clock, condition, what, timeout_s, seen) -> Any:
@@ -66,7 +71,7 @@ def _wait_driven(clock, condition, what, timeout_s, seen) -> Any:
         clock.advance(SIM_STEP_S)
         # let the app's other threads run: a condition may wait on their work (a report
         # drawn, a worker's check), which a loop spinning at full speed would slow
-        time.sleep(SIM_PAUSE_S)
+        time.sleep(SIM_PAUSE_S if clock.now() - start < SIM_FAST_S else SIM_SLOW_PAUSE_S)
 
 
 def ok_json(response: Any, status: int = 200) -> Any:
