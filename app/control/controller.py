@@ -36,10 +36,10 @@ from app.control.model import Robot, RobotModel, dynamics_robot
 from app.control.owner import MotionOwner
 from app.control.safety import servo_faults
 from app.control.sources import GoalSource, JogSource, Setpoint
-from app.control.state import Fault, Snapshot
+from app.control.state import Fault, RobotInfo, Snapshot
 from app.control.timing import TickClock, TimingRecorder
 from app.control.wrist import WristBus, next_phi, turn_to
-from hardware.bus import PositionGains, ServoBus, SimulatedBus
+from hardware.bus import BusStats, PositionGains, ServoBus, SimulatedBus
 from hardware.errors import BusError
 
 log = logging.getLogger(__name__)
@@ -86,23 +86,20 @@ class Controller:
         wrist = settings.wrist
         self.wrist = WristBus(bus, wrist.servo_id) if wrist.enabled else None
         self.servos: ServoBus = self.wrist if self.wrist is not None else bus
+        # joint positions read and goals written through calibration's joint offsets
+        self.joint_bus = OffsetBus(self.servos)
+        self.backend_description = backend_description or backend
+        info = RobotInfo(backend, self.backend_description, tuple(self.servo_ids))
+        self.state = LoopState.initial(settings.safety, self.period_s, info)
         # [control] gravity_compensation: servo goals shifted by the predicted sag (the
-        # loop's commanded joints stay the goal's, so status and following errors see it)
-        self.gravity: GravityOffset | None = None
+        # loop's commanded joints stay the goal's, so status and following errors see it);
         # unset: on where the bus carries a load (the twin, real servos; `carries_load`)
         if settings.gravity_on(getattr(bus, "carries_load", False)):
-            self.gravity = gravity_offset(
+            self.state.gravity = gravity_offset(
                 dynamics_robot(self.robot),
                 settings.control.payload_kg,
                 wrist=settings.wrist.enabled,
             )
-        # joint positions read and goals written through calibration's joint offsets
-        self.joint_bus = OffsetBus(self.servos)
-        # the position gains the servos use, per leg servo id (the factory's until tuned)
-        self._gains: dict[int, PositionGains] = {sid: PositionGains() for sid in self.servo_ids}
-        self.backend_description = backend_description or backend
-        self.timing = TimingRecorder(settings.loop.rate_hz)
-        self.state = LoopState.initial(settings.safety, self.period_s)
         self._commands: SimpleQueue[tuple[Callable[[], Any], Future]] = SimpleQueue()
         # who may move the robot: a procedure (calibration, tuning) claims it while it runs
         # and every motion command below asks it (app/control/owner.py)
@@ -116,15 +113,7 @@ class Controller:
         # paces the thread; None: real time at loop.rate_hz (tests may give a virtual one)
         self._tick_clock = tick_clock
         self._t0 = clock()
-        self._snapshot = Snapshot()
-        self.pose_status: Callable[[], dict] | None = None  # set by the world service
-        # wall-clock time [s since the epoch] the last e-stop press reached the server (its
-        # first request, by whichever path: see estop_request); None: none since start
-        self.estop_received_unix_s: float | None = None
-        # per path, when the last press's requests arrived (the instrumentation of the paths)
-        self.estop_arrivals_unix_s: dict[str, float] = {}
-        self._estop_press: str | None = None
-        self._estop_lock = threading.Lock()
+        self._snapshot = self.state.snapshot(0.0, self._bus_stats())
 
     # ---- lifecycle ----
     def start(self) -> None:
@@ -336,25 +325,6 @@ class Controller:
             return future
         return self.submit(lambda: commands.estop_now(self.state, self.ctx, self.joint_bus))
 
-    def estop_request(self, via: str, press: str | None = None) -> Future:
-        """An e-stop request arrived by path ``via`` (e.g. "listener", "middleware",
-        "route"): record when, then :meth:`estop` (idempotent: every request stops).
-
-        One press may come by several paths (the page sends two requests with the same
-        ``press`` id): ``estop_received_unix_s`` is its first arrival, and
-        ``estop_arrivals_unix_s`` when it came by each path (first per path). A request
-        without a press id is a press of its own. Safe from any thread.
-        """
-        now = time.time()
-        with self._estop_lock:
-            if press is None or press != self._estop_press:
-                self._estop_press = press
-                self.estop_received_unix_s = now
-                self.estop_arrivals_unix_s = {via: now}
-            else:
-                self.estop_arrivals_unix_s.setdefault(via, now)
-        return self.estop()
-
     def reset(self) -> Future:
         """Clear e-stop and faults, rebooting servos that report hardware errors."""
         return self.submit(self._reset_now)
@@ -418,8 +388,8 @@ class Controller:
                 self.state, robot, self.joint_bus, offsets, self._tip_measured, self._tip_commanded
             )
             self._ctx = dataclasses.replace(self._ctx, model=new)
-            if self.gravity is not None:
-                self.gravity = dataclasses.replace(self.gravity, robot=dynamics_robot(robot))
+            if (gravity := self.state.gravity) is not None:
+                self.state.gravity = dataclasses.replace(gravity, robot=dynamics_robot(robot))
             self.state.notice = f"robot model from {origin}; " + (self.state.notice or "")
             return new
 
@@ -453,7 +423,7 @@ class Controller:
                 raise MotionRefused(f"a {moving} is running: gains change only while the arm rests")
             self._use_gains(ordered)
             self.state.notice = "position gains changed"
-            return self.gains
+            return dict(zip(self.servo_ids, ordered, strict=True))
 
         return self.submit_motion(write)
 
@@ -489,16 +459,29 @@ class Controller:
         """Write the legs' gains (joint order) and use them (the gravity offset's stiffness
         depends on them); the control thread's, or start's before it runs."""
         self.servos.set_gains(ordered)
-        self._gains = dict(zip(self.servo_ids, ordered, strict=True))
-        if self.gravity is not None:  # the sag depends on the loop's stiffness
+        state = self.state
+        state.gains = tuple(ordered)
+        if state.gravity is not None:  # the sag depends on the loop's stiffness
             stiffness = loop_stiffness_nm_rad(ordered)
-            self.gravity = dataclasses.replace(self.gravity, stiffness_nm_rad=stiffness)
+            state.gravity = dataclasses.replace(state.gravity, stiffness_nm_rad=stiffness)
 
     @property
     def gains(self) -> dict[int, PositionGains]:
-        """The position gains in use per leg servo id: the factory's (PositionGains())
-        until `set_gains` writes others."""
-        return dict(self._gains)
+        """The position gains in use per leg servo id, as of the last snapshot: the
+        factory's (PositionGains()) until `set_gains` writes others."""
+        return dict(zip(self.servo_ids, self._snapshot.gains, strict=True))
+
+    @property
+    def gravity(self) -> GravityOffset | None:
+        """The gravity offset in use (None: compensation off); read it from the control
+        thread, or on a stopped loop."""
+        return self.state.gravity
+
+    @property
+    def timing(self) -> TimingRecorder:
+        """Every tick's timing (written by the control thread; its figures reach other
+        threads in the snapshot's ``loop_total`` / ``loop_window``)."""
+        return self.state.recorder
 
     @property
     def joint_offsets_rad(self) -> np.ndarray:
@@ -530,7 +513,7 @@ class Controller:
                 )
                 record_fault(self.state, fault)
             clock.end_tick()
-            self.timing.record(deadline, lateness, clock.now() - started)
+            self.state.recorder.record(deadline, lateness, clock.now() - started)
 
     def step(self) -> None:
         """One tick (the thread calls it each period; tests may call it on an unstarted one)."""
@@ -704,8 +687,8 @@ class Controller:
             step = self.gate.wrist_max_step_rad
             self.wrist.phi_rad = next_phi(state, self.wrist, step, phi_rad)
         servo_goal = joints
-        if self.gravity is not None:
-            offset = self.gravity.offset_rad(joints)
+        if state.gravity is not None:
+            offset = state.gravity.offset_rad(joints)
             servo_goal = joints + np.where(np.isfinite(offset), offset, 0.0)
         try:
             self.joint_bus.write_goal(servo_goal)
@@ -722,11 +705,16 @@ class Controller:
         state.commanded_point_m = self.gate.tip(self.robot.fk(joints).points, phi)
         state.warning = None
 
+    def _bus_stats(self) -> BusStats | None:
+        """The bus's counters (``ServoBus.stats``, which never raises); None from a test's
+        fake bus that keeps none."""
+        return getattr(self.bus, "stats", None)
+
     def _now(self) -> float:
         return self._clock() - self._t0
 
     def _publish(self) -> None:
-        self._snapshot = self.state.snapshot(self._now())
+        self._snapshot = self.state.snapshot(self._now(), self._bus_stats())
         for listener in tuple(self._listeners):  # a listener may remove itself
             listener(self._snapshot)
 

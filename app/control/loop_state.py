@@ -12,11 +12,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from app.config import SafetySettings
+from app.control.gravity import GravityOffset
 from app.control.safety import FeedbackFreshness, FollowingError, MissCounter
 from app.control.sources import GoalSource
-from app.control.state import Fault, Snapshot, WristReading
-from app.control.timing import TickTiming
-from hardware.bus import JointState
+from app.control.state import Fault, RobotInfo, Snapshot, WristReading
+from app.control.timing import TickTiming, TimingRecorder
+from hardware.bus import BusStats, JointState, PositionGains
 
 
 def _nan3() -> np.ndarray:
@@ -47,6 +48,10 @@ class LoopState:
         joints follow); the loop steps on to them, then clears it. None otherwise.
     hold_deadline_s: while an operator holds a jog (app/control/held_jog.py), the loop
     time [s] after which it stops unless a heartbeat renews it; None otherwise.
+    gains: the legs' position gains in use (joint order; the factory's until written);
+    gravity: the servo goals' shift by the predicted sag (app/control/gravity.py), None
+    when gravity compensation is off; recorder: every tick's timing (its figures go out
+    in the snapshot); info: the robot as the snapshots name it.
     """
 
     misses: MissCounter
@@ -80,15 +85,24 @@ class LoopState:
     phi_commanded_rad: float | None = None
     wrist: WristReading | None = None
     settle_rad: np.ndarray | None = None
+    gains: tuple[PositionGains, ...] = (PositionGains(),) * 3
+    gravity: GravityOffset | None = None
+    recorder: TimingRecorder = field(default_factory=lambda: TimingRecorder(200.0))
+    info: RobotInfo = field(default_factory=RobotInfo)
 
     @classmethod
-    def initial(cls, safety: SafetySettings, period_s: float) -> LoopState:
-        """The state before the first read: torque off, no source, no faults."""
+    def initial(
+        cls, safety: SafetySettings, period_s: float, info: RobotInfo | None = None
+    ) -> LoopState:
+        """The state before the first read: torque off, no source, no faults, the factory's
+        gains; ``info`` names the robot in the snapshots (None: a nameless one)."""
         return cls(
             MissCounter(safety.max_missed_reads),
             FollowingError(safety.following_error_rad, safety.following_error_time_s),
             freshness=FeedbackFreshness(safety.stale_feedback_s),
             dt_s=period_s,
+            recorder=TimingRecorder(1.0 / period_s),
+            info=info or RobotInfo(),
         )
 
     @property
@@ -116,8 +130,9 @@ class LoopState:
             return self.commanded_point_m
         return self.point_m
 
-    def snapshot(self, time_s: float) -> Snapshot:
-        """The immutable record other threads read, as of now."""
+    def snapshot(self, time_s: float, bus_stats: BusStats | None = None) -> Snapshot:
+        """The immutable record other threads read, as of now; ``bus_stats``: the bus's
+        counters now (None: none known)."""
         state = self.joints
         nan3 = _nan3()
         commanded = self.commanded_rad if self.commanded_rad is not None else nan3
@@ -159,6 +174,11 @@ class LoopState:
             phi_measured_rad=_or_nan(self.wrist.position_rad if self.wrist else None),
             phi_commanded_rad=_or_nan(self.phi_commanded_rad),
             phi_goal_rad=_or_nan(self.phi_goal_rad),
+            info=self.info,
+            gains=self.gains,
+            loop_total=self.recorder.since_start(),
+            loop_window=self.recorder.last_window(),
+            bus_stats=bus_stats or BusStats(),
         )
 
     def _servos_hold(self) -> bool:

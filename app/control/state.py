@@ -7,7 +7,22 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from app.control.timing import TimingStats
+from hardware.bus import BusStats, PositionGains
+
 _NAN3 = np.full(3, np.nan)
+_NO_TIMING = TimingStats(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0)
+
+
+@dataclass(frozen=True)
+class RobotInfo:
+    """What a loop's snapshots say of the robot that does not change while it runs: the
+    backend's name (``sim``, ``emulated``, ``dynamixel``, ...) and description, and the
+    legs' servo ids in joint order."""
+
+    backend: str = ""
+    backend_description: str = ""
+    servo_ids: tuple[int, ...] = (1, 2, 3)
 
 
 @dataclass(frozen=True)
@@ -126,6 +141,15 @@ class Snapshot:
     phi_measured_rad: float = float("nan")
     phi_commanded_rad: float = float("nan")
     phi_goal_rad: float = float("nan")
+    # what GET /api/status reports beside the tick's own figures, as of this tick: the
+    # robot (static), the legs' position gains in use (joint order), the loop's timing
+    # since start and over its last 10 s (app/control/timing.py; the figures of the
+    # ticks before this one), and the bus's transaction counters
+    info: RobotInfo = field(default_factory=RobotInfo)
+    gains: tuple[PositionGains, ...] = ()
+    loop_total: TimingStats = _NO_TIMING
+    loop_window: TimingStats = _NO_TIMING
+    bus_stats: BusStats = field(default_factory=BusStats)
 
     @property
     def tracking_error_m(self) -> np.ndarray:

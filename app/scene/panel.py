@@ -284,6 +284,6 @@ class ControlPanel:
     # ---- display rate (scene thread) ----
     def update(self, snap: Snapshot) -> None:
         message = self.message or self.goals.message
-        text = status_markdown(snap, self.controller.backend_description, message)
+        text = status_markdown(snap, snap.info.backend_description, message)
         if text != self.gui_status.content:
             self.gui_status.content = text

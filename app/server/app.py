@@ -49,7 +49,7 @@ from app.server.api.deps import require_read_token
 from app.server.backends import open_backend
 from app.server.bodies import StrictJSON
 from app.server.errors import install_error_handlers
-from app.server.estop import EstopFirst, EstopListener
+from app.server.estop import EstopFirst, EstopListener, EstopReceipts
 from app.server.limits import RequestLimits
 from app.server.origins import OriginCheck
 from app.server.queries import WorkspaceQueries
@@ -63,14 +63,14 @@ GIL_SWITCH_S = 2.5e-4
 STATIC_DIR = static_dir()
 
 
-def _start_estop_listener(settings: Settings, controller: Controller) -> EstopListener | None:
+def _start_estop_listener(settings: Settings, receipts: EstopReceipts) -> EstopListener | None:
     """The e-stop's own listener (app/server/estop.py); None (logged) when it cannot bind
     or the config turns it off: POST /api/estop still stops."""
     server = settings.server
     if not server.estop_listener:
         return None
     try:
-        return EstopListener(controller, server.host, server.estop_port, server.http_port)
+        return EstopListener(receipts, server.host, server.estop_port, server.http_port)
     except OSError as exc:
         log.warning("e-stop listener not started on port %s: %s", server.estop_port, exc)
         return None
@@ -126,7 +126,8 @@ def create_app(
             )
             controller.start()
             app.state.controller = controller
-            app.state.estop_listener = _start_estop_listener(settings, controller)
+            app.state.estop_receipts = EstopReceipts(controller)
+            app.state.estop_listener = _start_estop_listener(settings, app.state.estop_receipts)
             app.state.backend = backend
             app.state.runs = RunManager(controller, settings.runs.folder_path)
             app.state.world = WorldService(controller)
@@ -152,7 +153,6 @@ def create_app(
                 settings.runs.folder_path / "tuning",
                 config_path=config_path,
             )
-            controller.pose_status = app.state.world.tracker.status
             runs = lambda: app.state.runs  # noqa: E731
             app.state.scene = await asyncio.to_thread(
                 start_scene, settings, controller, runs, app.state.authority

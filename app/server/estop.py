@@ -38,7 +38,9 @@ import re
 import socket
 import threading
 import time
+from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeout
+from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
@@ -59,6 +61,52 @@ HEADER_TIMEOUT_S = 2.0  # each read of a request's line and headers, after its f
 _PRESS = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 
+@dataclass(frozen=True)
+class EstopReceipt:
+    """When the last e-stop press reached the server: ``received_unix_s``, the wall-clock
+    time [s since the epoch] of its first request by whichever path (None: no press since
+    start), and ``arrivals_unix_s``, when it came by each path (first per path)."""
+
+    received_unix_s: float | None = None
+    arrivals_unix_s: dict[str, float] = field(default_factory=dict)
+
+
+class EstopReceipts:
+    """The e-stop paths' front door: every request, by any path, is recorded here and
+    then stops the loop (``controller.estop()``, idempotent: every request stops).
+
+    One press may come by several paths (the page sends two requests with the same
+    ``press`` id): the receipt keeps its first arrival and each path's first. A request
+    without a press id is a press of its own. Safe from any thread; the station's record
+    (GET /api/status shows :meth:`latest`), not the loop's.
+    """
+
+    def __init__(self, controller: Any) -> None:
+        self.controller = controller
+        self._lock = threading.Lock()
+        self._press: str | None = None
+        self._latest = EstopReceipt()
+
+    def press(self, via: str, press: str | None = None) -> Future:
+        """An e-stop request arrived by path ``via`` ("listener", "middleware", "route"):
+        record when, then stop. Returns the e-stop command's Future."""
+        now = time.time()
+        with self._lock:
+            latest = self._latest
+            if press is None or press != self._press:
+                self._press = press
+                self._latest = EstopReceipt(now, {via: now})
+            elif via not in latest.arrivals_unix_s:
+                self._latest = EstopReceipt(
+                    latest.received_unix_s, {**latest.arrivals_unix_s, via: now}
+                )
+        return self.controller.estop()
+
+    def latest(self) -> EstopReceipt:
+        """The last press's receipt (immutable; replaced by each new press or path)."""
+        return self._latest
+
+
 def valid_press(value: str | None) -> str | None:
     """``value`` when it is 1-64 of [A-Za-z0-9_-], else None (a bad press id never refuses
     an e-stop: the request is then a press of its own)."""
@@ -74,8 +122,8 @@ def press_id(query: str | bytes) -> str | None:
 
 
 class EstopFirst:
-    """ASGI middleware, outermost of the project's: a ``POST /api/estop`` calls the
-    controller's ``estop_request("middleware", press)`` before anything else runs for it,
+    """ASGI middleware, outermost of the project's: a ``POST /api/estop`` calls the app's
+    ``EstopReceipts.press("middleware", press)`` before anything else runs for it,
     and leaves the command's Future in the scope (``SCOPE_KEY``) for the route to answer
     with. Everything else passes untouched."""
 
@@ -85,10 +133,10 @@ class EstopFirst:
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] == "http" and scope["method"] == "POST" and scope["path"] == ESTOP_PATH:
             app = scope.get("app")  # Starlette puts itself there before its middleware
-            controller = getattr(app.state, "controller", None) if app is not None else None
-            if controller is not None and controller.running:
+            receipts = getattr(app.state, "estop_receipts", None) if app is not None else None
+            if receipts is not None and receipts.controller.running:
                 press = press_id(scope.get("query_string", b""))
-                scope[SCOPE_KEY] = controller.estop_request("middleware", press)
+                scope[SCOPE_KEY] = receipts.press("middleware", press)
         await self.app(scope, receive, send)
 
 
@@ -125,7 +173,7 @@ class _Handler(BaseHTTPRequestHandler):
             self._skip_body()
             self._answer(404, {"detail": f"only POST {LISTENER_PATH} here"})
             return
-        future = self.server.controller.estop_request("listener", press_id(parts.query))
+        future = self.server.receipts.press("listener", press_id(parts.query))
         self._skip_body()  # after the stop is latched: nothing waits for a body
         try:
             result = future.result(timeout=ANSWER_TIMEOUT_S)
@@ -187,7 +235,7 @@ class _Handler(BaseHTTPRequestHandler):
 
 class _Server(ThreadingHTTPServer):
     daemon_threads = True
-    controller: Any
+    receipts: EstopReceipts
     page_port: int
 
     def __init__(self, address: tuple[str, int], handler: type[_Handler]) -> None:
@@ -236,14 +284,14 @@ class _Server(ThreadingHTTPServer):
 class EstopListener:
     """``POST /estop`` on ``host:port`` in a thread of its own (see the module doc).
 
-    controller: whose ``estop_request`` it calls; page_port: the dashboard's HTTP port (the
-    origin allowed to read the answers). ``port`` is the bound one (0 in the config picks
-    a free one). Raises OSError when the port cannot be bound.
+    receipts: the presses' record, which stops the loop; page_port: the dashboard's HTTP
+    port (the origin allowed to read the answers). ``port`` is the bound one (0 in the
+    config picks a free one). Raises OSError when the port cannot be bound.
     """
 
-    def __init__(self, controller: Any, host: str, port: int, page_port: int) -> None:
+    def __init__(self, receipts: EstopReceipts, host: str, port: int, page_port: int) -> None:
         self._server = _Server((host, port), _Handler)
-        self._server.controller = controller
+        self._server.receipts = receipts
         self._server.page_port = page_port
         self.port: int = self._server.server_address[1]
         self._thread = threading.Thread(

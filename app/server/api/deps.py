@@ -17,6 +17,7 @@ from app.control.controller import Controller
 from app.programs.workers import ProgramWorkers
 from app.runs.manager import RunManager
 from app.scene import Scene
+from app.server.estop import EstopReceipts
 from app.server.queries import WorkspaceQueries
 from app.tuning.procedure import TuningManager
 from app.world.service import WorldService
@@ -71,6 +72,11 @@ def get_estop_port(connection: HTTPConnection) -> int | None:
     """The e-stop listener's bound port (app/server/estop.py), None when it is not running."""
     listener = getattr(connection.app.state, "estop_listener", None)
     return None if listener is None else listener.port
+
+
+def get_estop_receipts(connection: HTTPConnection) -> EstopReceipts:
+    """The e-stop presses' record, which every e-stop path goes through (app/server/estop.py)."""
+    return connection.app.state.estop_receipts
 
 
 def get_authority(connection: HTTPConnection) -> Authority:
@@ -148,5 +154,6 @@ WorldDep = Annotated[WorldService, Depends(get_world)]
 SceneDep = Annotated[Scene | None, Depends(get_scene)]
 AuthorityDep = Annotated[Authority, Depends(get_authority)]
 EstopPortDep = Annotated[int | None, Depends(get_estop_port)]
+EstopReceiptsDep = Annotated[EstopReceipts, Depends(get_estop_receipts)]
 ControlClient = Annotated[str, Depends(require_control)]
 TokenChecked = Annotated[None, Depends(require_token)]

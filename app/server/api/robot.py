@@ -16,6 +16,7 @@ from app.server.api.deps import (
     AuthorityDep,
     ControlClient,
     ControllerDep,
+    EstopReceiptsDep,
     TokenChecked,
     WorldDep,
 )
@@ -41,10 +42,12 @@ async def _outcome(future: Future) -> Accepted:
 
 
 @router.get("/status", response_model=StatusOut, responses=UNAVAILABLE)
-def get_status(controller: ControllerDep) -> dict[str, Any]:
+def get_status(
+    controller: ControllerDep, receipts: EstopReceiptsDep, world: WorldDep
+) -> dict[str, Any]:
     """Mode, backend, faults, joints, the measured and commanded tool tip, the platform
     centre, the wrist angle, the goal and loop timing."""
-    return serialize.status(controller)
+    return serialize.status(controller.snapshot(), receipts.latest(), world.tracker.status())
 
 
 @router.post("/goal", response_model=Accepted, responses=CONTROL)
@@ -84,7 +87,7 @@ async def post_torque(body: TorqueRequest, controller: ControllerDep, _: Control
 
 
 @router.post("/estop", response_model=Accepted, responses=UNAVAILABLE)
-async def post_estop(request: Request, controller: ControllerDep):
+async def post_estop(request: Request, _: ControllerDep, receipts: EstopReceiptsDep):
     """Stop at once; holds or releases torque per config. Open to anyone (no token, no
     lease): whoever sees the robot about to hurt someone may stop it. Latched before
     routing by the outermost middleware (app/server/estop.py); also served by the e-stop
@@ -94,7 +97,7 @@ async def post_estop(request: Request, controller: ControllerDep):
     the press) is in GET /api/status (``estop_received_unix_s``): the page's latency is
     measured from it."""
     latched = request.scope.get(estop.SCOPE_KEY)
-    route = controller.estop_request("route", estop.valid_press(request.query_params.get("press")))
+    route = receipts.press("route", estop.valid_press(request.query_params.get("press")))
     return await _outcome(latched if latched is not None else route)
 
 

@@ -1,4 +1,9 @@
-"""Snapshots to JSON-ready dicts: NaN becomes null, arrays become lists."""
+"""Snapshots to JSON-ready dicts: NaN becomes null, arrays become lists.
+
+What the loop reports comes from its published :class:`~app.control.state.Snapshot`
+alone (never from live controller attributes), so a status or a telemetry message is one
+tick's view, whichever thread or process builds it.
+"""
 
 from __future__ import annotations
 
@@ -8,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from app.control.controller import Controller
 from app.control.loop_health import classify
 from app.control.state import Snapshot
+from app.server.estop import EstopReceipt
 from app.world.heading import wrap
 
 
@@ -19,24 +24,28 @@ def floats(values: Any) -> list[float | None]:
     return [None if not math.isfinite(v) else float(v) for v in np.asarray(values).tolist()]
 
 
-def status(controller: Controller) -> dict[str, Any]:
-    """Everything GET /api/status reports."""
-    snap = controller.snapshot()
+def status(
+    snap: Snapshot, estop: EstopReceipt | None = None, pose: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """Everything GET /api/status reports: the loop's snapshot ``snap``, with the station's
+    record of the last e-stop press (``estop``; None: none) and the pose input's status
+    (``pose``, app/world/poses.py; None: no pose input)."""
+    estop = estop or EstopReceipt()
     return {
         "mode": snap.mode,
-        "backend": controller.backend,
-        "backend_description": controller.backend_description,
+        "backend": snap.info.backend,
+        "backend_description": snap.info.backend_description,
         "torque": snap.torque,
         "estopped": snap.estopped,
-        "estop_received_unix_s": controller.estop_received_unix_s,
-        "estop_arrivals_unix_s": dict(controller.estop_arrivals_unix_s),
+        "estop_received_unix_s": estop.received_unix_s,
+        "estop_arrivals_unix_s": dict(estop.arrivals_unix_s),
         "faults": [f.as_dict() for f in snap.faults],
         "faults_dropped": snap.faults_dropped,
         "warning": snap.warning,
         "notice": snap.notice,
         "time_s": snap.time_s,
         "joints": {
-            "servo_ids": list(controller.servo_ids),
+            "servo_ids": list(snap.info.servo_ids),
             "position_rad": floats(snap.joints_measured_rad),
             "commanded_rad": floats(snap.joints_commanded_rad),
             "velocity_rad_s": floats(snap.velocity_rad_s),
@@ -56,11 +65,13 @@ def status(controller: Controller) -> dict[str, Any]:
             "external_m": floats(snap.external_m),
         },
         "goal": {"position_m": floats(snap.goal_m), "phi_rad": goal_phi(snap)},
-        "loop": loop_timing(controller),
-        "bus": {"missed_reads": snap.missed_reads, **asdict(controller.bus.stats)},
-        "pose": controller.pose_status() if controller.pose_status else None,
+        "loop": loop_timing(snap),
+        "bus": {"missed_reads": snap.missed_reads, **asdict(snap.bus_stats)},
+        "pose": pose,
         "phase": snap.phase,
-        "gains": {str(sid): g.as_dict() for sid, g in controller.gains.items()},
+        "gains": {
+            str(sid): g.as_dict() for sid, g in zip(snap.info.servo_ids, snap.gains, strict=True)
+        },
     }
 
 
@@ -75,8 +86,10 @@ def goal_phi(snap: Snapshot) -> float | None:
     return None
 
 
-def loop_timing(controller: Controller) -> dict[str, Any]:
-    total, window = controller.timing.since_start(), controller.timing.last_window()
+def loop_timing(snap: Snapshot) -> dict[str, Any]:
+    """The loop's timing as of ``snap``: since start and over its last 10 s, with the
+    health light (app/control/loop_health.py)."""
+    total, window = snap.loop_total, snap.loop_window
     return {
         "target_hz": total.target_hz,
         "measured_hz": window.measured_hz,
@@ -93,9 +106,9 @@ def loop_timing(controller: Controller) -> dict[str, Any]:
     }
 
 
-def telemetry(snap: Snapshot, controller: Controller) -> dict[str, Any]:
-    """One telemetry WebSocket message."""
-    window = controller.timing.last_window()
+def telemetry(snap: Snapshot) -> dict[str, Any]:
+    """One telemetry WebSocket message, from the tick's snapshot ``snap``."""
+    window = snap.loop_window
     return {
         "t": snap.time_s,
         "tick": snap.tick,
@@ -115,7 +128,7 @@ def telemetry(snap: Snapshot, controller: Controller) -> dict[str, Any]:
         "loop": {
             "measured_hz": window.measured_hz,
             "jitter_p99_ms": window.jitter_p99_ms,
-            "overruns": controller.timing.overruns,
+            "overruns": snap.loop_total.overruns,
         },
         "faults": [f.as_dict() for f in snap.faults],
         "world": world_frame(snap),

@@ -22,7 +22,7 @@ router = APIRouter(tags=["telemetry"])
 @router.get("/telemetry", response_model=TelemetryMessage, responses=UNAVAILABLE)
 def latest_telemetry(controller: ControllerDep) -> dict[str, Any]:
     """The latest telemetry message: the same JSON the WebSocket streams, once."""
-    return serialize.telemetry(controller.snapshot(), controller)
+    return serialize.telemetry(controller.snapshot())
 
 
 @router.websocket("/telemetry")
@@ -45,7 +45,7 @@ async def telemetry(websocket: WebSocket, controller: ControllerDep, settings: S
             snap = controller.snapshot()
             if snap.tick != last_tick:
                 last_tick = snap.tick
-                await websocket.send_json(serialize.telemetry(snap, controller))
+                await websocket.send_json(serialize.telemetry(snap))
             await asyncio.sleep(max(0.0, pacer.next(clock()) - clock()))
     except (WebSocketDisconnect, RuntimeError):
         return

@@ -6,7 +6,6 @@ from __future__ import annotations
 import logging
 import re
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -54,9 +53,7 @@ def test_telemetry_in_hold_mode_has_the_world_frame():
     """The world branch of the message, from a snapshot as the hold mode publishes it."""
     extra = {"goal_world_m": [1.0, 2.0, 3.0], "measured_world_m": [1.0, 2.0, 2.5]}
     snap = Snapshot(tick=7, mode="hold-world", extra=extra)
-    window = SimpleNamespace(measured_hz=500.0, jitter_p99_ms=0.1)
-    timing = SimpleNamespace(last_window=lambda: window, overruns=0)
-    message = serialize.telemetry(snap, SimpleNamespace(timing=timing))
+    message = serialize.telemetry(snap)
     parsed = TelemetryMessage.model_validate(message)
     assert parsed.world is not None and parsed.world.error_m == [0.0, 0.0, 0.5]
     assert parsed.measured_m == [None, None, None]  # unknown is null, not NaN
@@ -64,11 +61,7 @@ def test_telemetry_in_hold_mode_has_the_world_frame():
 
 
 def _telemetry(snap: Snapshot) -> TelemetryMessage:
-    window = SimpleNamespace(measured_hz=200.0, jitter_p99_ms=0.1)
-    timing = SimpleNamespace(last_window=lambda: window, overruns=0)
-    return TelemetryMessage.model_validate(
-        serialize.telemetry(snap, SimpleNamespace(timing=timing))
-    )
+    return TelemetryMessage.model_validate(serialize.telemetry(snap))
 
 
 @pytest.mark.parametrize(
