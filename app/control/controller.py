@@ -6,6 +6,9 @@ through the gate (which checks the platform point the tip implies), IK on the br
 nearest the current joints, limit joint speed, write the goal, check safety, then publish
 an immutable Snapshot. Operator commands (HTTP handlers, the 3D scene's callbacks)
 never touch the bus: they are queued and run at the start of the next tick, in this thread.
+The tick's work between the commands and the publish is app/control/tick.py's, a function of
+the loop's state, the command context and the bus; this class keeps the thread, that order
+and the queue.
 """
 
 from __future__ import annotations
@@ -34,11 +37,11 @@ from app.control.joint_offsets import OffsetBus, set_offsets
 from app.control.loop_state import LoopState
 from app.control.model import Robot, RobotModel, dynamics_robot
 from app.control.owner import MotionOwner
-from app.control.safety import servo_faults
-from app.control.sources import GoalSource, JogSource, Setpoint
+from app.control.sources import GoalSource, JogSource
 from app.control.state import Fault, RobotInfo, Snapshot
+from app.control.tick import TickPorts, phi_commanded, phi_measured, read, tick
 from app.control.timing import TickClock, TimingRecorder
-from app.control.wrist import WristBus, next_phi, turn_to
+from app.control.wrist import WristBus, turn_to
 from hardware.bus import BusStats, PositionGains, ServoBus, SimulatedBus
 from hardware.errors import BusError
 
@@ -107,8 +110,10 @@ class Controller:
         self._listeners: list[Listener] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        # the simulator's "motion capture" of the platform; real buses have none
-        self._external = bus.measure_platform if isinstance(bus, SimulatedBus) else None
+        # what the tick reads and writes: the legs through the joint offsets, the wrist,
+        # and the simulator's "motion capture" of the platform (real buses have none)
+        external = bus.measure_platform if isinstance(bus, SimulatedBus) else None
+        self._ports = TickPorts(self.joint_bus, self.wrist, external)
         self._clock = clock  # loop time [s]; tests step a controller on a fake one
         # paces the thread; None: real time at loop.rate_hz (tests may give a virtual one)
         self._tick_clock = tick_clock
@@ -125,7 +130,7 @@ class Controller:
             self._use_gains(
                 [j.gains.position_gains() if j.gains else PositionGains() for j in legs]
             )
-        self._read()
+        read(self.state, self._ctx, self._ports, self._now)
         self._publish()
         self._thread = threading.Thread(target=self._run, name="deltadash-control", daemon=True)
         self._thread.start()
@@ -397,13 +402,11 @@ class Controller:
 
     def _tip_commanded(self, platform: np.ndarray) -> np.ndarray:
         """The tool tip [m] of a platform point at the commanded wrist angle."""
-        state = self.state
-        phi = state.phi_rad if state.phi_commanded_rad is None else state.phi_commanded_rad
-        return self.gate.tip(platform, phi)
+        return self.gate.tip(platform, phi_commanded(self.state))
 
     def _tip_measured(self, platform: np.ndarray) -> np.ndarray:
         """The tool tip [m] of a platform point at the measured wrist angle."""
-        return self.gate.tip(platform, self._phi_measured())
+        return self.gate.tip(platform, phi_measured(self.state))
 
     def set_gains(self, gains: dict[int, PositionGains]) -> Future:
         """Position gains per leg servo id (app/tuning), written to the servos in the
@@ -520,16 +523,7 @@ class Controller:
         self.state.tick += 1
         outcomes = self._run_commands()
         try:
-            joints = self.state.joints if self._read() else None
-            if joints is not None and joints.faulted:
-                now = self._now()
-                for fault in servo_faults(self.servo_ids, joints.hardware_errors, now):
-                    record_fault(self.state, fault)
-            if joints is not None and self.wrist is not None and self.wrist.faulted:
-                errors = (self.wrist.hardware_errors,)
-                for fault in servo_faults((self.wrist.servo_id,), errors, self._now()):
-                    record_fault(self.state, fault)
-            self._advance()
+            tick(self.state, self._ctx, self._ports, self._now)  # the commands' context
             self._publish()
         finally:
             for future, outcome in outcomes:  # answered once the snapshot shows the change
@@ -551,159 +545,6 @@ class Controller:
                     outcomes.append((future, command()))
                 except Exception as exc:
                     outcomes.append((future, exc))
-
-    def _read(self) -> bool:
-        state = self.state
-        try:
-            joints = self.joint_bus.read_state()
-        except BusError as exc:
-            if state.misses.miss():
-                reason = f"{state.misses.consecutive} reads failed: {exc}"
-                record_fault(state, Fault("bus", reason, time_s=self._now(), kind="reads failed"))
-            return False
-        state.misses.ok()
-        state.freshness.update(self._now(), joints, state.commanded_rad)
-        state.joints = joints
-        if self.wrist is not None:
-            state.wrist, state.phi_commanded_rad = self.wrist.reading, self.wrist.phi_rad
-        state.platform_m = self.robot.fk(joints.position_rad).points
-        # the tip at the measured wrist angle (the held one without a wrist servo)
-        state.point_m = self.gate.tip(state.platform_m, self._phi_measured())
-        if self._external is not None:  # the simulator's "motion capture" of the platform,
-            external = self._external(at_last_read=True)  # at the read's instant
-            state.external_m = self.gate.tip(external, self._phi_measured())
-        return True
-
-    def _phi_measured(self) -> float:
-        """The wrist angle the tool is at [rad]: the wrist servo's reading, else (no wrist,
-        or none read) the angle the loop holds the tool at."""
-        wrist = self.state.wrist
-        if wrist is not None and math.isfinite(wrist.position_rad):
-            return float(wrist.position_rad)
-        return self.state.phi_rad
-
-    def _advance(self) -> None:
-        state, source = self.state, self.state.source
-        if not commands.motion_allowed(state) or state.joints is None:
-            return
-        if source is None:
-            self._settle()
-            self._turn_wrist_alone()
-            return
-        state.settle_rad = None  # a new source starts from the command
-        held_jog.tick(state, self.ctx, self._now())  # a held jog whose heartbeat is late stops
-        setpoint = source.next(state.dt_s)
-        state.phase, state.extra = setpoint.phase, setpoint.extra
-        if setpoint.fault is not None:
-            reason = f"{source.name}: {setpoint.fault}"
-            fault = Fault("source", reason, time_s=self._now(), kind=source.name)
-            record_fault(state, fault)
-            return
-        if setpoint.goal_m is not None:
-            state.goal_m = setpoint.goal_m
-        if setpoint.point_m is None and setpoint.joints_rad is None:
-            state.warning = setpoint.warning  # the source asks to hold where we are
-        else:
-            self._follow(setpoint)
-        if setpoint.finished and state.source is source:
-            state.source = None
-
-    def _follow(self, setpoint: Setpoint) -> None:
-        phi: float | None = None
-        if setpoint.phi_rad is not None:
-            try:  # a wrist goal beyond its limits is refused: nothing of this tick is written
-                phi = self.gate.check_phi(setpoint.phi_rad)
-            except GoalRejected as exc:
-                self.state.warning = f"holding: {exc}"
-                return
-            # the wrist turns there this tick, and the tip's goals stay at it once the
-            # source ends; its goal shown is the nominal one (a move's target)
-            self.state.phi_rad = phi
-            goal = setpoint.goal_phi_rad
-            self.state.phi_goal_rad = phi if goal is None else goal
-        if (joints := self._setpoint_joints(setpoint)) is None:
-            return
-        self._write(joints, phi)
-        if setpoint.finished and not np.array_equal(self.state.commanded_rad, joints):
-            self.state.settle_rad = joints  # the speed limit kept the last step short
-        self._check_following()
-
-    def _settle(self) -> None:
-        """Step on to a finished source's last joints (``state.settle_rad``) at the joint
-        speed limit: late ticks let a source end while the limit still held its joints
-        back, and a move would otherwise stop short of its goal."""
-        state = self.state
-        if state.settle_rad is None or state.commanded_rad is None:
-            return
-        self._write(state.settle_rad)
-        if np.array_equal(state.commanded_rad, state.settle_rad):
-            state.settle_rad = None
-        self._check_following()
-
-    def _check_following(self) -> None:
-        state, now = self.state, self._now()
-        if state.freshness.certain:  # an old state: it says nothing of how the joints follow
-            fault = state.freshness.fault(now)
-        else:
-            commanded, measured = state.commanded_rad, state.joints.position_rad
-            if state.wrist is not None and state.phi_commanded_rad is not None:
-                commanded = np.append(commanded, state.phi_commanded_rad)  # joint 4: the wrist
-                measured = np.append(measured, state.wrist.position_rad)
-            fault = state.following.check(now, commanded, measured)
-        if fault is not None:
-            record_fault(state, fault)
-
-    def _turn_wrist_alone(self) -> None:
-        """No source: the legs hold their command, the wrist turns on towards its goal and
-        is held to it."""
-        state = self.state
-        if self.wrist is None or state.phi_goal_rad is None or state.commanded_rad is None:
-            return
-        if state.phi_commanded_rad != state.phi_goal_rad:
-            self._write(state.commanded_rad)
-        # checked while the goal stands (a stop clears it), not only while it turns: a
-        # short turn ends before a stuck wrist's error has lasted following_error_time_s.
-        # A stale state says nothing of that, and idle is no time to fault on staleness.
-        if not state.freshness.certain:
-            self._check_following()
-
-    def _setpoint_joints(self, setpoint: Setpoint) -> np.ndarray | None:
-        try:
-            if setpoint.joints_rad is not None:
-                return self.gate.check_joints(setpoint.joints_rad)
-            phi = self.state.phi_rad if setpoint.phi_rad is None else setpoint.phi_rad
-            point = self.gate.clamp_point(setpoint.point_m, phi)
-            return self.gate.solve(point, self.state.reference_rad, phi)
-        except GoalRejected as exc:
-            self.state.warning = f"holding: {exc}"  # the path crossed a limit: stay put
-            return None
-
-    def _write(self, joints: np.ndarray, phi_rad: float | None = None) -> None:
-        """Write the legs' ``joints`` (3,) [rad] within the step limit, and a wrist's goal
-        towards ``phi_rad`` [rad] (None: towards ``state.phi_goal_rad``)."""
-        state = self.state
-        joints = self.gate.limit_step(joints, state.reference_rad)
-        if self.wrist is not None:  # the wrist's goal goes out in the same sync write
-            step = self.gate.wrist_max_step_rad
-            self.wrist.phi_rad = next_phi(state, self.wrist, step, phi_rad)
-        servo_goal = joints
-        if state.gravity is not None:
-            offset = state.gravity.offset_rad(joints)
-            servo_goal = joints + np.where(np.isfinite(offset), offset, 0.0)
-        try:
-            self.joint_bus.write_goal(servo_goal)
-        except BusError as exc:
-            if state.misses.miss():
-                reason = f"goal writes failing: {exc}"
-                fault = Fault("bus", reason, time_s=self._now(), kind="writes failed")
-                record_fault(state, fault)
-            return
-        state.commanded_rad = joints
-        if self.wrist is not None:
-            state.phi_commanded_rad = self.wrist.phi_rad
-        phi = state.phi_rad if state.phi_commanded_rad is None else state.phi_commanded_rad
-        state.commanded_point_m = self.gate.tip(self.robot.fk(joints).points, phi)
-        state.warning = None
 
     def _bus_stats(self) -> BusStats | None:
         """The bus's counters (``ServoBus.stats``, which never raises); None from a test's
@@ -728,7 +569,7 @@ class Controller:
     def measured_phi(self) -> float:
         """This tick's wrist angle [rad]: read, else the one the loop holds the tool at (0
         without a wrist) (call from the control thread)."""
-        return self._phi_measured()
+        return phi_measured(self.state)
 
     @property
     def current_source(self) -> GoalSource | None:
