@@ -51,11 +51,14 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     sine.add_argument(
         "--phi-amplitude",
         type=float,
-        default=0.0,
+        default=_D.phi_amplitude_rad,
         help="with a [wrist]: the wrist's sinusoid amplitude [rad] (default 0: left alone)",
     )
     sine.add_argument(
-        "--phi-frequency", type=float, default=0.0, help="the wrist's sinusoid frequency [Hz]"
+        "--phi-frequency",
+        type=float,
+        default=_D.phi_frequency_hz,
+        help="the wrist's sinusoid frequency [Hz]",
     )
     sine.add_argument("--feedforward", action="store_true", help="command the path ahead")
     sine.add_argument("--url", help="a running server, e.g. http://127.0.0.1:8000")

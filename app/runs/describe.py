@@ -10,6 +10,7 @@ the loop's health was recorded; runs from before it have none).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 AXES = "xyz"
@@ -162,7 +163,7 @@ def _generic(kind: str, p: dict[str, Any]) -> str:
     return f"{kind}: " + ", ".join(parts) if parts else kind
 
 
-_SENTENCES = {
+SENTENCES: dict[str, Callable[[dict[str, Any]], str]] = {  # kind -> its sentence of params
     "sinusoid": _sinusoid,
     "chirp": _chirp,
     "step": _step,
@@ -179,7 +180,7 @@ def describe(kind: str, params: dict[str, Any], conditions: dict[str, Any] | Non
     0 / 0 / −240 mm; 10 s; feed-forward on, lead 20 ms". ``params`` and ``conditions`` as
     saved in run.json (SI units); a kind without its own sentence lists its parameters."""
     conditions = conditions or {}
-    sentence = _SENTENCES.get(kind)
+    sentence = SENTENCES.get(kind)
     text = sentence(params) if sentence else _generic(kind, params)
     if kind == "hold" or "feedforward" not in params:
         return text

@@ -1,7 +1,8 @@
 """More timed paths for test runs: a chirp for identifying the servo response, waypoints
 with timing (pick-and-place, rasters), a step on one axis and a step of one joint. Each
 offers what PlannedRun needs: ``derivatives(t, order)``, ``duration_s``, ``peaks()`` and
-``feedforward``.
+``feedforward``. The defaults written here are the API's too: the run types' request
+models (app/runs/types.py) take theirs from these dataclasses.
 """
 
 from __future__ import annotations

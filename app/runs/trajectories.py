@@ -27,7 +27,9 @@ class SinusoidParams:
     amplitude_m [m], frequency_hz [Hz], phase_rad [rad], offset_m [m] (base frame), each
     (x, y, z); duration_s: the timed part [s]; feedforward: command the point lead_s ahead.
     With a wrist, phi(t) = phi_amplitude_rad sin(2 pi phi_frequency_hz t) [rad] turns the
-    tool as a fourth axis (0: the wrist is left alone, as without one).
+    tool as a fourth axis (0: the wrist is left alone, as without one). These defaults are
+    the API's and the command line's too (app/runs/types.py, app/cli/run.py read them;
+    the page's form repeats them, tests/runs/test_run_types.py checks it).
     """
 
     amplitude_m: tuple[float, float, float] = (0.05, 0.05, 0.08)

@@ -27,6 +27,7 @@ from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
 from app.runs.manager import RunManager
 from app.runs.trajectories import SinusoidParams, sinusoid_points
+from app.runs.types import SinusoidRequest
 from app.scene import Scene
 from app.server.api.deps import (
     ControllerDep,
@@ -37,7 +38,6 @@ from app.server.api.deps import (
     TokenChecked,
 )
 from app.server.api.responses import InfoOut
-from app.server.api.runs import SinusoidRequest
 from app.server.errors import INVALID, UNAUTHORISED, UNAVAILABLE
 
 router = APIRouter(tags=["dashboard"])

@@ -12,6 +12,7 @@ from fastapi import APIRouter, WebSocket
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.control.errors import GoalRejected
+from app.fields import Finite, Vector3
 from app.server.api.deps import (
     ControlClient,
     ControllerDep,
@@ -20,7 +21,7 @@ from app.server.api.deps import (
     WorldDep,
     websocket_token_ok,
 )
-from app.server.api.models import Accepted, Finite, Vector3
+from app.server.api.models import Accepted
 from app.server.api.responses import PoseAccepted, PoseInputStatus, RunStarted
 from app.server.errors import CONTROL, INVALID, UNAUTHORISED
 from app.world.drone_sim import DroneSimParams

@@ -6,14 +6,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-# strict: a number is a JSON number, never a string ("0.1") or a boolean
-Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]
-Vector3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
-REACH_M = 1.0
-"""No Delta this app drives reaches this far [m]; a path's points and amplitudes beyond it
-are refused by the model, the rest by the feasibility check against the robot's own reach."""
-Reach = Annotated[float, Field(ge=-REACH_M, le=REACH_M, allow_inf_nan=False, strict=True)]
-ReachVector3 = Annotated[list[Reach], Field(min_length=3, max_length=3)]
+from app.fields import Finite, Vector3
 
 
 class _Body(BaseModel):

@@ -35,6 +35,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from app.control.commands import require_motion
 from app.control.errors import MotionRefused
 from app.control.model import RobotModel
+from app.fields import ReachVector3
 from app.programs.check import CheckedProgram
 from app.programs.dry_run import DryRunRefused
 from app.programs.errors import ProgramError
@@ -48,7 +49,6 @@ from app.server.api.deps import (
     SettingsDep,
     TokenChecked,
 )
-from app.server.api.models import ReachVector3
 from app.server.api.responses import RunStarted
 from app.server.api.runs import start_run
 from app.server.errors import CONTROL, UNAUTHORISED, ErrorBody

@@ -1,37 +1,37 @@
-"""Runs resource: start the thesis's sinusoid test, list runs, their stats and files."""
+"""Runs resource: start test runs (a route per run type of app/runs/types.py: the thesis's
+sinusoid, a chirp, a step, waypoints), list runs, their stats and files."""
 
 from __future__ import annotations
 
 import asyncio
 import logging
-import math
 import time
-from itertools import pairwise
-from typing import Annotated, Any
+from collections.abc import Awaitable, Callable
+from typing import Any
 
 import numpy as np
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import FileResponse
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from app.control.errors import GoalRejected, MotionRefused
+from app.control.errors import MotionRefused
 from app.control.model import RobotModel
 from app.runs.describe import describe
 from app.runs.logs import MEDIA_TYPE as MCAP_MEDIA_TYPE
 from app.runs.logs import read_messages
 from app.runs.manager import Run, RunManager
-from app.runs.paths import ChirpParams, StepParams, WaypointParams
 from app.runs.stats import error_stats, window_mask
-from app.runs.trajectories import SinusoidParams, TimedPath
+from app.runs.trajectories import TimedPath
+from app.runs.types import RUN_TYPES, RunRequest, RunType
+from app.runs.types import ChirpRequest as ChirpRequest  # the bodies, importable here too
+from app.runs.types import SinusoidRequest as SinusoidRequest
+from app.runs.types import StepRequest as StepRequest
+from app.runs.types import WaypointsRequest as WaypointsRequest
 from app.server.api.deps import ControlClient, RunsDep
-from app.server.api.models import ReachVector3, Vector3
 from app.server.api.responses import RunOut, RunStarted, WindowStats
 from app.server.errors import CONTROL, INVALID, NOT_FOUND, PlanningTimeout
 
 log = logging.getLogger(__name__)
 router = APIRouter(tags=["runs"])
-_DEFAULT = SinusoidParams()
-MAX_WAYPOINTS = 1000
 FILES = {  # a run's files and their media types
     "log.mcap": MCAP_MEDIA_TYPE,
     "log.cut.mcap": MCAP_MEDIA_TYPE,  # an interrupted run's log as the crash left it
@@ -39,115 +39,6 @@ FILES = {  # a run's files and their media types
     "report.png": "image/png",
     "report.pdf": "application/pdf",
 }
-
-
-Seconds = Annotated[float, Field(gt=0, le=600, allow_inf_nan=False, strict=True)]
-Axis = Annotated[int, Field(ge=0, le=2, strict=True, description="0 = x, 1 = y, 2 = z")]
-
-HzOrZero = Annotated[float, Field(ge=0, le=20, allow_inf_nan=False, strict=True)]
-Hz = Annotated[float, Field(gt=0, le=20, allow_inf_nan=False, strict=True)]
-
-
-class _RunBody(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
-
-
-class SinusoidRequest(_RunBody):
-    """Per-axis sinusoid; every field optional, defaults are the thesis test (ch. 6.1)."""
-
-    amplitude_m: ReachVector3 = list(_DEFAULT.amplitude_m)
-    frequency_hz: Annotated[list[HzOrZero], Field(min_length=3, max_length=3)] = list(
-        _DEFAULT.frequency_hz
-    )
-    phase_rad: Vector3 = list(_DEFAULT.phase_rad)
-    offset_m: ReachVector3 = list(_DEFAULT.offset_m)
-    duration_s: Seconds = _DEFAULT.duration_s
-    feedforward: bool = False
-    phi_amplitude_rad: Annotated[float, Field(ge=0, le=math.pi, allow_inf_nan=False)] = Field(
-        0.0, description="with a [wrist]: phi(t) = A sin(2 pi f t) [rad]; 0 leaves it alone"
-    )
-    phi_frequency_hz: HzOrZero = Field(0.0, description="the wrist's frequency f [Hz]")
-
-    def params(self) -> SinusoidParams:
-        return SinusoidParams(
-            tuple(self.amplitude_m),
-            tuple(self.frequency_hz),
-            tuple(self.phase_rad),
-            tuple(self.offset_m),
-            self.duration_s,
-            self.feedforward,
-            self.phi_amplitude_rad,
-            self.phi_frequency_hz,
-        )  # type: ignore[arg-type]
-
-
-class ChirpRequest(_RunBody):
-    """Linear frequency sweep on one axis, for identifying the servo response."""
-
-    axis: Axis = 2
-    amplitude_m: Annotated[float, Field(gt=0, le=0.2, allow_inf_nan=False, strict=True)] = 0.02
-    f0_hz: Hz = 0.2
-    f1_hz: Hz = 3.0
-    offset_m: ReachVector3 = list(_DEFAULT.offset_m)
-    duration_s: Seconds = 10.0
-    feedforward: bool = False
-
-    def params(self) -> ChirpParams:
-        return ChirpParams(**{**self.model_dump(), "offset_m": tuple(self.offset_m)})
-
-
-class StepRequest(_RunBody):
-    """A position step on one axis (servo step response), within the run."""
-
-    axis: Axis = 2
-    size_m: Annotated[float, Field(ge=-0.05, le=0.05, allow_inf_nan=False, strict=True)] = 0.005
-    step_at_s: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False, strict=True)] = 0.5
-    offset_m: ReachVector3 = list(_DEFAULT.offset_m)
-    duration_s: Seconds = 2.0
-    phi_step_rad: Annotated[float, Field(ge=-math.pi, le=math.pi, allow_inf_nan=False)] = Field(
-        0.0, description="with a [wrist]: a step of phi [rad] at step_at_s too; 0 leaves it alone"
-    )
-
-    @model_validator(mode="after")
-    def _step_inside(self) -> StepRequest:
-        if self.step_at_s >= self.duration_s:
-            raise ValueError(
-                f"step_at_s: {self.step_at_s:g} s is not before the run's end "
-                f"(duration_s = {self.duration_s:g} s)"
-            )
-        return self
-
-    def params(self) -> StepParams:
-        return StepParams(**{**self.model_dump(), "offset_m": tuple(self.offset_m)})
-
-
-class WaypointsRequest(_RunBody):
-    """Points [m] reached at times [s] (first at 0), resting at each; minimum-jerk between."""
-
-    points_m: Annotated[list[ReachVector3], Field(min_length=2, max_length=MAX_WAYPOINTS)]
-    times_s: Annotated[
-        list[Annotated[float, Field(ge=0, le=600, allow_inf_nan=False, strict=True)]],
-        Field(min_length=2, max_length=MAX_WAYPOINTS),
-    ]
-    feedforward: bool = False
-
-    @model_validator(mode="after")
-    def _timed(self) -> WaypointsRequest:
-        if len(self.times_s) != len(self.points_m):
-            raise ValueError(
-                f"times_s: one time per point ({len(self.times_s)} times, "
-                f"{len(self.points_m)} points)"
-            )
-        if self.times_s[0] != 0.0 or not all(b > a for a, b in pairwise(self.times_s)):
-            raise ValueError("times_s: must start at 0 and increase")
-        return self
-
-    def params(self) -> WaypointParams:
-        points = tuple(tuple(p) for p in self.points_m)
-        try:
-            return WaypointParams(points, tuple(self.times_s), self.feedforward)  # type: ignore[arg-type]
-        except ValueError as exc:  # counts and order the schema cannot say
-            raise GoalRejected(str(exc)) from exc
 
 
 def _run(runs: RunManager, run_id: str) -> Run:
@@ -184,30 +75,26 @@ async def start_run(
     return {"run_id": run.run_id}
 
 
-@router.post("/tests/sinusoid", response_model=RunStarted, responses=CONTROL)
-async def start_sinusoid(request: Request, body: SinusoidRequest, runs: RunsDep, _: ControlClient):
-    """Check the whole path, then run it; 422 names the first infeasible time and point."""
-    return await start_run(request, runs, body.params(), "sinusoid")
+def _starter(run_type: RunType) -> Callable[..., Awaitable[dict]]:
+    """The route starting a run of ``run_type``: its body is the type's request model."""
+
+    async def start(request: Request, body: RunRequest, runs: RunsDep, _: ControlClient):
+        return await start_run(request, runs, body.params(), run_type.name)
+
+    start.__annotations__ = {**start.__annotations__, "body": run_type.request}
+    start.__name__ = start.__qualname__ = f"start_{run_type.name}"
+    start.__doc__ = run_type.doc
+    return start
 
 
-@router.post("/tests/chirp", response_model=RunStarted, responses=CONTROL)
-async def start_chirp(request: Request, body: ChirpRequest, runs: RunsDep, _: ControlClient):
-    """A frequency sweep f0 -> f1 on one axis; checked like the sinusoid."""
-    return await start_run(request, runs, body.params(), "chirp")
-
-
-@router.post("/tests/step", response_model=RunStarted, responses=CONTROL)
-async def start_step(request: Request, body: StepRequest, runs: RunsDep, _: ControlClient):
-    """A step on one axis; small steps pass the joint-speed limit unchanged."""
-    return await start_run(request, runs, body.params(), "step")
-
-
-@router.post("/tests/waypoints", response_model=RunStarted, responses=CONTROL)
-async def start_waypoints(
-    request: Request, body: WaypointsRequest, runs: RunsDep, _: ControlClient
-):
-    """Timed waypoints (pick-and-place, raster); checked like the sinusoid."""
-    return await start_run(request, runs, body.params(), "waypoints")
+for _type in RUN_TYPES.values():  # POST /tests/sinusoid, /tests/chirp, ...
+    router.add_api_route(
+        f"/tests/{_type.name}",
+        _starter(_type),
+        methods=["POST"],
+        response_model=RunStarted,
+        responses=CONTROL,
+    )
 
 
 def run_out(runs: RunManager, run: Run) -> dict[str, Any]:

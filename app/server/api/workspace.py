@@ -8,9 +8,9 @@ from typing import Annotated, Any
 import numpy as np
 from fastapi import APIRouter, Query
 
+from app.fields import REACH_M
 from app.server import sections
 from app.server.api.deps import ControllerDep, QueriesDep
-from app.server.api.models import REACH_M
 from app.server.api.responses import NearestOut, WorkspaceSectionOut
 from app.server.errors import INVALID, UNAVAILABLE
 
