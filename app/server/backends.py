@@ -38,18 +38,24 @@ def _calibrations(settings: Settings) -> tuple[JointCalibration, ...]:
 
 # The emulator is software on the same machine: a loaded one can deschedule it for longer
 # than the SDK's ~34 ms status timeout (sized for real servos behind a USB latency timer),
-# and a reply that comes late is a missed read. Its bus waits at least this long.
+# and a reply that comes late is a missed read. Its bus waits at least this long; on
+# simulated time (tests), where no deadline is real, twice that: 0.25 s still let a healthy
+# servo's reply miss with two test workers beside two CPU hogs.
 EMULATOR_REPLY_WAIT_S = 0.25
+SIM_TIME_REPLY_WAIT_S = 0.5
 
 
-def _dynamixel(settings: Settings, port: str, emulated: bool = False) -> DynamixelBus:
+def _dynamixel(
+    settings: Settings, port: str, emulated: bool = False, sim_time: bool = False
+) -> DynamixelBus:
     hw = settings.hardware
+    reply_wait_s = SIM_TIME_REPLY_WAIT_S if sim_time else EMULATOR_REPLY_WAIT_S
     config = DynamixelConfig(
         joints=_calibrations(settings),
         port=port,
         baudrate=hw.baud,
         max_tries=hw.max_tries,
-        min_reply_wait_s=EMULATOR_REPLY_WAIT_S if emulated else 0.0,
+        min_reply_wait_s=reply_wait_s if emulated else 0.0,
     )
     return DynamixelBus(config)
 
@@ -162,7 +168,7 @@ def open_backend(
         else:
             port = stack.enter_context(_emulator_process(ids))
             description = f"emulated XM430-W210 bus on {port} (dynamixel-sdk)"
-        bus = _dynamixel(settings, port, emulated=kind == "emulated")
+        bus = _dynamixel(settings, port, emulated=kind == "emulated", sim_time=clock is not None)
         bus.connect()
         stack.callback(bus.disconnect)
         yield Backend(bus, kind, description, emulator, sim_clock=clock)

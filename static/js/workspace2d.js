@@ -41,6 +41,7 @@ let drawnKey = "";
 let lastDraw = 0;
 let drawTimer = null;
 let typedTimer = null;
+const BUSY_RETRY_MS = 1000; // a typed goal's check refused as busy is asked again after this
 let typedAsked = 0; // the latest /nearest request; older answers are dropped
 // the last checked program (programs.js hands it here): path and violation points [m]
 let program = null; // { path: [[x, y, z], ...], violations: [[x, y, z], ...] }
@@ -316,7 +317,10 @@ async function checkTyped() {
       `${mmText(goal)} mm is outside; nearest reachable ${mmText(answer.nearest_m)} mm ` +
       `(${(answer.distance_m * 1000).toFixed(1)} mm away)`);
   } catch (err) {
-    if (ask === typedAsked) setText("ws-typed", `cannot check the typed goal: ${err.message}`);
+    if (ask !== typedAsked) return;
+    setText("ws-typed", `cannot check the typed goal: ${err.message}`);
+    // the query workers were busy (503, Retry-After): ask again, as the operator would
+    if (err.status === 503) typedTimer = setTimeout(checkTyped, BUSY_RETRY_MS);
   }
   schedule();
 }

@@ -39,9 +39,9 @@ def bus(emulator: ServoEmulator) -> Iterator[DynamixelBus]:
 
 @pytest.fixture
 def patient_bus(emulator: ServoEmulator) -> Iterator[DynamixelBus]:
-    """A bus that waits 0.3 s for each status packet: for tests that tell which servo
+    """A bus that waits 1 s for each status packet: for tests that tell which servo
     failed, so that a healthy servo answering late on a loaded machine is not counted."""
-    dxl = DynamixelBus(make_config(emulator.port, rx_timeout_s=0.3))
+    dxl = DynamixelBus(make_config(emulator.port, rx_timeout_s=1.0))
     dxl.connect()
     try:
         yield dxl

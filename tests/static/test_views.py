@@ -143,6 +143,36 @@ def test_an_outside_goal_offers_the_nearest_point_and_goes_there(page: Any, serv
     assert "inside" in page.locator("#ws-typed").inner_text()
 
 
+def test_a_typed_goal_refused_as_busy_is_checked_again(page: Any, server: Server) -> None:
+    """The workspace queries answer 503 while their workers are busy: the page asks again
+    (here the first answer is a made-up 503, the second the server's own)."""
+    refused: list[str] = []
+
+    def busy_once(route: Any) -> None:
+        if not refused:
+            refused.append(route.request.url)
+            detail = '{"detail": "busy: the server is answering other workspace queries"}'
+            route.fulfill(status=503, content_type="application/json", body=detail)
+        else:
+            route.continue_()
+
+    page.route("**/api/workspace/nearest?*", busy_once)
+    try:
+        page.fill("#goal-form input[name=x]", "0")
+        page.fill("#goal-form input[name=y]", "30")
+        page.fill("#goal-form input[name=z]", "-460")
+        # Playwright's sync API runs the route's handler while the test is in one of its
+        # calls: the condition makes one
+        wait_for(lambda: page.evaluate("true") and refused, "the first check of the typed goal")
+        wait_for(
+            lambda: "nearest reachable" in page.locator("#ws-typed").inner_text(),
+            "the typed goal checked again after the busy answer",
+        )
+        assert page.locator("#ws-go-nearest").is_visible()
+    finally:
+        page.unroute("**/api/workspace/nearest?*")
+
+
 def test_the_2d_view_draws_the_region_and_the_robots_point(page: Any, server: Server) -> None:
     # the arm powers up hanging below the workspace: the top cut there is empty; go home
     torque_on(page, server)

@@ -31,7 +31,9 @@ def fast(emulator: ServoEmulator) -> ServoEmulator:
 # hogs) can deschedule it past the SDK's ~34 ms status timeout, and a reply that comes late
 # is a failed try. A config waits at least this long for each status packet, unless the
 # test sets its own timeout (rx_timeout_s) or floor: those test the timeouts themselves.
-EMULATOR_REPLY_WAIT_S = 0.25
+# 0.25 s still let a healthy servo's reply miss with two workers beside two hogs; a wait
+# costs only where a reply is really missing (a dropped or unplugged servo's test).
+EMULATOR_REPLY_WAIT_S = 1.0
 
 
 def make_config(port: str, **overrides: object) -> DynamixelConfig:

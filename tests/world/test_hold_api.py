@@ -71,9 +71,9 @@ def test_a_platform_marker_pose_is_its_own_stream(client):
 
 
 def test_hold_faults_when_the_pose_stream_is_lost(client):
-    client.post("/api/reset")
-    client.post("/api/torque", json={"enabled": True})
-    client.post("/api/mav/pose", json=_pose(100.0))
+    ok_json(client.post("/api/reset"))
+    ok_json(client.post("/api/torque", json={"enabled": True}))
+    ok_json(client.post("/api/mav/pose", json=_pose(100.0)))
     response = client.post("/api/hold", json={"position_m": [0.0, 0.0, 1.5 - 0.08 - 0.24]})
     assert response.status_code == 200, response.text
     wait_for(lambda: ok_json(client.get("/api/status"))["mode"] == "fault", "the lost-pose fault")

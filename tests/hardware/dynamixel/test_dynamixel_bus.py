@@ -232,7 +232,7 @@ def test_connect_waits_for_a_servo_slow_to_answer(emulator: ServoEmulator) -> No
     # Servo 2 misses its first four pings (one round of three tries, and one more), as a
     # servo still booting or an emulator not yet scheduled on a loaded machine does.
     emulator.inject(2, drop_replies=4)
-    bus = DynamixelBus(make_config(emulator.port))
+    bus = DynamixelBus(make_config(emulator.port, connect_timeout_s=10.0))  # 4 waits of 1 s
     bus.connect()
     try:
         assert bus.read_register(2, Reg.ID) == 2

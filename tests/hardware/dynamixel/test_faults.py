@@ -27,7 +27,7 @@ def test_one_bad_reply_is_retried_and_counted(bus: DynamixelBus, emulator, fault
     assert (stats.failed_tries, stats.retries, stats.failures) == (1, 1, 0)
 
 
-@pytest.mark.slow  # three tries of a 0.3 s reply timeout per case
+@pytest.mark.slow  # three tries of a 1 s reply timeout per case
 @pytest.mark.parametrize(
     ("fault", "reason"),
     [
