@@ -21,7 +21,7 @@ test: $(BIN)/.installed browser
 	$(BIN)/ruff format --check .
 	$(BIN)/lint-imports
 	$(BIN)/mypy kinematics hardware
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n auto --maxprocesses=4 --dist loadfile
 
 # Lint and every test but the slow (> ~3 s: end-to-end runs, the wheel build) and browser ones.
 test-fast: $(BIN)/.installed

@@ -43,6 +43,7 @@ def _calibrations(settings: Settings) -> tuple[JointCalibration, ...]:
 # servo's reply miss with two test workers beside two CPU hogs.
 EMULATOR_REPLY_WAIT_S = 0.25
 SIM_TIME_REPLY_WAIT_S = 0.5
+EMULATOR_CONNECT_S = 5.0
 
 
 def _dynamixel(
@@ -56,6 +57,9 @@ def _dynamixel(
         baudrate=hw.baud,
         max_tries=hw.max_tries,
         min_reply_wait_s=reply_wait_s if emulated else 0.0,
+        # an emulator thread or process not yet scheduled on a loaded machine answers its
+        # first pings late: a few of its reply waits are not a servo missing
+        connect_timeout_s=EMULATOR_CONNECT_S if emulated else 1.0,
     )
     return DynamixelBus(config)
 
