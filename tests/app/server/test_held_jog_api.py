@@ -76,7 +76,9 @@ def test_a_held_jog_stops_by_itself_when_the_client_stops_sending(client) -> Non
         "heartbeat (status polling resolution; see benchmarks/jog_deadman.py)"
     )
     assert end[0] - start[0] > 0.005  # it did move while held
-    assert np.abs(end[1:] - start[1:]).max() < 1e-6  # along +x only
+    # along +x only: a wrong axis or sign is millimetres off; the joint step limit on a
+    # late tick bends the commanded path by a micrometre or two
+    assert np.abs(end[1:] - start[1:]).max() < 1e-5
     snap = status(client)
     assert snap["mode"] == "jog" and "no heartbeat" in snap["notice"]
     assert snap["goal"]["position_m"] == pytest.approx(list(end), abs=1e-9)
