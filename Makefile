@@ -21,13 +21,13 @@ test: $(BIN)/.installed browser
 	$(BIN)/ruff format --check .
 	$(BIN)/lint-imports
 	$(BIN)/mypy kinematics hardware
-	$(BIN)/pytest -q -n auto --maxprocesses=4 --dist loadfile
+	$(BIN)/pytest -q -n auto --maxprocesses=4 --dist loadgroup
 
 # Lint and every test but the slow (> ~3 s: end-to-end runs, the wheel build) and browser ones.
 test-fast: $(BIN)/.installed
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/pytest -q -n auto --maxprocesses=4 --dist loadfile -m "not slow and not browser"
+	$(BIN)/pytest -q -n auto --maxprocesses=4 --dist loadgroup -m "not slow and not browser"
 
 # The scene's browser test drives Debian's chromium (no browser download); if it cannot be
 # installed here (not root, no apt) the test skips and says so.

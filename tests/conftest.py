@@ -2,6 +2,7 @@
 
 import os
 
+import pytest
 from hypothesis import HealthCheck, settings
 
 # CI replays the same examples every run (derandomize): a red CI is a real, reproducible
@@ -31,3 +32,24 @@ def pytest_unconfigure(config):  # pragma: no cover - diagnostics
     for thread in alive:
         where = traceback.format_stack(frames[thread.ident])[-2:] if thread.ident in frames else []
         print(f"\nthread alive at exit: {thread.name}\n{''.join(where)}", file=sys.stderr)
+
+
+# Where real time is the point (a real chromium, the emulator's replies on a pty in wall
+# time), tests run one after another in one worker: chromium's software WebGL can take both
+# cores for seconds, and an emulator thread descheduled that long misses its replies.
+REAL_TIME_GROUP = "real-time"
+REAL_TIME_FOLDERS = ("tests/hardware/dynamixel/", "tests/hardware/emulator/")
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the groups
+def pytest_collection_modifyitems(config, items):
+    """With ``--dist loadgroup`` (make test, make test-fast): each module is a group (its
+    fixtures stay in one worker, as ``loadfile``), except that every real-time test (the
+    comment above) is in one group of its own. (pytest 9.2 broke xdist's groups,
+    pytest-dev/pytest-xdist#1386: pyproject.toml keeps pytest below it.)"""
+    for item in items:
+        if item.get_closest_marker("xdist_group"):
+            continue
+        path = item.nodeid.split("::")[0]
+        real_time = item.get_closest_marker("browser") or path.startswith(REAL_TIME_FOLDERS)
+        item.add_marker(pytest.mark.xdist_group(REAL_TIME_GROUP if real_time else path))
