@@ -49,8 +49,9 @@ class RunRequest(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
 
     def params(self) -> TimedPath:
-        """The path these parameters give (SI units, base frame)."""
-        raise NotImplementedError
+        """The path these parameters give (SI units, base frame). Abstract: every request
+        model of the registry defines it (tests/runs/test_run_types.py builds each)."""
+        raise NotImplementedError(f"{type(self).__name__} is not a registered run type")
 
 
 def _triple(values: list[float]) -> tuple[float, float, float]:
