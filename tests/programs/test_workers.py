@@ -30,6 +30,7 @@ from app.programs.workers import (
     WorkerTimeout,
     run_check,
 )
+from tests.support.pids import say_pid
 from tests.support.wait import wait_for
 
 GOOD = "G21 G90\nG1 F1200 X0 Y0 Z-220\nG2 X10 Y0 I5 J0\nG4 P0.2\nG0 X0\nM2"
@@ -48,7 +49,7 @@ def pid_and_check(job: CheckJob) -> tuple[int, int, object]:
 
 def pid_then_wait(pid_file: str) -> None:
     """Say the worker's pid, then never answer (until killed)."""
-    Path(pid_file).write_text(str(os.getpid()))
+    say_pid(pid_file)
     while True:
         time.sleep(1.0)
 

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import os
 import time
-from pathlib import Path
 
 from app.programs.check import CheckedProgram
 from app.programs.workers import CheckJob, run_check
+from tests.support.pids import say_pid
 
 STARTED_ENV = "SLOW_CHECK_STARTED"
 HOLD_S = 600.0  # ten times tests.support.server.WAIT_S (not imported: the worker imports this)
@@ -24,12 +24,7 @@ PREAMBLE = "import tests.support.slow_checks as slow; slow.install()"
 
 def slow_check(job: CheckJob) -> CheckedProgram:
     """In the worker: say so, hold HOLD_S (or until the server is gone), then check."""
-    # written whole, then renamed into place: the test polls for the file and reads the
-    # pid at once (CI read an empty file created but not yet written)
-    started = Path(os.environ[STARTED_ENV])
-    partial = started.with_name(started.name + ".partial")
-    partial.write_text(str(os.getpid()))
-    partial.replace(started)
+    say_pid(os.environ[STARTED_ENV])
     server, end = os.getppid(), time.monotonic() + HOLD_S
     while time.monotonic() < end and os.getppid() == server:
         time.sleep(0.2)

@@ -7,11 +7,11 @@ import os
 import signal
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.support.pids import say_pid
 from tests.support.wait import ok_json, wait_for
 
 START = [0.0, 0.0, -0.22]
@@ -100,7 +100,7 @@ def test_the_check_runs_outside_the_server_process(client, monkeypatch):
 
 def say_pid_then_wait(job) -> None:
     """In the worker, instead of the check: the pid to the file the program text names."""
-    Path(job.text).write_text(str(os.getpid()))
+    say_pid(job.text)
     while True:
         time.sleep(1.0)
 
