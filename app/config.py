@@ -438,6 +438,13 @@ class ServerSettings(_Section):
     )
     telemetry_hz: float = Field(50.0, gt=0, le=200, description="WebSocket telemetry rate")
     lease_timeout_s: float = Field(30.0, gt=0, description="control lease lapses when idle")
+    command_timeout_s: float = Field(
+        2.0,
+        gt=0,
+        le=60,
+        description="a command (goal, jog, torque, e-stop, reset) waits this long for the "
+        "control loop to run it, then is answered 503",
+    )
     max_body_bytes: int = Field(
         1 << 20, ge=1024, description="larger request bodies are refused unread (413) [bytes]"
     )

@@ -70,7 +70,9 @@ def _start_estop_listener(settings: Settings, receipts: EstopReceipts) -> EstopL
     if not server.estop_listener:
         return None
     try:
-        return EstopListener(receipts, server.host, server.estop_port, server.http_port)
+        return EstopListener(
+            receipts, server.host, server.estop_port, server.http_port, server.command_timeout_s
+        )
     except OSError as exc:
         log.warning("e-stop listener not started on port %s: %s", server.estop_port, exc)
         return None

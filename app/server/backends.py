@@ -60,6 +60,8 @@ def _dynamixel(
         # an emulator thread or process not yet scheduled on a loaded machine answers its
         # first pings late: a few of its reply waits are not a servo missing
         connect_timeout_s=EMULATOR_CONNECT_S if emulated else 1.0,
+        # and pings after a reboot the same: 2 s is four of its sim-time reply waits
+        reboot_timeout_s=EMULATOR_CONNECT_S if emulated else 2.0,
     )
     return DynamixelBus(config)
 

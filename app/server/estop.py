@@ -53,7 +53,6 @@ ESTOP_PATH = "/api/estop"
 LISTENER_PATH = "/estop"
 READY_PATH = "/ready"  # GET: 204, nothing else; the page keeps its connection warm with it
 SCOPE_KEY = "deltadash.estop"  # the latched command's Future, for the route
-ANSWER_TIMEOUT_S = 2.0  # the route's COMMAND_TIMEOUT_S
 IDLE_TIMEOUT_S = 30.0  # a kept-alive connection idle this long is closed
 MAX_BODY_BYTES = 1024  # a body is never needed; a larger one is not read (connection closed)
 MAX_CONNECTIONS = 32  # beyond, the longest-waiting one is closed for the new one
@@ -176,7 +175,7 @@ class _Handler(BaseHTTPRequestHandler):
         future = self.server.receipts.press("listener", press_id(parts.query))
         self._skip_body()  # after the stop is latched: nothing waits for a body
         try:
-            result = future.result(timeout=ANSWER_TIMEOUT_S)
+            result = future.result(timeout=self.server.answer_timeout_s)
         except FutureTimeout:
             self._answer(503, {"detail": "the control loop did not answer in time"})
         except Exception as exc:  # the loop is not running, a bus error: say so, as a 503
@@ -237,6 +236,7 @@ class _Server(ThreadingHTTPServer):
     daemon_threads = True
     receipts: EstopReceipts
     page_port: int
+    answer_timeout_s: float
 
     def __init__(self, address: tuple[str, int], handler: type[_Handler]) -> None:
         super().__init__(address, handler)
@@ -285,14 +285,24 @@ class EstopListener:
     """``POST /estop`` on ``host:port`` in a thread of its own (see the module doc).
 
     receipts: the presses' record, which stops the loop; page_port: the dashboard's HTTP
-    port (the origin allowed to read the answers). ``port`` is the bound one (0 in the
-    config picks a free one). Raises OSError when the port cannot be bound.
+    port (the origin allowed to read the answers); answer_timeout_s: how long a press
+    waits for the loop's answer [s] (the routes' ``server.command_timeout_s``), then a 503.
+    ``port`` is the bound one (0 in the config picks a free one). Raises OSError when the
+    port cannot be bound.
     """
 
-    def __init__(self, receipts: EstopReceipts, host: str, port: int, page_port: int) -> None:
+    def __init__(
+        self,
+        receipts: EstopReceipts,
+        host: str,
+        port: int,
+        page_port: int,
+        answer_timeout_s: float = 2.0,
+    ) -> None:
         self._server = _Server((host, port), _Handler)
         self._server.receipts = receipts
         self._server.page_port = page_port
+        self._server.answer_timeout_s = answer_timeout_s
         self.port: int = self._server.server_address[1]
         self._thread = threading.Thread(
             target=self._server.serve_forever,

@@ -19,6 +19,7 @@ from fastapi.testclient import TestClient
 from app.config import load_settings
 from app.server import create_app
 from app.server.backends import open_backend
+from tests.support.server import COMMAND_WAIT_S
 from tests.support.sim_time import driving
 from tests.support.wait import ok_json, wait_for
 
@@ -71,7 +72,12 @@ def make_client(
     compare); False where real time is the point.
     """
     hardware = {"backend": backend, **overrides.pop("hardware", {})}
-    server = {"scene": False, "viser_port": 0, **overrides.pop("server", {})}
+    server = {
+        "scene": False,
+        "viser_port": 0,
+        "command_timeout_s": COMMAND_WAIT_S,
+        **overrides.pop("server", {}),
+    }
     runs = {"folder": str(runs_folder), **overrides.pop("runs", {})}
     settings = load_settings(hardware=hardware, server=server, runs=runs, **overrides)
     if sim_time is None:

@@ -34,6 +34,7 @@ def fast(emulator: ServoEmulator) -> ServoEmulator:
 # 0.25 s still let a healthy servo's reply miss with two workers beside two hogs; a wait
 # costs only where a reply is really missing (a dropped or unplugged servo's test).
 EMULATOR_REPLY_WAIT_S = 1.0
+REBOOT_WAIT_S = 10.0  # how long a rebooted emulated servo may stay silent
 
 
 def make_config(port: str, **overrides: object) -> DynamixelConfig:
@@ -41,6 +42,9 @@ def make_config(port: str, **overrides: object) -> DynamixelConfig:
     settings = {"joints": joints, "port": port, "baudrate": BAUD, **overrides}
     if "rx_timeout_s" not in overrides:
         settings.setdefault("min_reply_wait_s", EMULATOR_REPLY_WAIT_S)
+    # the product's 2 s is two of these tests' pings: CI's loaded run saw a servo back
+    # after its Reboot, unheard within it
+    settings.setdefault("reboot_timeout_s", REBOOT_WAIT_S)
     return DynamixelConfig(**settings)  # type: ignore[arg-type]
 
 

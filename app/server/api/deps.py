@@ -37,6 +37,11 @@ def get_settings(connection: HTTPConnection) -> Settings:
     return connection.app.state.settings
 
 
+def get_command_wait(connection: HTTPConnection) -> float:
+    """How long a command waits for the control loop to run it [s] (then a 503)."""
+    return connection.app.state.settings.server.command_timeout_s
+
+
 def get_runs(connection: HTTPConnection) -> RunManager:
     return connection.app.state.runs
 
@@ -145,6 +150,7 @@ def require_control(
 
 ControllerDep = Annotated[Controller, Depends(get_controller)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
+CommandWait = Annotated[float, Depends(get_command_wait)]
 RunsDep = Annotated[RunManager, Depends(get_runs)]
 ProgramWorkersDep = Annotated[ProgramWorkers, Depends(get_program_workers)]
 QueriesDep = Annotated[WorkspaceQueries, Depends(get_queries)]

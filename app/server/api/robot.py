@@ -14,6 +14,7 @@ from app.server import estop
 from app.server.api import serialize
 from app.server.api.deps import (
     AuthorityDep,
+    CommandWait,
     ControlClient,
     ControllerDep,
     EstopReceiptsDep,
@@ -32,12 +33,12 @@ from app.server.api.responses import LeaseOut, LeaseTaken, StatusOut
 from app.server.errors import CONFLICT, CONTROL, INVALID, UNAUTHORISED, UNAVAILABLE
 
 router = APIRouter(tags=["robot"])
-COMMAND_TIMEOUT_S = 2.0
 
 
-async def _outcome(future: Future) -> Accepted:
-    """Wait for the control thread to run a command; its exceptions map to HTTP errors."""
-    result = await asyncio.wait_for(asyncio.wrap_future(future), COMMAND_TIMEOUT_S)
+async def _outcome(future: Future, timeout_s: float) -> Accepted:
+    """Wait up to ``timeout_s`` [s] for the control thread to run a command (a 503 past it:
+    ``server.command_timeout_s``); its exceptions map to HTTP errors."""
+    result = await asyncio.wait_for(asyncio.wrap_future(future), timeout_s)
     return Accepted(result=result)
 
 
@@ -51,24 +52,30 @@ def get_status(
 
 
 @router.post("/goal", response_model=Accepted, responses=CONTROL)
-async def post_goal(body: GoalRequest, controller: ControllerDep, _: ControlClient):
+async def post_goal(
+    body: GoalRequest, controller: ControllerDep, wait_s: CommandWait, _: ControlClient
+):
     """Move the tool tip to a goal (base frame) at wrist angle ``phi_rad``; refused with the
     nearest tip if the platform point it implies is outside the workspace."""
-    return await _outcome(controller.set_goal(body.position_m, body.phi_rad))
+    return await _outcome(controller.set_goal(body.position_m, body.phi_rad), wait_s)
 
 
 @router.post("/jog", response_model=Accepted, responses=CONTROL)
-async def post_jog(body: JogRequest, controller: ControllerDep, _: ControlClient):
+async def post_jog(
+    body: JogRequest, controller: ControllerDep, wait_s: CommandWait, _: ControlClient
+):
     """A relative step [m] (``delta_m``), clamped onto the workspace; or hold-to-move
     (``velocity_m_s``): the jog moves only while this is repeated, braking 0.15 s after the
     last one (a dead man's switch for browsers), and a zero velocity stops it."""
     if body.velocity_m_s is not None:
-        return await _outcome(controller.hold_jog(body.velocity_m_s))
-    return await _outcome(controller.jog(body.delta_m))
+        return await _outcome(controller.hold_jog(body.velocity_m_s), wait_s)
+    return await _outcome(controller.jog(body.delta_m), wait_s)
 
 
 @router.post("/move", response_model=Accepted, responses=CONTROL)
-async def post_move(body: MoveRequest, controller: ControllerDep, _: ControlClient):
+async def post_move(
+    body: MoveRequest, controller: ControllerDep, wait_s: CommandWait, _: ControlClient
+):
     """Smooth move-to a point or joint angles, along a Cartesian or joint-space path."""
     future = controller.move(
         point=body.position_m,
@@ -77,17 +84,21 @@ async def post_move(body: MoveRequest, controller: ControllerDep, _: ControlClie
         joint_space=body.space == "joint",
         phi_rad=body.phi_rad,
     )
-    return await _outcome(future)
+    return await _outcome(future, wait_s)
 
 
 @router.post("/torque", response_model=Accepted, responses=CONTROL)
-async def post_torque(body: TorqueRequest, controller: ControllerDep, _: ControlClient):
+async def post_torque(
+    body: TorqueRequest, controller: ControllerDep, wait_s: CommandWait, _: ControlClient
+):
     """Enable torque (holding where the robot is) or relax the servos."""
-    return await _outcome(controller.set_torque(body.enabled))
+    return await _outcome(controller.set_torque(body.enabled), wait_s)
 
 
 @router.post("/estop", response_model=Accepted, responses=UNAVAILABLE)
-async def post_estop(request: Request, _: ControllerDep, receipts: EstopReceiptsDep):
+async def post_estop(
+    request: Request, _: ControllerDep, receipts: EstopReceiptsDep, wait_s: CommandWait
+):
     """Stop at once; holds or releases torque per config. Open to anyone (no token, no
     lease): whoever sees the robot about to hurt someone may stop it. Latched before
     routing by the outermost middleware (app/server/estop.py); also served by the e-stop
@@ -98,15 +109,17 @@ async def post_estop(request: Request, _: ControllerDep, receipts: EstopReceipts
     measured from it."""
     latched = request.scope.get(estop.SCOPE_KEY)
     route = receipts.press("route", estop.valid_press(request.query_params.get("press")))
-    return await _outcome(latched if latched is not None else route)
+    return await _outcome(latched if latched is not None else route, wait_s)
 
 
 @router.post("/reset", response_model=Accepted, responses=CONTROL)
-async def post_reset(controller: ControllerDep, world: WorldDep, _: ControlClient):
+async def post_reset(
+    controller: ControllerDep, world: WorldDep, wait_s: CommandWait, _: ControlClient
+):
     """Clear e-stop and faults; reboots servos that report hardware errors; restarts a pose
     input (UDP, MAVLink) whose listener died (GET /api/mav/pose ``sources``)."""
     await asyncio.to_thread(world.restart_inputs)
-    return await _outcome(controller.reset())
+    return await _outcome(controller.reset(), wait_s)
 
 
 @router.get("/lease", response_model=LeaseOut)
