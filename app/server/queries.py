@@ -31,8 +31,13 @@ import numpy as np
 
 from app.config import Settings
 from app.control.gate import Gate
+from app.programs import workers
 from app.programs.workers import ChecksBusy, ProgramWorkers, WorkerError
 from app.server import sections
+
+# a worker unpickles sections.nearest by importing app.server.sections, and with it the
+# app.server package (the whole server): ~2 s per worker unless the fork server has it
+workers.preload(sections.__name__)
 
 SLOTS = 1  # worker processes at once (~150 MB; one core stays the loop's); a second is refused
 TIMEOUT_S = 60.0  # the longest a query may take, its worker's start included [s]

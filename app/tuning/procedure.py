@@ -53,6 +53,7 @@ from app.control.controller import Controller
 from app.control.errors import MotionRefused
 from app.procedures.lifecycle import Ending, ProcedureManager, ProcedureRun, Stopped
 from app.procedures.states import TUNING_RUNNING, State
+from app.programs import workers
 from app.programs.workers import (
     ChecksBusy,
     ChecksStopped,
@@ -70,6 +71,7 @@ from hardware.bus import PositionGains
 from hardware.calibration import SECTION, save
 
 log = logging.getLogger(__name__)
+workers.preload(run_offer.__module__)  # the twin check's worker imports it: once, not each
 START_M = (0.0, 0.0, -0.24)  # where both runs start (the runs' default offset) [m]
 STEP = StepParams(size_m=0.004, duration_s=1.5, offset_m=START_M)
 CHIRP = ChirpParams(amplitude_m=0.003, f0_hz=0.5, f1_hz=8.0, duration_s=6.0, offset_m=START_M)

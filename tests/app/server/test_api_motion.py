@@ -191,13 +191,20 @@ def test_a_servo_shut_down_by_an_overload_shows_torque_off(client, fresh):
     wait_for(lambda: _status(fresh)["faults"] == [], "the fault to clear")
 
 
-def test_missed_reads_fault_after_the_limit(client, fresh):
+def test_missed_reads_fault_after_the_limit(client, fresh, monkeypatch):
+    # each missed read waits out the emulated bus's reply wait on its every try (wall
+    # time): two reads of one try each, not the config's ten of three, are this test's
+    misses = client.app.state.controller.state.misses
+    monkeypatch.setattr(misses, "limit", 2)
+    monkeypatch.setattr(client.app.state.backend.bus.link, "max_tries", 1)
     emulator = client.app.state.backend.emulator
     emulator.inject(3, unplugged=True)
     try:
         wait_for(lambda: _status(fresh)["mode"] == "fault", "the bus fault")
-        fault = _status(fresh)["faults"][0]
+        status = _status(fresh)
+        fault = status["faults"][0]
         assert fault["source"] == "bus" and "3" in fault["reason"]
+        assert status["bus"]["missed_reads"] >= 2
     finally:
         emulator.clear_faults()
     fresh.post("/api/reset")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -60,10 +61,10 @@ def test_a_repeated_query_is_answered_from_the_kept_answers(queries, gate):
     assert again is cut and cut.reachable.any()
 
 
-def test_a_query_waits_its_turn_and_one_beyond_the_queue_is_refused_at_once(gate):
+def test_a_query_waits_its_turn_and_one_beyond_the_queue_is_refused_at_once(gate, release):
     queries = WorkspaceQueries(load_settings(), slots=1, timeout_s=60, queue=1, wait_s=60)
     try:
-        blocked = threading.Thread(target=queries.call, args=(_sleep, 3.0), daemon=True)
+        blocked = threading.Thread(target=queries.call, args=(_hold, release), daemon=True)
         blocked.start()
         wait_for(lambda: not queries._workers._free, "the only worker busy")
         waited: list = []
@@ -74,6 +75,7 @@ def test_a_query_waits_its_turn_and_one_beyond_the_queue_is_refused_at_once(gate
         wait_for(lambda: not queries._places._value, "the queue full")
         with pytest.raises(QueriesBusy, match="busy"):
             queries.nearest(gate, FAR + 3e-3, 0.0)
+        Path(release).touch()  # the worker is free: the waiting query's turn
         waiting.join(timeout=120)
         np.testing.assert_allclose(waited[0], sections.nearest(gate, FAR + 2e-3, 0.0))
         blocked.join()
@@ -81,23 +83,37 @@ def test_a_query_waits_its_turn_and_one_beyond_the_queue_is_refused_at_once(gate
         queries.close()
 
 
-def test_a_query_that_waited_too_long_is_refused(gate):
+def test_a_query_that_waited_too_long_is_refused(gate, release):
     queries = WorkspaceQueries(load_settings(), slots=1, timeout_s=60, queue=1, wait_s=0.0)
     try:
-        blocked = threading.Thread(target=queries.call, args=(_sleep, 3.0), daemon=True)
+        blocked = threading.Thread(target=queries.call, args=(_hold, release), daemon=True)
         blocked.start()
         wait_for(lambda: not queries._workers._free, "the only worker busy")
         with pytest.raises(QueriesBusy, match="busy"):
             queries.nearest(gate, FAR + 4e-3, 0.0)
+        Path(release).touch()
         blocked.join()
     finally:
         queries.close()
 
 
-def _sleep(seconds: float) -> None:
+def _hold(release: str) -> None:
+    """In the worker: keep it busy until the test creates the file ``release`` (60 s at
+    most, so a failed test leaves no worker behind)."""
     import time
+    from pathlib import Path
 
-    time.sleep(seconds)
+    end = time.monotonic() + 60.0
+    while not Path(release).exists() and time.monotonic() < end:
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def release(tmp_path) -> Iterator[str]:
+    """The file whose creation lets :func:`_hold` end; created at the end in any case."""
+    path = tmp_path / "release"
+    yield str(path)
+    path.touch()
 
 
 @pytest.fixture(scope="module")
@@ -107,7 +123,7 @@ def client(tmp_path_factory):
         yield client
 
 
-def test_the_routes_answer_from_the_workers_and_say_when_busy(client):
+def test_the_routes_answer_from_the_workers_and_say_when_busy(client, release):
     app = client.app
     queries = app.state.queries
     asked = queries.asked
@@ -121,7 +137,7 @@ def test_the_routes_answer_from_the_workers_and_say_when_busy(client):
 
     queries.wait_s = 0.0  # no waiting for the worker here: busy at once
     blockers = [
-        threading.Thread(target=queries.call, args=(_sleep, 3.0), daemon=True)
+        threading.Thread(target=queries.call, args=(_hold, release), daemon=True)
         for _ in range(queries._workers.slots)
     ]
     for blocker in blockers:
@@ -133,6 +149,7 @@ def test_the_routes_answer_from_the_workers_and_say_when_busy(client):
     # a refused goal is still a 422, with the gate's own nearest workspace point
     still = client.post("/api/goal", json={"position_m": [0.56, 0.45, -0.12]})
     assert still.status_code == 422 and len(still.json()["nearest_m"]) == 3
+    Path(release).touch()
     for blocker in blockers:
         blocker.join()
     queries.wait_s = WAIT_S
