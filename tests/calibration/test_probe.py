@@ -189,6 +189,7 @@ def test_one_plate_cannot_see_the_robot_scaled_with_the_plate_moved() -> None:
     assert sigma2[-1] > 1e-5 * sigma2[0], sigma2 / sigma2[0]
 
 
+@pytest.mark.slow  # many fits: seconds of CPU
 def test_the_stated_standard_deviation_is_the_scatter_of_fits() -> None:
     """The report's sd of the weak direction (one plate, plate height free, 0.1 mm of
     noise) against the scatter of that direction over fits of 16 noise draws."""

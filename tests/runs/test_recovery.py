@@ -92,6 +92,7 @@ def test_a_crashed_run_is_interrupted_with_stats_from_its_logged_ticks(restarted
     assert saved["state"] == "interrupted"  # once: a later start does not redo it
 
 
+@pytest.mark.slow  # an app restarted on the twin
 def test_a_crashed_runs_files_are_served_and_its_mcap_is_whole(restarted):
     client, seen = restarted
     base = f"/api/runs/{seen['crashed']}"

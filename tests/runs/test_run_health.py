@@ -73,6 +73,7 @@ class Once:
             self.stop()
 
 
+@pytest.mark.slow  # a run on the twin
 def test_a_healthy_run_is_not_flagged_and_logs_its_tick_figures(tmp_path):
     bus = FakeBus(sim_step_s=0.005)
     with loop(bus, tmp_path, VirtualTickClock(HZ)) as controller:
@@ -91,6 +92,7 @@ def test_a_healthy_run_is_not_flagged_and_logs_its_tick_figures(tmp_path):
     assert {r["stale"] for r in rows} == {"False"} and {r["overrun"] for r in rows} == {"False"}
 
 
+@pytest.mark.slow  # a run on the twin
 def test_a_starved_loop_is_flagged_with_its_pause(tmp_path):
     ticks = VirtualTickClock(HZ)
     stall = Once(lambda: ticks.stalls.update({ticks.ticks + 1: 0.1}), lambda: None, 1)
@@ -104,6 +106,7 @@ def test_a_starved_loop_is_flagged_with_its_pause(tmp_path):
     assert health["reasons"][0] == "the loop paused 105 ms between two ticks (limit 20 ms)"
 
 
+@pytest.mark.slow  # a run on the twin
 def test_a_paused_simulator_is_flagged_as_stale_feedback_not_a_lagging_joint(tmp_path):
     bus = FakeBus(sim_step_s=0.005)
     pause = Once(lambda: setattr(bus, "paused", True), lambda: setattr(bus, "paused", False), 40)
@@ -122,6 +125,7 @@ def test_a_paused_simulator_is_flagged_as_stale_feedback_not_a_lagging_joint(tmp
     )
 
 
+@pytest.mark.slow  # a run on the twin
 def test_a_simulator_paused_too_long_faults_naming_stale_feedback(tmp_path):
     bus = FakeBus(sim_step_s=0.005)
     pause = Once(lambda: setattr(bus, "paused", True), lambda: setattr(bus, "paused", False), 400)

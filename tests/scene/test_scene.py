@@ -11,6 +11,7 @@ import sys
 import time
 
 import numpy as np
+import pytest
 import viser
 
 from app.scene.geometry import robot_lines
@@ -160,6 +161,7 @@ def test_tracking_error_plot_keeps_the_window(scene):
     assert len(times) >= 2 and times.min() >= -10.0 - 1e-9 and math.isclose(times.max(), 0.0)
 
 
+@pytest.mark.slow  # a second app and scene
 def test_a_linear_delta_draws_as_one():
     from app.scene.robot_view import RobotView
     from app.scene.workspace_view import WorkspaceView

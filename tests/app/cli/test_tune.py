@@ -173,6 +173,7 @@ def test_tune_suggests_the_checks_choice_never_a_set_it_failed(served, capsys):
     assert body["suggested"][sid] == chosen["gains"][sid] != gains_out(rule)
 
 
+@pytest.mark.slow  # a tuning run on the twin, through the CLI
 def test_tune_says_when_no_candidate_met_the_goal(served, capsys):
     FAIL_ALL["on"] = True
     assert main(["tune", "--url", URL, "--joints", "1"]) == 0  # the closest is still offered

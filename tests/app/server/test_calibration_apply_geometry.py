@@ -90,6 +90,7 @@ def _bottom(client) -> np.ndarray:
     return lowest + 3e-4 * (CENTRE_M - lowest) / np.linalg.norm(CENTRE_M - lowest)
 
 
+@pytest.mark.slow  # a motion on the twin
 def test_apply_is_refused_while_a_motion_runs_and_changes_nothing(client, config) -> None:
     torque_on(client)
     _done_run(client, SHORT_RODS, "cal-moving")

@@ -46,6 +46,7 @@ def _finished(client, run_id: str) -> dict:
     return wait_for(ended, f"probe run {run_id} to end", RUN_S, poll_s=0.2)
 
 
+@pytest.mark.slow  # a probing run on the twin
 def test_a_probe_run_finds_the_offsets_and_after_apply_nothing_is_left(client) -> None:
     run_id = _start(client, poses=32, parameters="offsets", source="probe", plate_z_m=PLATE_M)
     planned = ok_json(client.get(f"/api/calibration/{run_id}"))

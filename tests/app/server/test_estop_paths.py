@@ -134,6 +134,7 @@ def test_one_kept_alive_connection_serves_presses_and_a_large_body_is_not_read(f
     assert wait_for(lambda: status(fresh)["estopped"], "the e-stop with a large body")
 
 
+@pytest.mark.slow  # connections held past the listener's header timeout (wall time)
 def test_connections_held_open_or_trickling_cannot_lock_a_press_out(fresh):
     """A slowloris: every one of the listener's connections held by a client that sends
     nothing, or a header one byte at a time. A new press still gets in (the longest-waiting

@@ -75,6 +75,7 @@ def test_the_offered_point_is_taken_by_the_gate_and_no_farther_than_needed(gate,
     assert distance <= grid + TOLERANCE_M, (why, distance, grid)
 
 
+@pytest.mark.slow  # seeded goals, a nearest-point search each
 def test_random_goals_beyond_the_joint_limits_get_a_point_the_gate_takes(gate):
     """Many goals inside the workspace but refused by a joint limit or the singularity
     margin, and many outside it: each offered point is taken."""

@@ -225,6 +225,7 @@ def test_with_torque_off_a_run_is_refused_as_such_before_any_check(fresh, monkey
     assert response.json()["detail"].startswith("torque is off")
 
 
+@pytest.mark.slow  # a long program's check in a worker
 def test_a_program_too_long_for_a_run_fails_its_check_as_the_run_refuses_it(fresh):
     """The check says in advance what the run refuses: a program over runs.max_samples
     (checkable up to programs.max_samples) has a run_duration violation, and the run's

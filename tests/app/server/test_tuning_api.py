@@ -103,6 +103,7 @@ class StandInCheck:
         )
 
 
+@pytest.mark.slow  # a tuning run on the twin, its check in a worker
 def test_gains_that_miss_the_goal_are_applied_only_when_the_operator_confirms(client):
     """Issue 28 point 5: a set with met_goal false was applied like any other. Now the
     409 says what it misses, and ``confirm_missed`` applies it."""

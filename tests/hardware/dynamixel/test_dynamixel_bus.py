@@ -46,6 +46,7 @@ def test_dynamixel_bus_is_a_servo_bus(bus: DynamixelBus) -> None:
     assert isinstance(bus, ServoBus)
 
 
+@pytest.mark.slow  # absent ids wait out their reply waits (wall time)
 def test_scan_reports_model_and_firmware_and_skips_absent(bus: DynamixelBus) -> None:
     found = bus.scan([1, 2, 3, 42])
     assert [(s.servo_id, s.model_number, s.firmware_version) for s in found] == [
@@ -228,6 +229,7 @@ def test_connect_names_missing_servos(emulator: ServoEmulator) -> None:
         bus.connect()
 
 
+@pytest.mark.slow  # the emulator answers late on purpose (wall time)
 def test_connect_waits_for_a_servo_slow_to_answer(emulator: ServoEmulator) -> None:
     # Servo 2 misses its first four pings (one round of three tries, and one more), as a
     # servo still booting or an emulator not yet scheduled on a loaded machine does.
@@ -302,6 +304,7 @@ def test_stats_count_transactions(bus: DynamixelBus) -> None:
     assert (stats.failed_tries, stats.retries, stats.failures) == (0, 0, 0)
 
 
+@pytest.mark.slow  # absent ids wait out their reply waits (wall time)
 def test_bad_ids_are_named(bus: DynamixelBus) -> None:
     with pytest.raises(CommError, match="read ID on servo 42 failed after 3 tries"):
         bus.read_register(42, Reg.ID)

@@ -76,6 +76,7 @@ def test_an_unheard_reboot_is_sent_again(bus: DynamixelBus, emulator: ServoEmula
     assert not bus.read_state().faulted
 
 
+@pytest.mark.slow  # pings wait out their reply waits (wall time)
 def test_a_servo_that_does_not_come_back_is_named(emulator: ServoEmulator) -> None:
     bus = DynamixelBus(make_config(emulator.port, reboot_timeout_s=0.3))
     bus.connect()
