@@ -306,7 +306,8 @@ class EstopListener:
         self.port: int = self._server.server_address[1]
         self._thread = threading.Thread(
             target=self._server.serve_forever,
-            kwargs={"poll_interval": 0.5},
+            # shutdown() waits for the serving loop to look at its flag: at most one poll
+            kwargs={"poll_interval": 0.02},
             name="deltadash-estop",
             daemon=True,
         )
