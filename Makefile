@@ -4,6 +4,9 @@
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
+# Bytecode caches on, whatever the shell says: pytest keeps its assertion-rewritten test
+# modules there, and collecting from a warm cache takes half the time (docs/development.md).
+unexport PYTHONDONTWRITEBYTECODE
 
 .PHONY: run test test-fast lint bench clean browser
 

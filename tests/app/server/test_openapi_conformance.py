@@ -25,19 +25,28 @@ from hypothesis.errors import Unsatisfiable
 from tests.support.app_client import make_client
 from tests.support.lease import take_lease
 
-schemathesis = pytest.importorskip("schemathesis")
-from schemathesis.specs.openapi.checks import (  # noqa: E402
-    response_schema_conformance,
-    status_code_conformance,
-)
-
 pytestmark = pytest.mark.slow
 # 503 is the documented "not now" (the loop, a worker or a plan did not answer in time,
 # which a loaded machine may see: Retry-After); any other 5xx is a bug
-CHECKS = [status_code_conformance, response_schema_conformance]
 NOT_NOW = 503
 EXAMPLES = 10  # per operation and mode: about 48 operations x 2 modes, well under 90 s
 EXCLUDED: set[tuple[str, str]] = set()  # (method, path): none ends the server
+
+
+@pytest.fixture(scope="module")
+def schemathesis():
+    """schemathesis, imported here (not at collection: every test process would pay for it,
+    and pyproject.toml keeps its pytest plugin off, which this module does not use)."""
+    return pytest.importorskip("schemathesis")
+
+
+def checks() -> list[Any]:
+    from schemathesis.specs.openapi.checks import (
+        response_schema_conformance,
+        status_code_conformance,
+    )
+
+    return [status_code_conformance, response_schema_conformance]
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +56,7 @@ def app_client(tmp_path_factory):
         yield client
 
 
-def operations(client) -> list[Any]:
+def operations(schemathesis, client) -> list[Any]:
     schema = schemathesis.openapi.from_dict(client.get("/openapi.json").json())
     found = [result.ok() for result in schema.get_all_operations()]
     return [op for op in found if (op.method.upper(), op.path) not in EXCLUDED]
@@ -65,9 +74,9 @@ def send(client, case) -> Any:
 
 
 @pytest.mark.parametrize("mode", ["positive", "negative"])
-def test_answers_agree_with_the_openapi_document(app_client, mode):
+def test_answers_agree_with_the_openapi_document(schemathesis, app_client, mode):
     tested = []
-    for operation in operations(app_client):
+    for operation in operations(schemathesis, app_client):
         strategy = operation.as_strategy(generation_mode=schemathesis.GenerationMode(mode))
 
         @settings(
@@ -82,7 +91,7 @@ def test_answers_agree_with_the_openapi_document(app_client, mode):
             response = send(app_client, case)
             status = response.status_code
             assert status < 500 or status == NOT_NOW, (case.method, case.path, response.text)
-            case.validate_response(response, checks=CHECKS)
+            case.validate_response(response, checks=checks())
 
         try:
             call()
@@ -93,11 +102,11 @@ def test_answers_agree_with_the_openapi_document(app_client, mode):
     assert len(tested) > (40 if mode == "positive" else 20), tested
 
 
-def test_every_json_body_refused_as_invalid_fits_its_422_schema(app_client):
+def test_every_json_body_refused_as_invalid_fits_its_422_schema(schemathesis, app_client):
     """A JSON array where each body is an object: FastAPI's own validation error, which
     random cases may miss, checked against each route's documented 422."""
     take_lease(app_client)  # the generated cases before may have given control back
-    bodies = [op for op in operations(app_client) if op.body]
+    bodies = [op for op in operations(schemathesis, app_client) if op.body]
     assert len(bodies) >= 20
     for operation in bodies:
         names = re.findall(r"{(\w+)}", operation.path)  # servo 1, run or file "1"
@@ -106,4 +115,4 @@ def test_every_json_body_refused_as_invalid_fits_its_422_schema(app_client):
         )
         response = send(app_client, case)
         assert response.status_code == 422, (operation.path, response.text)
-        case.validate_response(response, checks=CHECKS)
+        case.validate_response(response, checks=checks())
