@@ -60,6 +60,7 @@ def test_offsets_recovered_within_a_tenth_of_a_degree_with_noise() -> None:
     np.testing.assert_allclose(result.frame.position_m, FRAME.position_m, atol=2e-3)
 
 
+@pytest.mark.slow
 def test_geometry_fit_recovers_rods_off_by_a_millimetre() -> None:
     true = NOMINAL.with_values(joint_offsets_rad=OFFSETS, l=(0.2440, 0.2425, 0.2430))
     chosen = plan(NOMINAL, 60, "geometry")

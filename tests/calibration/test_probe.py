@@ -53,6 +53,7 @@ def offsets_error_deg(result) -> np.ndarray:
     return np.degrees(np.subtract(result.robot.joint_offsets_rad, OFFSETS))
 
 
+@pytest.mark.slow
 def test_a_touch_is_where_the_true_platform_meets_the_plate() -> None:
     xy = probe_points(NOMINAL, PLATE_M, 12)
     q = simulate_touches(WRONG_RODS, NOMINAL, xy, PLATE_M, noise_m=0.0)
@@ -63,6 +64,7 @@ def test_a_touch_is_where_the_true_platform_meets_the_plate() -> None:
     assert np.abs(NOMINAL.fk(q).points[:, 2] - PLATE_M).max() > 1e-3
 
 
+@pytest.mark.slow
 def test_offsets_are_recovered_from_a_plate_of_known_height() -> None:
     q, z, held = touches(WRONG_OFFSETS)
     result = probe_fit(NOMINAL, q, z, held, "offsets")
@@ -79,6 +81,7 @@ def _dz_dcommon(joints: np.ndarray, step: float = 1e-6) -> np.ndarray:
     return (up[:, 2] - down[:, 2]) / (2 * step)
 
 
+@pytest.mark.slow
 def test_one_plate_can_hardly_tell_a_common_offset_from_the_plate_height() -> None:
     """By hand: turning all three joints by d lowers each touch by -dFK_z/dtheta d, which
     varies only a little over the plate (less at the rim than the centre); a plate stated
@@ -111,6 +114,7 @@ def test_one_plate_can_hardly_tell_a_common_offset_from_the_plate_height() -> No
     assert slopes.min() <= ratio <= slopes.max(), (ratio, slopes.min(), slopes.max())
 
 
+@pytest.mark.slow
 def test_two_plates_pin_the_common_offset_and_the_plate_height() -> None:
     q, z, held = touches(WRONG_OFFSETS, heights=(-0.2, -0.3), true_plate_dz=5e-4)
     result = probe_fit(NOMINAL, q, z, held, "offsets", plate_free=True)
@@ -120,6 +124,7 @@ def test_two_plates_pin_the_common_offset_and_the_plate_height() -> None:
     assert result.holdout_rmse_m < 3 * NOISE_M and result.better
 
 
+@pytest.mark.slow
 def test_one_plate_with_its_height_free_pins_the_differences_of_the_offsets() -> None:
     q, z, held = touches(WRONG_OFFSETS, true_plate_dz=5e-4)
     result = probe_fit(NOMINAL, q, z, held, "offsets", plate_free=True, noise_m=1e-4)
@@ -129,6 +134,7 @@ def test_one_plate_with_its_height_free_pins_the_differences_of_the_offsets() ->
     assert result.holdout_rmse_m < 3 * NOISE_M and result.better
 
 
+@pytest.mark.slow
 def test_a_geometry_fit_names_what_heights_cannot_pin_and_predicts_the_touches() -> None:
     q, z, held = touches(WRONG_RODS, heights=(-0.2, -0.3))
     result = probe_fit(NOMINAL, q, z, held, "geometry")
@@ -143,6 +149,7 @@ def test_a_geometry_fit_names_what_heights_cannot_pin_and_predicts_the_touches()
     assert np.all(np.abs(np.subtract(result.robot.l, NOMINAL.l)) <= 5e-3 + 1e-12)
 
 
+@pytest.mark.slow
 def test_an_outlier_touch_does_not_drag_the_fit() -> None:
     q, z, held = touches(WRONG_OFFSETS)
     z = z.copy()
@@ -151,6 +158,7 @@ def test_an_outlier_touch_does_not_drag_the_fit() -> None:
     assert np.all(np.abs(offsets_error_deg(result)) < 0.1), offsets_error_deg(result)
 
 
+@pytest.mark.slow
 def test_bad_input_names_the_field() -> None:
     with pytest.raises(CalibrationError, match="plate_z_m"):
         probe_points(NOMINAL, 0.05, 10)  # above the base
@@ -164,6 +172,7 @@ def test_bad_input_names_the_field() -> None:
         probe_fit(NOMINAL, q, z, held)
 
 
+@pytest.mark.slow
 def test_one_plate_cannot_see_the_robot_scaled_with_the_plate_moved() -> None:
     """By hand: scaling every length of the robot (L, l and R - r) by 1 + s scales every
     FK point by 1 + s, so every touch of a plate at z0 moves by the same s z0: exactly what

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -37,6 +38,7 @@ direction = -1
 """
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None)
 @given(robot=per_leg_deltas(), offsets=st.lists(st.floats(-0.2, 0.2), min_size=3, max_size=3))
 def test_the_config_written_and_read_back_gives_the_same_robot(tmp_path_factory, robot, offsets):

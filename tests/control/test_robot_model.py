@@ -118,6 +118,7 @@ def test_a_goal_outside_the_fitted_workspace_is_refused_though_the_nominal_reach
     assert np.linalg.norm(nearest - point) > 1e-3  # the rods are 1.5 - 2.5 mm shorter
 
 
+@pytest.mark.slow
 def test_and_the_other_way_round_a_goal_only_the_fitted_robot_reaches_is_accepted() -> None:
     loop, _, clock = _holding()
     nominal = loop.gate
@@ -130,6 +131,7 @@ def test_and_the_other_way_round_a_goal_only_the_fitted_robot_reaches_is_accepte
     np.testing.assert_allclose(loop.snapshot().point_measured_m, point, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_a_jog_is_clamped_onto_the_fitted_workspace() -> None:
     loop, _, clock = _holding()
     _apply(loop, SHORT_RODS)

@@ -119,6 +119,7 @@ def phi_seen(control: Controller) -> dict:
     return {k: getattr(snap, k) for k in keys} | {"faults": [f.reason for f in snap.faults]}
 
 
+@pytest.mark.slow
 def test_the_loop_turns_the_wrist_to_phi_at_its_speed_and_holds_it(controller) -> None:
     control, recording = controller
     assert isinstance(control.servos, WristBus) and control.bus is recording

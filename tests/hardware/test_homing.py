@@ -50,6 +50,7 @@ def test_homing_across_the_seam_is_refused_and_saves_nothing(
     assert bus.config.joints[1].zero_offset_ticks == 2048  # the bus keeps its calibration
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("raw", "direction"), [(2048, 1), (391, 1), (3182, 1), (3500, -1), (913, -1), (3704, -1)]
 )
@@ -85,6 +86,7 @@ def test_homing_reads_a_count_that_ran_past_the_seam_as_the_servo_will(
 ON_ITS_TURN_RAD = 0.05
 
 
+@pytest.mark.slow
 def test_extended_position_mode_homes_across_the_seam_and_keeps_its_turn(
     bus, emulator, tmp_path: Path
 ) -> None:

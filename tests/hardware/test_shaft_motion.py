@@ -27,6 +27,7 @@ def test_position_loop_settles_on_the_goal(goal: float, p_gain: int) -> None:
     assert final.position_rad == pytest.approx(goal, abs=1e-3)
 
 
+@pytest.mark.slow
 @given(st.floats(0.5, 3.0), st.floats(0.0, 5.0))
 def test_speed_respects_velocity_limit_and_profile(goal: float, profile: float) -> None:
     model = SimpleServoModel()

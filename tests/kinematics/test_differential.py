@@ -1,6 +1,7 @@
 """Velocity and acceleration kinematics against finite differences."""
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -24,6 +25,7 @@ def _fd_jacobian(robot, joints):
     return np.stack(columns, axis=-1)
 
 
+@pytest.mark.slow
 @given(robot_and_joints())
 def test_jacobian_matches_finite_differences(case):
     robot, joints = case
@@ -47,6 +49,7 @@ def test_inverse_velocity_inverts_the_jacobian(case, seed):
     np.testing.assert_allclose(robot.joint_velocity(joints, pd)[usable], qd[usable], atol=1e-7)
 
 
+@pytest.mark.slow
 @given(robot_and_joints(shape=()), st.integers(0, 2**32 - 1))
 def test_joint_acceleration_matches_a_differentiated_trajectory(case, seed):
     """Along q(t) = q0 + v t + a t^2 / 2, the platform's pd, pdd by differences must map back."""
@@ -122,6 +125,7 @@ def test_jacobian_equals_the_thesis_matrices():
     np.testing.assert_allclose(robot.jacobian(theta), np.linalg.solve(M, V), atol=1e-12)
 
 
+@pytest.mark.slow
 @given(robot_and_joints(shape=(6,)))
 def test_one_triple_gives_the_batch_answer(case):
     """The control loop's scalar path (floats, one triple) and the array path agree,

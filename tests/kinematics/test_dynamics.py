@@ -55,6 +55,7 @@ def _trajectory(seed: int, centre: np.ndarray, amplitude: float, t: np.ndarray):
     return p, pd, pdd
 
 
+@pytest.mark.slow
 @settings(max_examples=50)  # each example integrates a 2001-sample trajectory
 @given(mass_models(), gravities(), st.integers(0, 2**32 - 1), st.sampled_from([0, 1]))
 def test_work_of_the_torques_is_the_change_of_energy(mass, gravity, seed, which):
@@ -109,6 +110,7 @@ def test_static_hand_case_on_the_axis(z):
     assert expected < 0  # holding the load up is a torque towards negative theta
 
 
+@pytest.mark.slow
 @given(gravities(), st.integers(0, 2**32 - 1), BATCH_SHAPES)
 def test_static_torques_are_virtual_work(gravity, seed, shape):
     """At rest, tau = -J^T (m_P + 3 m_L/2) g - (m_U + m_L)/2 g . dC_i/dtheta_i."""
@@ -135,6 +137,7 @@ def test_static_torques_are_virtual_work(gravity, seed, shape):
     np.testing.assert_allclose(torque[usable], expected[usable], atol=1e-9)
 
 
+@pytest.mark.slow
 @given(st.integers(0, 2**32 - 1))
 def test_platform_only_robot_obeys_newton(seed):
     """Massless links: tau = J^T m_P (a - g) + I qdd (d'Alembert through the Jacobian)."""
@@ -151,6 +154,7 @@ def test_platform_only_robot_obeys_newton(seed):
     np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.slow
 @given(st.integers(0, 2**32 - 1), BATCH_SHAPES)
 def test_joint_space_entry_agrees(seed, shape):
     rng = np.random.default_rng(seed)

@@ -55,6 +55,7 @@ def _offsets(ident, params):
     return np.array(robot.joint_offsets_rad)
 
 
+@pytest.mark.slow
 @given(
     per_leg_deltas(),
     st.integers(0, 2**32 - 1),
@@ -109,6 +110,7 @@ def test_offsets_and_frame_are_observable_from_selected_poses():
     assert report.condition_number < ident.observability(ident.initial, random).condition_number
 
 
+@pytest.mark.slow
 def test_what_no_data_can_see_is_named():
     """Only R_i - r_i enters the model; a common turn of the legs is a turn of the frame."""
     ident = Identification(NOMINAL, groups=GROUPS)
@@ -130,6 +132,7 @@ def test_what_no_data_can_see_is_named():
     np.testing.assert_allclose(jac @ turn, 0.0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_an_exact_fit_recovers_offsets_geometry_and_frame():
     """No noise: bounded robust least squares from the nominal robot finds the truth."""
     ident = Identification(NOMINAL, groups=GEOMETRY)
@@ -160,6 +163,7 @@ def test_offsets_within_a_tenth_of_a_degree_from_noisy_poses():
     assert np.sqrt(np.mean(result.fun**2)) < 4e-4  # the noise, no more
 
 
+@pytest.mark.slow
 def test_noisy_geometry_fit_is_as_good_as_its_observability_says():
     """Rods off by up to 1 mm: fitting the geometry too, the offsets' errors stay within
     4 predicted standard deviations and the held-out RMSE is under 0.5 mm."""

@@ -24,6 +24,7 @@ def _usable(robot, joints, dexterity=1e-3):
 # FK(IK) and IK(FK) round trips: tests/kinematics/test_roundtrip.py runs them on this model
 
 
+@pytest.mark.slow
 @given(per_leg_and_joints())
 def test_every_leg_keeps_its_own_rod_length(case):
     """|P - C_i| = l_i with C_i built by hand from the docstring's eq. 3.28 and theta = q + o."""
@@ -38,6 +39,7 @@ def test_every_leg_keeps_its_own_rod_length(case):
     np.testing.assert_allclose(rods[ok], np.broadcast_to(robot.l, rods.shape)[ok], atol=TOL_M)
 
 
+@pytest.mark.slow
 @given(per_leg_and_joints())
 def test_jacobian_matches_finite_differences(case):
     robot, joints = case
@@ -54,6 +56,7 @@ def test_jacobian_matches_finite_differences(case):
     np.testing.assert_allclose(jac[usable], expected[usable], rtol=1e-4, atol=1e-5 * scale)
 
 
+@pytest.mark.slow
 @given(per_leg_and_joints())
 def test_reachable_agrees_with_the_ik(case):
     """margin 0: the per-leg discriminants say exactly where the IK succeeds."""
@@ -62,6 +65,7 @@ def test_reachable_agrees_with_the_ik(case):
     np.testing.assert_array_equal(robot.reachable(points), robot.ik(points).ok)
 
 
+@pytest.mark.slow
 @given(robot_and_joints(kind="rotary"))
 def test_equal_legs_are_the_symmetric_robot(case):
     robot, joints = case
@@ -87,6 +91,7 @@ def test_equal_legs_are_the_symmetric_robot(case):
         np.testing.assert_allclose(a, b, atol=1e-12)
 
 
+@pytest.mark.slow
 @given(robot_and_joints(kind="rotary"))
 def test_a_joint_offset_is_a_turned_joint(case):
     """Offsets o: the per-leg FK at q is the symmetric FK at q + o; IK gives back q."""

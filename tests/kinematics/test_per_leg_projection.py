@@ -65,6 +65,7 @@ def _assert_nearest(robot, goal, margin=0.0, z_max=None, samples=40_000, seed=0)
     return point, distance
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("goal", GOALS)
 def test_equal_legs_project_as_the_symmetric_robot(goal) -> None:
     for margin, z_max in ((0.0, None), (0.01, -0.05)):
@@ -79,6 +80,7 @@ def test_a_robot_with_unequal_legs_gets_the_nearest_admissible_point(goal, margi
     _assert_nearest(WRONG, goal, margin, z_max)
 
 
+@pytest.mark.slow
 def test_joint_offsets_do_not_move_the_workspace() -> None:
     plain = WRONG.with_values(joint_offsets_rad=(0.0, 0.0, 0.0))
     for goal in GOALS:

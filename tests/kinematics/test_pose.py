@@ -58,6 +58,7 @@ quaternions = st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(
 )
 
 
+@pytest.mark.slow
 @given(quaternions, quaternions, st.lists(st.floats(-2, 2), min_size=3, max_size=3))
 def test_round_trip_and_agreement_with_scipy(q_drone, q_mount, point):
     drone = Pose.from_arrays([0.3, -0.2, 1.5], np.array(q_drone) / np.linalg.norm(q_drone))

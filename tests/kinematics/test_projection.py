@@ -131,6 +131,7 @@ def problems(draw):
     return robot, goal, margin, z_max
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
 @given(problems())
 def test_projection_is_the_nearest_admissible_point(problem):
@@ -138,6 +139,7 @@ def test_projection_is_the_nearest_admissible_point(problem):
     _assert_nearest(robot, goal, margin, z_max, samples=30_000)
 
 
+@pytest.mark.slow
 def test_rotary_delta_with_a_ring_torus_margin():
     """A margin that leaves the tube thinner than the upper link (a ring torus)."""
     robot = RotaryDelta(L=0.1, l=0.12, R=0.1, r=0.02)

@@ -28,6 +28,7 @@ def _usable(robot, joints):
     return ok & below & (np.nan_to_num(robot.dexterity(joints)) > WELL_CONDITIONED)
 
 
+@pytest.mark.slow
 @FAMILIES
 @given(data=st.data())
 def test_fk_then_ik_with_near_returns_the_joints(family, data):
@@ -40,6 +41,7 @@ def test_fk_then_ik_with_near_returns_the_joints(family, data):
     np.testing.assert_allclose(solved[usable], joints[usable], atol=1e-7)
 
 
+@pytest.mark.slow
 @FAMILIES
 @given(data=st.data())
 def test_ik_then_fk_returns_the_point(family, data):

@@ -42,6 +42,7 @@ def test_torus_h_is_the_robots_h():
     )
 
 
+@pytest.mark.slow
 def test_point_problem_has_its_known_answer():
     """One point (0, 0, -H): h_i = 0 exactly when l = sqrt(Rbar^2 + H^2) +- L.
 
@@ -79,6 +80,7 @@ def test_thesis_design_holds_a_20cm_cube_centred_at_depth_h():
     assert certify_box(THESIS_DESIGN.robot(), c - 0.1, c + 0.1, tol=0.0).contains is True
 
 
+@pytest.mark.slow
 def test_quick_search_beats_the_thesis_and_is_certified():
     problem = Problem()
     result = synthesize(problem, popsize=12, maxiter=60, seed=3)

@@ -24,6 +24,7 @@ def _box(robot, n, seed):
     return rng.uniform([-size, -size, -1.5 * size], [size, size, 0.5 * size], (n, 3))
 
 
+@pytest.mark.slow
 @given(st.one_of(rotary_deltas(), linear_deltas()), st.integers(0, 2**32 - 1))
 def test_h_sign_agrees_with_ik(robot, seed):
     points = _box(robot, 2000, seed)
@@ -101,6 +102,7 @@ def test_projection_is_reachable_and_no_farther_than_any_sample(goal):
     assert distance <= nearest_sample + 1e-6
 
 
+@pytest.mark.slow
 def test_projection_keeps_margin_and_ceiling():
     projected, _ = THESIS_DELTA.project([0.3, 0.0, -0.2], margin=0.01)
     assert THESIS_DELTA.signed_distance(projected) <= -0.01 + 1e-9

@@ -36,6 +36,7 @@ def test_line_errors_are_the_error_magnitude_grouped_by_line_in_order():
     assert second.rmse_m == pytest.approx(math.sqrt(1e-6 / 2)) and second.max_m == 1e-3
 
 
+@pytest.mark.slow
 def test_a_circle_has_a_finite_small_error_on_each_of_its_motion_lines(settings, circle):
     checked, result = circle
     assert result.ok is True and result.duration_s == checked.path.duration_s
@@ -53,6 +54,7 @@ def test_a_circle_has_a_finite_small_error_on_each_of_its_motion_lines(settings,
     assert total == pytest.approx(sum(v**2 for v in result.rmse_m), rel=1e-9)
 
 
+@pytest.mark.slow
 def test_feedforward_predicts_less_error_on_the_arc(settings, circle):
     """Commanding the point ahead makes up for the servos' position lag (thesis ch. 6)."""
     checked, plain = circle
@@ -61,6 +63,7 @@ def test_feedforward_predicts_less_error_on_the_arc(settings, circle):
     assert arc[1].rmse_m < arc[0].rmse_m
 
 
+@pytest.mark.slow
 def test_a_failing_program_is_played_as_the_loop_would_hold_it(settings):
     """Where the gate refuses a point the twin holds (as the live loop does): the error
     grows there but stays finite, and the result says the check failed."""
@@ -73,6 +76,7 @@ def test_a_failing_program_is_played_as_the_loop_would_hold_it(settings):
     assert refused_line.max_m > {e.line: e for e in result.lines}[2].max_m
 
 
+@pytest.mark.slow
 def test_too_long_a_program_is_refused_naming_the_limit():
     settings = load_settings(programs={"dry_run_max_s": 2.0})
     checked = check_program("G4 P2.5\nM2", settings)

@@ -27,6 +27,7 @@ def sampled(profile, count=20001):
     )
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(cases)
 def test_the_profile_keeps_its_limits_and_ends_at_rest_at_the_distance(case):
@@ -42,6 +43,7 @@ def test_the_profile_keeps_its_limits_and_ends_at_rest_at_the_distance(case):
     assert (np.diff(s) >= -1e-15).all()  # never backwards
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
 @given(cases)
 def test_derivatives_are_the_derivatives(case):

@@ -112,6 +112,7 @@ def test_a_finished_log_has_a_summary(committed):
     assert len(read_messages(log.mcap_path)) == 300
 
 
+@pytest.mark.slow
 def test_a_log_cut_anywhere_reads_as_a_prefix_and_is_finished_whole(committed, tmp_path):
     snapshots, _, log = committed
     data = snapshots[-1]

@@ -43,6 +43,7 @@ def walks(draw) -> np.ndarray:
     return START + np.cumsum(steps, axis=0)
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(walks(), st.sampled_from(["start", "nan", "knee_in"]))
 def test_batch_branch_following_equals_the_sample_by_sample_rule(points, near_kind):

@@ -74,6 +74,7 @@ def restarted(tmp_path_factory):
     live_log.close()
 
 
+@pytest.mark.slow
 def test_a_crashed_run_is_interrupted_with_stats_from_its_logged_ticks(restarted):
     client, seen = restarted
     runs = {r["run_id"]: r for r in ok_json(client.get("/api/runs"))}
@@ -117,6 +118,7 @@ def _reported(client, run_id: str) -> None:
     )
 
 
+@pytest.mark.slow
 def test_run_files_are_inline_with_their_media_type_and_answer_head(restarted):
     client, seen = restarted
     _reported(client, seen["crashed"])

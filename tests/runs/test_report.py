@@ -35,6 +35,7 @@ def texts_of(figure) -> str:
     return " ".join(texts)  # wrapped lines break at spaces
 
 
+@pytest.mark.slow
 def test_report_states_the_test_its_parameters_the_loop_and_the_verdict(tmp_path):
     rows = synthetic_rows()
     stats = {**run_stats(rows, SKIP_S, PERIOD_S), "health": UNHEALTHY}
@@ -77,6 +78,7 @@ def test_a_healthy_run_and_one_without_a_health_record_say_so(tmp_path):
     assert "healthy" in verdict and "NOT" not in verdict
 
 
+@pytest.mark.slow
 def test_report_plots_only_the_scored_part_and_breaks_lines_at_missing_ticks(tmp_path):
     rows = synthetic_rows(gap=(3.0, 3.4))
     stats = run_stats(rows, SKIP_S, PERIOD_S)
@@ -96,6 +98,7 @@ def test_report_plots_only_the_scored_part_and_breaks_lines_at_missing_ticks(tmp
         plt.close(figure)
 
 
+@pytest.mark.slow
 def test_write_report_saves_a_png_and_a_vector_pdf(tmp_path):
     rows = synthetic_rows()
     stats = {**run_stats(rows, SKIP_S, PERIOD_S), "health": UNHEALTHY}
@@ -107,6 +110,7 @@ def test_write_report_saves_a_png_and_a_vector_pdf(tmp_path):
     assert b"/FontFile2" in pdf  # TrueType fonts embedded: text stays text in print
 
 
+@pytest.mark.slow
 def test_a_run_that_ended_before_its_test_shows_the_whole_run(tmp_path):
     rows = [r for r in synthetic_rows() if r["phase"] == "approach"]
     stats = run_stats(rows, SKIP_S, PERIOD_S)
@@ -144,6 +148,7 @@ def test_scored_mask_is_the_part_the_statistics_score():
     assert times[mask][0] == pytest.approx(1.0 + SKIP_S, abs=PERIOD_S)
 
 
+@pytest.mark.slow
 def test_a_program_run_has_its_error_per_line_in_stats_and_report(tmp_path):
     """Rows of a G-code program: the per-line stats are the error's magnitude grouped by
     line (hand-computed on a made-up error), and the report draws one bar pair per line."""
@@ -174,6 +179,7 @@ def test_a_program_run_has_its_error_per_line_in_stats_and_report(tmp_path):
     assert "program" not in run_stats(synthetic_rows(), SKIP_S, PERIOD_S)
 
 
+@pytest.mark.slow
 def test_a_wrist_run_has_its_phi_in_stats_and_a_phi_row_in_the_report():
     rows = synthetic_rows()
     for row in rows:  # the wrist 0.1 rad behind a 0.5 rad sine in the timed part

@@ -87,6 +87,7 @@ def test_the_bodies_stay_importable_from_the_runs_router():
         assert getattr(runs_api, run_type.request.__name__) is run_type.request
 
 
+@pytest.mark.slow
 def test_the_openapi_document_has_each_models_defaults():
     from app.config import load_settings
     from app.server import create_app

@@ -46,6 +46,7 @@ def test_a_run_without_phi_leaves_the_wrist_alone_and_one_with_phi_commands_it()
         assert setpoint.phi_rad == pytest.approx(float(params.phi_at(np.array(timed))))
 
 
+@pytest.mark.slow
 def test_phi_without_a_wrist_is_refused_naming_the_field(tmp_path):
     with make_client(tmp_path) as client:
         take_lease(client)

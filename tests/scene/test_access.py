@@ -149,6 +149,7 @@ def refused_once_more(scene, client_id: int, act) -> None:
     wait_for(lambda: scene.access.refused(client_id) > count, "the command refused")
 
 
+@pytest.mark.slow
 def test_a_websocket_client_without_the_token_cannot_move_the_robot(scene, raw, app_client):
     client, client_id = raw
     panel, before = scene.panel, robot(app_client)
@@ -167,12 +168,14 @@ def test_a_websocket_client_without_the_token_cannot_move_the_robot(scene, raw, 
     assert ok_json(app_client.get("/api/lease"))["holder"] == "browser"
 
 
+@pytest.mark.slow
 def test_the_scene_e_stop_is_open_to_anyone(scene, raw, app_client):
     client, _ = raw
     client.set(scene.panel.gui_estop, True)
     wait_for(lambda: robot(app_client)["mode"] == "estop", "the e-stop from the scene")
 
 
+@pytest.mark.slow
 def test_the_token_unlocks_but_taking_control_from_a_holder_is_explicit(scene, raw, app_client):
     client, client_id = raw
     client.set(scene.access.handle(client_id, "token"), "not-the-token")
@@ -230,6 +233,7 @@ def goal_z(app_client) -> float:
     return robot(app_client)["goal_m"][2]
 
 
+@pytest.mark.slow
 def test_a_locked_client_cannot_change_what_the_operators_click_does(scene, raw, app_client):
     """Issue 28 point 1: the jog Step and Speed (and the sinusoid's fields) were shared by
     every scene client, so a locked one set Step to 50 mm and the operator's next click
@@ -265,6 +269,7 @@ def test_a_locked_client_cannot_change_what_the_operators_click_does(scene, raw,
     assert goal_z(app_client) == pytest.approx(z - 0.005, abs=1e-6), "one 5 mm step"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("field", "value", "reason"),
     [("jog_step", 1e6, "jog step"), ("jog_speed", 1e6, "jog speed"), ("jog_step", 0.0, "jog step")],

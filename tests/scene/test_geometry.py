@@ -102,6 +102,7 @@ VOLUME_CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("robot", "margin", "z_max"), VOLUME_CASES)
 def test_volume_mesh_lies_on_the_gates_boundary(robot, margin, z_max):
     mesh = reachable_volume(robot, margin, z_max)
@@ -118,6 +119,7 @@ def test_volume_mesh_lies_on_the_gates_boundary(robot, margin, z_max):
     assert (counts == 2).all()
 
 
+@pytest.mark.slow
 def test_volume_mesh_encloses_the_reachable_points():
     """Sampled reachable points lie within the mesh's bounding box (nothing is cut off)."""
     robot, margin, z_max = THESIS_DELTA, 0.002, -0.06

@@ -6,10 +6,12 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pytest
 
 from tests.support.wait import WAIT_S, wait_for
 
 
+@pytest.mark.slow
 def test_marker_follows_the_setpoint_and_hides_without_one(scene):
     goals, controller = scene.goals, scene.controller
     point = np.array([0.02, -0.01, -0.25])

@@ -6,6 +6,7 @@ import json
 import logging
 
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 
 from app.scene.goal_store import FILE_NAME, load_points, save_points
@@ -45,6 +46,7 @@ def _scene_app(folder) -> TestClient:
     return make_client(folder, server={"scene": True})
 
 
+@pytest.mark.slow
 def test_points_saved_in_the_scene_are_there_after_a_restart(tmp_path):
     with _scene_app(tmp_path) as client:
         scene = client.app.state.scene

@@ -70,6 +70,7 @@ def test_non_finite_points_are_dropped_not_sent(server):
     assert view.violations is None
 
 
+@pytest.mark.slow
 def test_the_check_route_publishes_its_report_to_the_scene(app_client, scene):
     text = (EXAMPLES / "fails.ngc").read_text()
     response = app_client.post(

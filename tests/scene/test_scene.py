@@ -25,11 +25,13 @@ def _goal(scene) -> np.ndarray:
     return scene.controller.snapshot().goal_m
 
 
+@pytest.mark.slow
 def test_info_names_the_port_the_scene_is_bound_to(scene, app_client):
     """The config asks for port 0 (a free one): /api/info names the one viser got."""
     assert ok_json(app_client.get("/api/info"))["viser_port"] == scene.server.get_port() > 0
 
 
+@pytest.mark.slow
 def test_drag_inside_sends_every_update_as_the_goal(scene, app_client):
     for point in ([0.01, 0.0, -0.24], [0.02, 0.01, -0.25], [0.03, -0.01, -0.26]):
         sent = scene.goals.drag_to(np.array(point))  # mid-drag updates, not only the end
@@ -61,6 +63,7 @@ def test_drag_with_torque_off_says_why(scene):
     assert "torque is off" in scene.panel.gui_status.content
 
 
+@pytest.mark.slow
 def test_frame_draws_the_measured_pose(scene, app_client):
     scene.goals.drag_to(np.array([0.04, 0.02, -0.22]), final=True)
     wait_at(app_client, [0.04, 0.02, -0.22], "the robot at the goal")
@@ -89,6 +92,7 @@ def test_estop_and_reset_buttons(scene):
     wait_for(lambda: scene.controller.snapshot().mode != "estop", "reset")
 
 
+@pytest.mark.slow
 def test_goal_points_save_go_to_delete(scene, app_client):
     scene.goals.drag_to(np.array([-0.03, 0.02, -0.27]), final=True)
     wait_for(lambda: np.allclose(_goal(scene), [-0.03, 0.02, -0.27]), "the goal")
@@ -152,6 +156,7 @@ def test_run_panel_without_runs_says_so(monkeypatch):
         server.stop()
 
 
+@pytest.mark.slow
 def test_tracking_error_plot_keeps_the_window(scene):
     now = time.monotonic()
     for k in range(5):

@@ -27,6 +27,7 @@ def app_client(tmp_path_factory) -> Iterator[TestClient]:
         yield client
 
 
+@pytest.mark.slow
 def test_the_scene_draws_and_clamps_with_the_model_in_use(app_client) -> None:
     controller, scene = app_client.app.state.controller, app_client.app.state.scene
     controller.set_torque(True).result(timeout=WAIT_S)

@@ -48,6 +48,7 @@ def _status(port: int, request: str) -> int:
     return int(head.split(b" ", 2)[1])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("host", "origin"),
     [

@@ -4,6 +4,7 @@ where the tip may go (the platform's moved by the offset)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import viser
 
 from app.scene.robot_view import RobotView
@@ -13,6 +14,7 @@ from kinematics import THESIS_DELTA, Tool
 OFFSET = (0.01, 0.0, -0.05)
 
 
+@pytest.mark.slow
 def test_the_tool_is_drawn_from_the_platform_centre_to_the_tip():
     joints = THESIS_DELTA.ik([0.02, -0.01, -0.22]).joints
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)

@@ -6,6 +6,7 @@ import math
 import time
 
 import numpy as np
+import pytest
 import viser
 
 from app.scene.world_view import WorldView
@@ -51,6 +52,7 @@ def test_world_frame_maps_world_points_into_the_base_frame():
         server.stop()
 
 
+@pytest.mark.slow
 def test_hold_mode_shows_the_frames(scene, app_client):
     response = app_client.post("/api/hold", json={"frame": "current", "source": "simulated"})
     assert response.status_code == 200, response.text

@@ -80,6 +80,7 @@ def wristed(tmp_path_factory) -> Iterator[TestClient]:
         yield client
 
 
+@pytest.mark.slow
 def test_a_turned_handle_sends_its_phi_and_the_wrist_turns(wristed: TestClient) -> None:
     scene, controller = wristed.app.state.scene, wristed.app.state.controller
     goals = scene.goals
@@ -110,6 +111,7 @@ def test_a_turned_handle_sends_its_phi_and_the_wrist_turns(wristed: TestClient) 
     assert controller.snapshot().phi_goal_rad == pytest.approx(0.6)
 
 
+@pytest.mark.slow
 def test_without_a_wrist_the_handle_only_translates(app_client: TestClient) -> None:
     scene, controller = app_client.app.state.scene, app_client.app.state.controller
     controller.reset().result(timeout=WAIT_S)

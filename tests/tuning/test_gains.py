@@ -48,6 +48,7 @@ def test_registers_and_continuous_gains_are_inverse():
     assert registers(kp, ki, kd, 0.0, 0.0) == gains
 
 
+@pytest.mark.slow
 def test_a_higher_target_bandwidth_gives_a_higher_p_and_bandwidth():
     found = [suggest(PLANT, Target(bandwidth_hz=f)) for f in (5.0, 10.0, 20.0, 30.0)]
     p = [s.gains.p for s in found]
@@ -63,6 +64,7 @@ def test_a_higher_target_bandwidth_gives_a_higher_p_and_bandwidth():
             assert 0.9 * target < s.prediction.bandwidth_hz < 1.5 * target, s
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("bandwidth_hz", [2.0, 15.0, 40.0, 100.0])
 @pytest.mark.parametrize("overshoot_pct", [2.0, 5.0])
 def test_what_is_offered_meets_the_target_within_the_registers(bandwidth_hz, overshoot_pct):
@@ -148,6 +150,7 @@ def test_the_d_limit_is_the_tick_noise_pwm_bound_by_hand(pwm_fraction):
     assert d_limit(0.8) == 2832  # 16 * 0.2 * 885 = 2832 exactly
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("bandwidth_hz", [10.0, 20.0, 30.0, 60.0])
 @pytest.mark.parametrize("pwm_fraction", [0.8, 0.9, 0.95])
 def test_offered_d_respects_the_tick_noise_bound_and_the_step_stays_honest(

@@ -71,6 +71,7 @@ def records() -> list[Record]:
     return [_step_record(), _chirp_record()]
 
 
+@pytest.mark.slow
 def test_the_fit_recovers_a_known_model(records):
     fit = fit_joint(records)
     m = fit.model
@@ -87,6 +88,7 @@ def test_the_fit_recovers_a_known_model(records):
     assert np.sqrt(np.mean(_residuals(off, records) ** 2)) > 1.5 * fit.rmse_rad
 
 
+@pytest.mark.slow
 def test_the_lock_in_measures_the_models_frequency_response(records):
     bode = empirical_response(records[1], *CHIRP)
     assert bode.freqs_hz.size >= 15
@@ -101,6 +103,7 @@ def test_the_lock_in_measures_the_models_frequency_response(records):
     assert np.all(bode.coherence > 0.95)
 
 
+@pytest.mark.slow
 def test_the_model_simulator_against_the_ode():
     t = _ticks(1.0, 3)
     u = 0.5 + 0.01 * np.sin(2 * math.pi * 3 * t)
@@ -145,6 +148,7 @@ def _rows(record: Record, joint: int = 1) -> list[dict]:
     ]
 
 
+@pytest.mark.slow
 def test_identify_from_log_rows_and_draw_the_bode_plot(records, tmp_path):
     fits, bodes = identify(_rows(records[0]), _rows(records[1]), CHIRP, joints=(1,))
     assert fits[0].joint == 1 and fits[0].rmse_rad < 0.5 * TICK

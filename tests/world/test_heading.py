@@ -101,6 +101,7 @@ def _source(drone, gate, heading=None, wrist=True):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("roll", [0.0, 0.2])
 def test_hold_commands_phi_plus_yaw_equal_to_the_world_heading(roll):
     drone = _YawingDrone(0.5, roll)
@@ -124,6 +125,7 @@ def test_hold_commands_phi_plus_yaw_equal_to_the_world_heading(roll):
     assert source.heading == pytest.approx(tool_heading(first, 0.0), abs=1e-12)
 
 
+@pytest.mark.slow
 def test_hold_past_the_wrist_limits_holds_the_limit_and_says_so():
     drone = _YawingDrone(1.4)  # the heading needs up to 1.4 rad; the wrist reaches 1
     source = _source(drone, _gate(wrist=True), heading=0.0)
@@ -138,6 +140,7 @@ def test_hold_past_the_wrist_limits_holds_the_limit_and_says_so():
     assert any(limited) and not all(limited)
 
 
+@pytest.mark.slow
 def test_without_a_wrist_the_hold_sends_no_phi_and_no_heading():
     source = _source(_YawingDrone(0.5), _gate(wrist=False), wrist=False)
     for _ in range(300):

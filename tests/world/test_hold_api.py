@@ -70,6 +70,7 @@ def test_a_platform_marker_pose_is_its_own_stream(client):
     assert client.get("/api/mav/pose?body=tool").status_code == 422
 
 
+@pytest.mark.slow
 def test_hold_faults_when_the_pose_stream_is_lost(client):
     ok_json(client.post("/api/reset"))
     ok_json(client.post("/api/torque", json={"enabled": True}))

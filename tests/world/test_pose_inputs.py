@@ -50,6 +50,7 @@ def test_udp_json_stream_is_received_and_vetted(tracker):
     np.testing.assert_allclose(sample.position_m, [0.0, 0.0, 1.004])
 
 
+@pytest.mark.slow
 def test_udp_platform_marker_poses_go_to_their_own_tracker(tracker):
     platform = PoseTracker(stale_after_s=0.05, lost_after_s=0.5, max_jump_m=0.5)
     listener = UdpPoseListener(tracker, _free_port(), platform=platform).start()
@@ -148,6 +149,7 @@ def test_udp_listener_survives_a_poison_datagram_and_names_it(tracker, poison, r
         listener.stop()
 
 
+@pytest.mark.slow
 def test_a_dead_udp_listener_says_so_and_restarts(tracker):
     listener = UdpPoseListener(tracker, _free_port()).start()
     try:
@@ -166,6 +168,7 @@ def test_a_dead_udp_listener_says_so_and_restarts(tracker):
 TOKEN = "s3cret-token"
 
 
+@pytest.mark.slow
 def test_with_a_token_set_udp_poses_carry_it_or_are_refused(tracker):
     listener = UdpPoseListener(tracker, _free_port(), token=TOKEN).start()
     trusted = UdpPoseListener(PoseTracker(0.05, 0.5, 0.5), _free_port(), token=TOKEN, trusted=True)

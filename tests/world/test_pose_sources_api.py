@@ -75,6 +75,7 @@ def test_a_dead_udp_input_shows_in_the_status_and_reset_restarts_it(udp):
     )
 
 
+@pytest.mark.slow
 def test_with_a_token_every_pose_source_needs_it_or_says_why_not(tmp_path):
     from starlette.websockets import WebSocketDisconnect
 

@@ -7,6 +7,7 @@ import json
 import math
 
 import numpy as np
+import pytest
 
 from app.calibration.fit import plan
 from app.calibration.pairs import write_pairs
@@ -70,6 +71,7 @@ def test_write_moves_the_zero_offsets_by_the_fitted_angles(tmp_path, capsys) -> 
         assert math.isclose(new.to_rad(2000), old.to_rad(2000) + offset, abs_tol=RAD_PER_TICK)
 
 
+@pytest.mark.slow
 def test_geometry_is_written_as_the_robot_legs_and_read_back(tmp_path, capsys) -> None:
     """A geometry fit's --write: the legs go to [robot.legs] and the offsets to the zero
     offsets; the config read back builds the fitted robot (the true one, from exact pairs)."""

@@ -51,6 +51,7 @@ def served(app, monkeypatch) -> TestClient:
     return app
 
 
+@pytest.mark.slow
 def test_a_probe_run_finds_the_offsets_in_millimetres_in(served, capsys) -> None:
     args = ["calibrate", "--url", URL, "--take-over", "--probe", "--plate-z", "-250"]
     code = main([*args, "--poses", "32", "--json"])
@@ -64,6 +65,7 @@ def test_a_probe_run_finds_the_offsets_in_millimetres_in(served, capsys) -> None
     assert "unobservable: none" in err  # before the touches
 
 
+@pytest.mark.slow
 def test_what_heights_cannot_pin_is_printed(served, capsys) -> None:
     args = ["calibrate", "--url", URL, "--take-over", "--probe", "--plate-z", "-250"]
     main([*args, "--poses", "60", "--parameters", "geometry", "--fit-plate-z"])

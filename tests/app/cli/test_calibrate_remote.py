@@ -77,6 +77,7 @@ def test_calibrate_on_a_server_applies_and_writes_the_offsets(served, tmp_path, 
     assert served.get("/api/lease").json()["held"] is False  # control given back
 
 
+@pytest.mark.slow
 def test_bad_poses_are_refused_naming_the_field(served, capsys):
     assert main(["calibrate", "--url", URL, "--poses", "3", "--take-over"]) == 2
     assert "poses" in capsys.readouterr().err

@@ -21,6 +21,7 @@ def _run(argv: list[str], capsys) -> tuple[int, str]:
     return code, capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_synth_json_answers_the_thesis_problem(capsys, tmp_path):
     code, out = _run(
         ["design", "synth", "--json", "--popsize", "10", "--maxiter", "40", "--out", str(tmp_path)],
@@ -104,6 +105,7 @@ def test_every_command_explains_itself(command, capsys):
     assert "--json" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_size_on_its_defaults_says_what_drives_the_peak_and_why_it_is_not_the_thesis(capsys):
     # issue 17: on its own defaults the command printed FAIL and 11.3 against 0.905 N m
     code, out = _run(["design", "size", "--grid", "5"], capsys)

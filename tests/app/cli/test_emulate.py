@@ -57,6 +57,7 @@ def test_run_prints_a_port_the_sdk_can_ping() -> None:
     assert not thread.is_alive()
 
 
+@pytest.mark.slow
 def test_module_entry_point_runs_and_stops_on_sigterm() -> None:
     process = subprocess.Popen(
         [sys.executable, "-m", "hardware.emulator", "--ids", "1"],

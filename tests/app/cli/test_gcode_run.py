@@ -70,6 +70,7 @@ def test_a_program_runs_and_its_error_per_line_is_printed(served, tmp_path, caps
     assert served.get("/api/lease").json()["held"] is False  # control given back
 
 
+@pytest.mark.slow
 def test_a_failing_program_is_refused_with_its_violations_and_nothing_runs(
     served, tmp_path, capsys
 ):

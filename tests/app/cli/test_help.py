@@ -69,11 +69,13 @@ def _loaded_after(code: str) -> dict[str, bool]:
     return json.loads(done.stdout.splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_building_the_parser_imports_no_heavy_library():
     loaded = _loaded_after("from app.cli import build_parser; build_parser().format_help()")
     assert not any(loaded.values()), loaded
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv", [["ik", "0", "0", "-240"], ["fk", "30", "30", "30"]])
 def test_ik_and_fk_import_no_heavy_library(argv):
     loaded = _loaded_after(f"from app.cli import main; assert main({argv!r}) == 0")

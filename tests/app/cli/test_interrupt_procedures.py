@@ -68,6 +68,7 @@ def served(app, monkeypatch) -> TestClient:
     return app
 
 
+@pytest.mark.slow
 def test_ctrl_c_in_calibrate_aborts_the_run(served, monkeypatch, capsys) -> None:
     monkeypatch.setattr(Progress, "update_to", _interrupt)
     code = main(["calibrate", "--url", URL, "--poses", "12", "--take-over"])

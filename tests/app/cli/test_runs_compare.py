@@ -29,6 +29,7 @@ def saved_stats(folder, run_id):
     return json.loads((folder / run_id / "run.json").read_text())["stats"]["tracking"]
 
 
+@pytest.mark.slow
 def test_compare_prints_each_runs_figures_in_its_column(folder, capsys, tmp_path):
     plot = tmp_path / "compare.png"
     assert main(["runs", "compare", A, B, "--folder", str(folder), "--plot", str(plot)]) == 0
@@ -54,6 +55,7 @@ def test_compare_refuses_unknown_ids_and_fewer_than_two(folder, capsys, ids, wor
     assert all(word in err for word in words), err
 
 
+@pytest.mark.slow
 def test_compare_from_a_server_prints_the_same_table(folder, capsys, monkeypatch, tmp_path):
     assert main(["runs", "compare", A, B, "--folder", str(folder), "--json"]) == 0
     local = json.loads(capsys.readouterr().out)

@@ -103,6 +103,7 @@ def _registers(app) -> list[PositionGains]:
     return app.app.state.backend.bus.read_gains()
 
 
+@pytest.mark.slow
 def test_tune_prints_the_model_and_gains_and_applies_them(served, capsys):
     ids = list(served.app.state.controller.servo_ids)
     code = main(["tune", "--url", URL, "--joints", "1", "3", "--bandwidth", "15", "--take-over"])
@@ -138,6 +139,7 @@ def test_tune_prints_the_model_and_gains_and_applies_them(served, capsys):
     assert _registers(served) == [PositionGains()] * 3
 
 
+@pytest.mark.slow
 def test_tune_json_is_the_apis_body(served, capsys):
     assert main(["tune", "--url", URL, "--joints", "2", "--json"]) == 0
     body = json.loads(capsys.readouterr().out)
@@ -160,6 +162,7 @@ def test_revert_with_nothing_applied_is_refused(served, capsys):
     assert "revert" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_tune_suggests_the_checks_choice_never_a_set_it_failed(served, capsys):
     rule = suggest(Plant.of(MODEL), Target()).gains
     FAILING.add(rule)  # the rule's own first candidate fails on the twin

@@ -59,6 +59,7 @@ def test_a_slow_creep_under_the_tolerance_counts_as_rest(monkeypatch):
     assert creep.t <= 0.3 + 0.02
 
 
+@pytest.mark.slow
 def test_an_arm_that_never_settles_is_refused_at_the_deadline(monkeypatch):
     monkeypatch.setattr("app.cli.run.time.sleep", lambda s: None)
     swinging = ScriptedLoop(lambda t: [0.01 * np.sin(2 * np.pi * t), 0.0, -0.24])
@@ -75,6 +76,7 @@ def test_a_fault_while_waiting_is_said_at_once(monkeypatch):
     assert faulting.t < 0.51
 
 
+@pytest.mark.slow
 def test_the_headless_run_waits_for_rest_before_it_plans(monkeypatch):
     """The order the issue asks for: torque on, at rest, then the plan."""
     import app.cli.run as run

@@ -39,6 +39,7 @@ def client(tmp_path_factory) -> Iterator[TestClient]:
         yield test_client
 
 
+@pytest.mark.slow
 def test_info_says_no_scene_and_no_token(client: TestClient) -> None:
     """This app has no 3D scene (tests/scene/ checks the port /api/info names when on)."""
     info = ok_json(client.get("/api/info"))
@@ -99,6 +100,7 @@ def test_check_rejects_bad_input_with_422(client: TestClient) -> None:
     assert "duration_s" in response.json()["detail"]
 
 
+@pytest.mark.slow
 def test_plotly_is_served_from_the_installed_package(client: TestClient) -> None:
     response = client.get("/vendor/plotly.min.js")
     assert response.status_code == 200
@@ -106,6 +108,7 @@ def test_plotly_is_served_from_the_installed_package(client: TestClient) -> None
     assert b"plotly.js" in response.content[:200]
 
 
+@pytest.mark.slow
 def test_with_a_token_info_says_so_and_the_check_needs_it(tmp_path) -> None:
     token = "a-long-secret-1"
     with make_client(tmp_path, server={"token": token}) as client:  # emulated: starts faster
@@ -125,6 +128,7 @@ def test_info_names_the_long_move_distance_and_a_reachable_home(client: TestClie
     assert bool(ok), "the dashboard's home point must be reachable"
 
 
+@pytest.mark.slow
 def test_check_of_a_relaxed_arm_starts_from_where_it_hangs(client: TestClient) -> None:
     """Torque off: the command is the last held point, the arm falls from it; the preview's
     "the robot is there now" must name the measured point, not the old command."""

@@ -26,6 +26,7 @@ BAD_GOAL_BODIES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("body", "mentions"), BAD_GOAL_BODIES)
 def test_bad_goals_are_422_with_a_clear_detail(fresh, body, mentions):
     before = ticks(fresh)
@@ -75,6 +76,7 @@ def test_motion_with_torque_off_is_409(fresh):
     assert response.status_code == 409
 
 
+@pytest.mark.slow
 def test_unknown_paths_and_methods_are_4xx(fresh):
     assert fresh.get("/api/nope").status_code == 404
     assert fresh.get("/api/goal").status_code in (404, 405)  # the dashboard mount answers GETs

@@ -30,6 +30,7 @@ def test_status_has_the_fixed_fields(client):
     assert status["loop"]["target_hz"] == 200.0
 
 
+@pytest.mark.slow
 def test_goal_is_reached_and_the_loop_keeps_counting(fresh):
     assert fresh.post("/api/torque", json={"enabled": True}).status_code == 200
     goal = [0.03, -0.02, -0.23]
@@ -56,6 +57,7 @@ def _robot(client) -> dict:
     }
 
 
+@pytest.mark.slow
 def test_a_refused_goal_moves_nothing(fresh):
     """A goal the gate refuses (422) leaves the goal and the command as they were: nothing
     is queued before the checks (issue 29, break 13: no test watched the robot after a
@@ -77,6 +79,7 @@ def test_a_refused_goal_moves_nothing(fresh):
     assert unmoved(before, after), (before, after)
 
 
+@pytest.mark.slow
 def test_jog_steps_add_up_and_clamp_at_the_boundary(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     start = np.array([0.0, 0.0, -0.22])
@@ -93,6 +96,7 @@ def test_jog_steps_add_up_and_clamp_at_the_boundary(fresh):
     assert THESIS_DELTA.reachable(clamped) and clamped[0] < 1.0
 
 
+@pytest.mark.slow
 def test_move_cartesian_and_joint_space(fresh):
     fresh.post("/api/torque", json={"enabled": True})
     goal = [-0.02, 0.02, -0.25]
@@ -145,6 +149,7 @@ HARDWARE_ERROR_BITS = {  # Hardware Error Status (70) bit -> its name
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("bit", HARDWARE_ERROR_BITS, ids=HARDWARE_ERROR_BITS.values())
 def test_hardware_error_faults_with_servo_and_reason_and_reset_reboots(client, fresh, bit):
     emulator = client.app.state.backend.emulator
@@ -191,6 +196,7 @@ def test_a_servo_shut_down_by_an_overload_shows_torque_off(client, fresh):
     wait_for(lambda: _status(fresh)["faults"] == [], "the fault to clear")
 
 
+@pytest.mark.slow
 def test_missed_reads_fault_after_the_limit(client, fresh, monkeypatch):
     # each missed read waits out the emulated bus's reply wait on its every try (wall
     # time): two reads of one try each, not the config's ten of three, are this test's

@@ -99,6 +99,7 @@ def holding_at_goal(client: TestClient) -> dict[str, str]:
     return holder
 
 
+@pytest.mark.slow
 def test_every_command_route_checks_the_lease():
     """A law over /openapi.json: every POST/PUT/PATCH/DELETE route takes the X-Lease header
     of the lease check (require_control), unless it is named in NO_LEASE; a route added
@@ -123,6 +124,7 @@ def test_every_command_route_checks_the_lease():
     assert not commands[("post", "/api/estop")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("path", "body"), COMMANDS, ids=[p for p, _ in COMMANDS])
 def test_a_command_without_the_lease_is_refused_and_nothing_moves(local, path, body):
     holding_at_goal(local)
@@ -186,6 +188,7 @@ def test_commands_need_the_token_as_well_as_the_lease(local):
     assert robot(local)["torque"] is True
 
 
+@pytest.mark.slow
 def test_e_stop_needs_no_token_and_no_lease(networked):
     holder = holding_at_goal(networked)
     response = networked.post("/api/estop")  # no Authorization, no X-Lease
@@ -195,6 +198,7 @@ def test_e_stop_needs_no_token_and_no_lease(networked):
     ok_json(networked.post("/api/reset", headers=holder))
 
 
+@pytest.mark.slow
 def test_reads_need_the_token_beyond_loopback(networked):
     """Issue 14, point 9: with --host 0.0.0.0 --token, status, runs, run files and the
     lease were readable by anyone."""

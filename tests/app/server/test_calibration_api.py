@@ -136,6 +136,7 @@ def test_a_run_recovers_the_offsets_and_apply_makes_fk_agree(client, config) -> 
     assert again.status_code == 409 and "applied" in again.json()["detail"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("body", "field"),
     [

@@ -105,6 +105,7 @@ def test_apply_is_refused_while_a_motion_runs_and_changes_nothing(client, config
     client.app.state.calibration._runs.pop("cal-moving")
 
 
+@pytest.mark.slow
 def test_a_geometry_fit_becomes_the_model_of_every_route_and_nothing_moves(client, config):
     torque_on(client)
     wait_for(lambda: _status(client)["mode"] == "idle", "the arm to rest")

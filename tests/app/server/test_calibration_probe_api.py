@@ -73,6 +73,7 @@ def test_a_probe_run_finds_the_offsets_and_after_apply_nothing_is_left(client) -
     assert np.all(np.abs(left_deg) < 0.1), left_deg
 
 
+@pytest.mark.slow
 def test_a_geometry_probe_run_says_what_heights_cannot_pin(client) -> None:
     run_id = _start(
         client, poses=60, parameters="geometry", source="probe", plate_z_m=PLATE_M, fit_plate_z=True
@@ -89,6 +90,7 @@ def test_a_geometry_probe_run_says_what_heights_cannot_pin(client) -> None:
     assert apply.status_code == 409  # a geometry fit is never applied
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("body", "field"),
     [

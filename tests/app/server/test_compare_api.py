@@ -47,6 +47,7 @@ def test_compare_gives_each_runs_figures_side_by_side_in_the_order_asked(client)
     assert body["plot"] == f"/api/runs/compare.png?ids={LOADED}%2C{QUIET}%2C{OLD}"
 
 
+@pytest.mark.slow
 def test_compare_plot_is_a_png_of_the_overlaid_errors(client):
     body = ok_json(client.get(f"/api/runs/compare?ids={QUIET},{LOADED}"))
     response = client.get(body["plot"])

@@ -34,5 +34,6 @@ def test_docs_pages_reference_only_local_assets(client: TestClient, page: str) -
         assert fetched.status_code == 200 and fetched.content, f"{page}: {asset} not served"
 
 
+@pytest.mark.slow
 def test_the_openapi_document_the_docs_read_is_served(client: TestClient) -> None:
     assert client.get("/openapi.json").json()["info"]["title"] == "deltadash"

@@ -18,6 +18,7 @@ def post_raw(client, path, raw: bytes):
     return client.post(path, content=raw, headers=JSON)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", PROGRAM_ROUTES)
 @pytest.mark.parametrize(
     ("body", "field"),

@@ -36,6 +36,7 @@ def status(client) -> dict:
     return ok_json(client.get("/api/status"))
 
 
+@pytest.mark.slow
 def test_a_post_to_the_listener_estops_the_controller(fresh):
     assert not status(fresh)["estopped"]
     code, _, body = call(listener_url(fresh) + "?press=listener-1")
@@ -48,6 +49,7 @@ def test_a_post_to_the_listener_estops_the_controller(fresh):
     assert fresh.post("/api/torque", json={"enabled": True}).status_code == 409
 
 
+@pytest.mark.slow
 def test_the_listener_does_nothing_but_stop(fresh):
     """Other paths, other methods, a reset or a goal through it: refused, nothing happens."""
     before = status(fresh)

@@ -88,6 +88,7 @@ def test_telemetry_error_is_null_without_a_setpoint(change):
     assert _telemetry(Snapshot(**{**held, **change})).error_m == [None, None, None]
 
 
+@pytest.mark.slow
 def test_openapi_has_response_schemas_and_error_responses(bare):
     doc = bare.get("/openapi.json").json()
     paths = doc["paths"]

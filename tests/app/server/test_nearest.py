@@ -63,6 +63,7 @@ def nearest_on_grid(gate, goal: np.ndarray, radius_m: float) -> float:
     return float(np.linalg.norm(offsets[ok], axis=1).min()) if ok.any() else np.inf
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("goal", "why"), GOALS, ids=[g[1] for g in GOALS])
 def test_the_offered_point_is_taken_by_the_gate_and_no_farther_than_needed(gate, goal, why):
     goal = np.array(goal)
@@ -93,6 +94,7 @@ def test_a_goal_the_gate_takes_is_offered_as_itself(gate):
     np.testing.assert_array_equal(sections.nearest(gate, HOME_M), HOME_M)
 
 
+@pytest.mark.slow
 def test_the_422_offers_the_same_point_for_a_goal_beyond_a_joint_limit(client):
     """A goal inside the workspace that only a joint limit refuses now gets a nearest_m too
     (it had none), and it is the point /nearest offers."""

@@ -111,6 +111,7 @@ def robot(client: TestClient) -> dict:
     }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("headers", [REBIND, OTHER_SITE], ids=["rebinding", "other-site"])
 def test_another_sites_page_cannot_take_control_move_or_read(client, headers):
     before = robot(client)

@@ -22,6 +22,7 @@ def check(client, gcode, **extra):
     return client.post("/api/programs/check", json={"gcode": gcode, **extra})
 
 
+@pytest.mark.slow
 def test_a_passing_program_answers_its_report(client):
     body = ok_json(check(client, GOOD, start_m=START))
     assert body["ok"] is True and body["violations"] == []

@@ -110,6 +110,7 @@ def test_a_passing_program_runs_with_its_error_per_line(fresh):
     assert fresh.get(f"/api/runs/{run_id}/report.png").content[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
 def test_a_failing_program_is_a_422_with_its_violations_and_nothing_moves(fresh):
     ok_json(fresh.post("/api/torque", json={"enabled": True}))
     before = _status(fresh)
@@ -158,6 +159,7 @@ def test_a_bad_body_is_a_422_naming_the_field(fresh):
     assert response.status_code == 422 and "feedforward" in response.json()["detail"]
 
 
+@pytest.mark.slow
 def test_the_dry_run_predicts_an_error_for_each_line_and_moves_nothing(fresh):
     ok_json(fresh.post("/api/torque", json={"enabled": True}))
     before = _status(fresh)
@@ -171,6 +173,7 @@ def test_the_dry_run_predicts_an_error_for_each_line_and_moves_nothing(fresh):
     assert _status(fresh)["commanded_rad"] == before["commanded_rad"]
 
 
+@pytest.mark.slow
 def test_too_long_a_program_for_the_dry_run_is_a_422_naming_the_limit(fresh):
     response = fresh.post("/api/programs/dry-run", json={"gcode": "G4 P100\nM2"})
     assert response.status_code == 422, response.text

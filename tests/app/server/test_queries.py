@@ -41,6 +41,7 @@ def _pid(_gate) -> int:
     return os.getpid()
 
 
+@pytest.mark.slow
 def test_a_query_is_answered_in_another_process_as_in_this_one(queries, gate):
     assert queries._workers.call(_pid, gate) != os.getpid()
     here = sections.nearest(gate, FAR, 0.0)
@@ -49,6 +50,7 @@ def test_a_query_is_answered_in_another_process_as_in_this_one(queries, gate):
     assert gate.inside(there)
 
 
+@pytest.mark.slow
 def test_a_repeated_query_is_answered_from_the_kept_answers(queries, gate):
     first = queries.nearest(gate, FAR, 0.0)
     asked = queries.asked
@@ -61,6 +63,7 @@ def test_a_repeated_query_is_answered_from_the_kept_answers(queries, gate):
     assert again is cut and cut.reachable.any()
 
 
+@pytest.mark.slow
 def test_a_query_waits_its_turn_and_one_beyond_the_queue_is_refused_at_once(gate, release):
     queries = WorkspaceQueries(load_settings(), slots=1, timeout_s=60, queue=1, wait_s=60)
     try:
@@ -83,6 +86,7 @@ def test_a_query_waits_its_turn_and_one_beyond_the_queue_is_refused_at_once(gate
         queries.close()
 
 
+@pytest.mark.slow
 def test_a_query_that_waited_too_long_is_refused(gate, release):
     queries = WorkspaceQueries(load_settings(), slots=1, timeout_s=60, queue=1, wait_s=0.0)
     try:
@@ -123,6 +127,7 @@ def client(tmp_path_factory):
         yield client
 
 
+@pytest.mark.slow
 def test_the_routes_answer_from_the_workers_and_say_when_busy(client, release):
     app = client.app
     queries = app.state.queries

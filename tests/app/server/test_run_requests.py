@@ -44,6 +44,7 @@ def unmoved(before, after) -> bool:
     return bool(np.allclose(before, after, rtol=0.0, atol=1e-9))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("path", "body", "field"),
     [

@@ -106,6 +106,7 @@ def wristed(tmp_path_factory) -> Iterator[TestClient]:
         yield client
 
 
+@pytest.mark.slow
 def test_the_api_cuts_and_offers_at_the_asked_wrist_angle(wristed):
     params = {"plane": "xy", "at_m": -0.29, "phi_rad": 1.0}
     body = ok_json(wristed.get("/api/workspace/section", params=params))
@@ -129,6 +130,7 @@ def test_a_wrist_angle_beyond_the_limits_is_422_naming_it(wristed, phi):
         assert "phi_rad" in response.json()["detail"], response.text
 
 
+@pytest.mark.slow
 def test_without_a_wrist_a_turned_tip_is_422(client):
     response = client.get(
         "/api/workspace/section", params={"plane": "xy", "at_m": -0.24, "phi_rad": 0.3}

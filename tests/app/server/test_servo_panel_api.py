@@ -82,6 +82,7 @@ def all_registers(client) -> dict[int, dict[str, int]]:
     return {sid: registers(client, sid) for sid in client.app.state.controller.servo_ids}
 
 
+@pytest.mark.slow
 def test_a_read_is_of_the_servos_own_registers(resting):
     body = ok_json(resting.get("/api/servos/2/gains"))
     assert body["servo_id"] == 2 and body["joint"] == 2
@@ -100,6 +101,7 @@ def test_a_read_is_of_the_servos_own_registers(resting):
         table.set(Reg.POSITION_P_GAIN, 800)
 
 
+@pytest.mark.slow
 def test_a_write_reaches_the_servos_registers_and_the_revert_restores_them(resting):
     written = ok_json(resting.post("/api/servos/2/gains", json=TUNED))
     assert written["servo"] == TUNED  # read back from the servo after the write
@@ -170,6 +172,7 @@ def test_unknown_servos_are_404_and_a_write_needs_the_lease(resting):
     assert len(ok_json(resting.get("/api/runs"))) == runs
 
 
+@pytest.mark.slow
 def test_gains_are_neither_read_nor_written_while_a_motion_runs(resting):
     ok_json(resting.post("/api/move", json={"position_m": [0.0, 0.0, -0.22], "duration_s": 60}))
     wait_for(
@@ -188,6 +191,7 @@ def test_gains_are_neither_read_nor_written_while_a_motion_runs(resting):
     ok_json(resting.post("/api/reset"))
 
 
+@pytest.mark.slow
 def test_a_goals_jog_standing_at_it_rests_but_a_held_jog_moves(resting):
     ok_json(resting.post("/api/servos/2/gains", json=TUNED))  # the goal's jog stands
     assert registers(resting, 2) == TUNED
@@ -224,6 +228,7 @@ def test_a_write_is_refused_while_a_test_run_goes(resting):
         ok_json(resting.post(f"/api/runs/{run['run_id']}/abort"))
 
 
+@pytest.mark.slow
 def test_a_write_goes_to_the_config_file_and_its_revert_too(tmp_path):
     from app.config import load_settings
 
@@ -241,6 +246,7 @@ def test_a_write_goes_to_the_config_file_and_its_revert_too(tmp_path):
         assert saved == {1: FACTORY, 2: FACTORY, 3: FACTORY}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("servo_id", "body", "words"),
     [

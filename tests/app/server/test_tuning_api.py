@@ -135,6 +135,7 @@ def test_gains_that_miss_the_goal_are_applied_only_when_the_operator_confirms(cl
     ok_json(client.post("/api/tuning/revert"))
 
 
+@pytest.mark.slow
 def test_the_suggested_gains_are_the_twin_checks_choice_never_a_failed_set(client):
     manager = client.app.state.tuning
     run = _fitted_run(client)
@@ -362,6 +363,7 @@ def test_a_run_on_the_twin_identifies_checks_suggests_applies_and_reverts(tmp_pa
         assert bus.read_gains() == [PositionGains()] * 3
 
 
+@pytest.mark.slow
 def test_apply_writes_the_config_and_a_server_started_from_it_uses_the_gains(tmp_path):
     from app.config import load_settings
     from hardware.calibration import load, save

@@ -22,6 +22,7 @@ def cells(body: dict) -> tuple[np.ndarray, np.ndarray]:
     return points, reachable
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("plane", "level"), SECTIONS)
 def test_a_section_marks_exactly_what_the_gate_accepts(client, plane, level):
     body = ok_json(client.get("/api/workspace/section", params={"plane": plane, "at_m": level}))

@@ -26,6 +26,7 @@ def wristed(tmp_path_factory) -> Iterator[TestClient]:
         yield client
 
 
+@pytest.mark.slow
 def test_info_gives_the_tool_offset_and_the_wrist_s_limits(wristed: TestClient) -> None:
     info = ok_json(wristed.get("/api/info"))
     assert info["tool_offset_m"] == OFFSET
@@ -47,6 +48,7 @@ def test_a_goal_s_phi_is_the_status_goal_and_the_wrist_turns_to_it(wristed: Test
     assert message["ee"]["phi_rad"] == pytest.approx(0.5, abs=0.01)
 
 
+@pytest.mark.slow
 def test_without_a_wrist_info_and_status_say_none(tmp_path) -> None:
     with make_client(tmp_path, backend="emulated") as client:
         info = ok_json(client.get("/api/info"))

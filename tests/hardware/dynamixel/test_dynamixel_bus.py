@@ -221,6 +221,7 @@ def test_position_limits_follow_the_calibration(emulator: ServoEmulator) -> None
     assert (table.get(Reg.MIN_POSITION_LIMIT), table.get(Reg.MAX_POSITION_LIMIT)) == (low, high)
 
 
+@pytest.mark.slow
 def test_connect_names_missing_servos(emulator: ServoEmulator) -> None:
     joints = tuple(JointCalibration(i) for i in (1, 2, 5))
     config = make_config(emulator.port, joints=joints, max_tries=1, connect_timeout_s=0.0)

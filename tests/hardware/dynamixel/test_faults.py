@@ -18,6 +18,7 @@ from tests.support.servo_emulator import make_config
 from tests.support.wait import wait_for
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault", ["drop_replies", "corrupt_replies", "wrong_id_replies"])
 def test_one_bad_reply_is_retried_and_counted(bus: DynamixelBus, emulator, fault: str) -> None:
     emulator.place({1: 1000, 2: 2000, 3: 3000})

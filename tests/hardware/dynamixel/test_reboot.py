@@ -25,6 +25,7 @@ BITS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("flag", "name", "shuts_down"), BITS, ids=[b[1] for b in BITS])
 def test_every_hardware_error_is_named_and_a_reboot_clears_it(
     bus: DynamixelBus, emulator: ServoEmulator, flag, name: str, shuts_down: bool
@@ -47,6 +48,7 @@ def test_every_hardware_error_is_named_and_a_reboot_clears_it(
     assert emulator.servo(2).reboots == emulator.servo(3).reboots == 0
 
 
+@pytest.mark.slow
 def test_two_latched_servos_reboot_together(bus: DynamixelBus, emulator: ServoEmulator) -> None:
     for servo_id in (1, 3):
         emulator.inject(servo_id, boot_s=BOOT_S)
@@ -58,6 +60,7 @@ def test_two_latched_servos_reboot_together(bus: DynamixelBus, emulator: ServoEm
     assert [emulator.servo(i).reboots for i in (1, 2, 3)] == [1, 0, 1]
 
 
+@pytest.mark.slow
 def test_a_lost_reboot_status_is_not_answered_by_another_reboot(
     bus: DynamixelBus, emulator: ServoEmulator
 ) -> None:
@@ -68,6 +71,7 @@ def test_a_lost_reboot_status_is_not_answered_by_another_reboot(
     assert not bus.read_state().faulted
 
 
+@pytest.mark.slow
 def test_an_unheard_reboot_is_sent_again(bus: DynamixelBus, emulator: ServoEmulator) -> None:
     emulator.raise_hardware_error(2, HardwareErrorFlag.OVERLOAD)
     emulator.inject(2, ignore_requests=1)  # the first Reboot never reaches it

@@ -174,6 +174,7 @@ def test_sync_read_replies_out_of_order_are_each_taken_by_their_id(
     assert (after.failed_tries, after.discarded) == (before.failed_tries, before.discarded)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", [p for p in PATHS if p != "sync read"])
 def test_a_reply_overtaken_by_the_next_one_is_not_its_answer(
     bus: DynamixelBus, placed: ServoEmulator, path: str
@@ -187,6 +188,7 @@ def test_a_reply_overtaken_by_the_next_one_is_not_its_answer(
         other(bus)
 
 
+@pytest.mark.slow
 def test_sync_read_failure_says_the_real_data_byte_count(
     placed: ServoEmulator, raw_writer: RawPort
 ) -> None:

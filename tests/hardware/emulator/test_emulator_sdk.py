@@ -12,6 +12,7 @@ from hardware.emulator import ServoEmulator
 OK = sdk.COMM_SUCCESS
 
 
+@pytest.mark.slow
 def test_ping_each_servo_and_miss_an_absent_one(sdk_port) -> None:
     port, ph = sdk_port
     for servo_id in (1, 2, 3):
@@ -20,6 +21,7 @@ def test_ping_each_servo_and_miss_an_absent_one(sdk_port) -> None:
     assert result == sdk.COMM_RX_TIMEOUT
 
 
+@pytest.mark.slow
 def test_broadcast_ping_finds_every_servo(sdk_port) -> None:
     port, ph = sdk_port
     found, result = ph.broadcastPing(port)
@@ -114,6 +116,7 @@ def test_factory_reset_all_returns_to_id_1(sdk_port, emulator: ServoEmulator) ->
     assert ph.factoryReset(port, 2, 0x07) == (OK, StatusError.DATA_RANGE)
 
 
+@pytest.mark.slow
 def test_id_change_moves_the_servo(sdk_port) -> None:
     port, ph = sdk_port
     assert ph.write1ByteTxRx(port, 3, Reg.ID.address, 7) == (OK, 0)
@@ -121,6 +124,7 @@ def test_id_change_moves_the_servo(sdk_port) -> None:
     assert ph.ping(port, 3)[1] == sdk.COMM_RX_TIMEOUT
 
 
+@pytest.mark.slow
 def test_status_return_level(sdk_port) -> None:
     port, ph = sdk_port
     assert ph.write1ByteTxRx(port, 1, Reg.STATUS_RETURN_LEVEL.address, 1) == (OK, 0)

@@ -38,6 +38,7 @@ def test_bus_errors_survive_pickling_with_their_fields() -> None:
         assert copy.__dict__ == error.__dict__
 
 
+@pytest.mark.slow
 def test_the_relaxed_arm_falls_then_holds_a_goal(bus: ProcessSimBus) -> None:
     assert isinstance(bus, ServoBus)
     assert [info.servo_id for info in bus.scan()] == [1, 2, 3]

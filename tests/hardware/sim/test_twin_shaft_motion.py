@@ -23,6 +23,7 @@ def test_reset_places_the_arm_at_the_shaft_angles() -> None:
     assert [s.position_rad for s in states] == pytest.approx(shafts, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_goals_and_gains_written_over_the_sdk_drive_the_twin() -> None:
     model = TwinMotionModel()
     joints = tuple(JointCalibration(i) for i in (1, 2, 3))
