@@ -36,9 +36,10 @@ from app.control.commands import require_motion
 from app.control.errors import MotionRefused
 from app.control.model import RobotModel
 from app.fields import ReachVector3
-from app.programs.check import CheckedProgram
+from app.programs.check import CheckedProgram, ProgramReport
 from app.programs.dry_run import DryRunRefused
 from app.programs.errors import ProgramError
+from app.programs.verify import Violation
 from app.programs.workers import CheckJob, ProgramWorkers, WorkerError
 from app.server.api.deps import (
     ControlClient,
@@ -49,6 +50,7 @@ from app.server.api.deps import (
     SettingsDep,
     TokenChecked,
 )
+from app.server.api.records import model_of
 from app.server.api.responses import RunStarted
 from app.server.api.runs import start_run
 from app.server.errors import CONTROL, UNAUTHORISED, ErrorBody
@@ -83,41 +85,29 @@ class RunProgramRequest(ProgramRequest):
     )
 
 
-class ViolationOut(BaseModel):
-    line: int = Field(description="program line (1-based)")
-    kind: str = Field(
-        description="workspace, ceiling, ik, joint_limit, joint_speed, ...; wrist_limit and "
+ViolationOut = model_of(
+    Violation,
+    "ViolationOut",
+    describe={
+        "line": "program line (1-based)",
+        "kind": "workspace, ceiling, ik, joint_limit, joint_speed, ...; wrist_limit and "
         "wrist_speed with a wrist; run_duration (longer than a run may be: runs.max_samples; "
-        "/run refuses it in the same words)"
-    )
-    message: str
-    t_s: float = Field(description="first offending sample, from the program's start [s]")
-    point_m: list[float] = Field(description="its point in the base frame [m]")
-
-
-class ProgramReportOut(BaseModel):
-    """The check's report (app/programs/check.py ProgramReport)."""
-
-    ok: bool
-    duration_s: float
-    length_m: float
-    violations: list[ViolationOut]
-    path_m: list[list[float]] = Field(description="the path decimated for drawing [m]")
-    path_lines: list[int | None] = Field(
-        description="the program line of each path_m point (null where nothing moves)"
-    )
-    peak_joint_speed_rad_s: float | None
-    peak_joint_acceleration_rad_s2: float | None
-    worst_dexterity: float | None
-    worst_torque_ratio: float | None
-    lines: int
-    segments: int
-    samples: int
-    period_s: float
-    chord_tolerance_m: float
-    start_m: list[float]
-    work_offset_m: list[float]
-    notes: list[str]
+        "/run refuses it in the same words)",
+        "t_s": "first offending sample, from the program's start [s]",
+        "point_m": "its point in the base frame [m]",
+    },
+    types={"point_m": list[float]},
+)
+ProgramReportOut = model_of(
+    ProgramReport,
+    "ProgramReportOut",
+    doc="The check's report (app/programs/check.py ProgramReport).",
+    describe={
+        "path_m": "the path decimated for drawing [m]",
+        "path_lines": "the program line of each path_m point (null where nothing moves)",
+    },
+    types={"violations": list[ViolationOut]},  # type: ignore[valid-type]
+)
 
 
 class FieldProblemOut(BaseModel):
@@ -137,7 +127,7 @@ class ProgramErrorOut(BaseModel):
     word: str | None = Field(
         None, description="the word at fault ('' when none is; null when no program was read)"
     )
-    violations: list[ViolationOut | FieldProblemOut] = Field(
+    violations: list[ViolationOut | FieldProblemOut] = Field(  # type: ignore[valid-type]
         default_factory=list,
         description="the check's violations (/run), or each body field at fault and why",
     )

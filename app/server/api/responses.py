@@ -2,8 +2,10 @@
 
 Built from what serialize.py and the routers produce (same names, same nesting), with
 ``extra="forbid"`` so a key added on one side and not the other fails the tests instead of
-being dropped silently. SI units, base frame; null where a value is unknown (no read yet,
-FK failed).
+being dropped silently. A shape the domain already declares as a record (the loop's
+timing figures, the bus's counters, the lease's public view) is made from that record
+(app/server/api/records.py), not written again. SI units, base frame; null where a value
+is unknown (no read yet, FK failed).
 """
 
 from __future__ import annotations
@@ -11,6 +13,11 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
+
+from app.control.authority import LeaseView
+from app.control.timing import TimingStats
+from app.server.api.records import model_of
+from hardware.bus import BusStats
 
 MaybeFloat = float | None
 MaybeVector3 = Annotated[
@@ -82,18 +89,13 @@ class GoalStatus(_Out):
     )
 
 
-class TimingStatsOut(_Out):
-    """Loop timing; jitter is how late a tick started after its deadline [ms]."""
-
-    target_hz: float
-    measured_hz: float
-    period_mean_ms: float
-    jitter_p50_ms: float
-    jitter_p99_ms: float
-    worst_ms: float
-    overruns: int
-    ticks: int
-    longest_gap_ms: float = Field(description="the longest time between two ticks' starts [ms]")
+TimingStatsOut = model_of(
+    TimingStats,
+    "TimingStatsOut",
+    base=_Out,
+    doc="Loop timing; jitter is how late a tick started after its deadline [ms].",
+    describe={"longest_gap_ms": "the longest time between two ticks' starts [ms]"},
+)
 
 
 class LoopHealthOut(_Out):
@@ -114,7 +116,7 @@ class LoopHealthOut(_Out):
     longest_gap_ms: float = Field(description="the longest time between two ticks' starts [ms]")
 
 
-class LoopStatus(TimingStatsOut):
+class LoopStatus(TimingStatsOut):  # type: ignore[misc,valid-type]
     """The last 10 s at top level (overruns and ticks since start), both in full, and the
     health light judged on the last 10 s."""
 
@@ -123,17 +125,19 @@ class LoopStatus(TimingStatsOut):
     health: LoopHealthOut
 
 
-class BusStatusOut(_Out):
+class BusStatusOut(  # type: ignore[misc,valid-type]
+    model_of(
+        BusStats,
+        "BusCounters",
+        base=_Out,
+        describe={
+            "discarded": "status packets discarded as answers to another request (late, duplicated)"
+        },
+    )
+):
     """Counters since connect, and reads the loop missed."""
 
     missed_reads: int
-    transactions: int
-    failed_tries: int
-    retries: int
-    failures: int
-    discarded: int = Field(
-        description="status packets discarded as answers to another request (late, duplicated)"
-    )
 
 
 class PoseSourceOut(_Out):
@@ -444,14 +448,19 @@ class WindowStats(_Out):
     end_s: float | None
 
 
-class LeaseOut(_Out):
-    """The public view of the control lease: never anything that lets a client act for
-    the holder (the lease id is only in the answer to the POST that took it)."""
-
-    held: bool = Field(description="someone holds control now (the lease has not lapsed)")
-    holder: str | None = Field(description="the holder's display name (a label, not authority)")
-    since_s: float | None = Field(description="when control was taken [s, Unix time]")
-    idle_s: float | None = Field(description="seconds since the holder's last command [s]")
+LeaseOut = model_of(
+    LeaseView,
+    "LeaseOut",
+    base=_Out,
+    doc="The public view of the control lease: never anything that lets a client act for "
+    "the holder (the lease id is only in the answer to the POST that took it).",
+    describe={
+        "held": "someone holds control now (the lease has not lapsed)",
+        "holder": "the holder's display name (a label, not authority)",
+        "since_s": "when control was taken [s, Unix time]",
+        "idle_s": "seconds since the holder's last command [s]",
+    },
+)
 
 
 class LeaseTaken(_Out):
@@ -460,7 +469,7 @@ class LeaseTaken(_Out):
     lease_id: str = Field(description="the secret lease id; only its holder knows it")
     holder: str = Field(description="the display name given")
     timeout_s: float = Field(description="the lease lapses after this long without a command")
-    took_over_from: LeaseOut | None = Field(
+    took_over_from: LeaseOut | None = Field(  # type: ignore[valid-type]
         None, description="the lease this one replaced, when someone held control; else null"
     )
 
