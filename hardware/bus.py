@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -46,13 +46,20 @@ class ServoInfo:
     firmware_version: int
 
 
+def reading(unit: str, description: str) -> Any:
+    """A servo reading of :class:`JointState`: a per-joint column that every layer above
+    (the loop's snapshot, ``/api/status``, the process bus's shared frame, the wrist's
+    split) carries by its name, ``unit`` and ``description``, so a new register read is
+    declared here once (:data:`READINGS`)."""
+    return field(metadata={"unit": unit, "description": description})
+
+
 @dataclass(frozen=True)
 class JointState:
     """One consistent read of all joints, in joint order; arrays have shape (n_joints,).
 
-    position_rad: joint angle [rad] (calibrated: 0 = upper link horizontal, + down)
-    velocity_rad_s: joint velocity [rad/s]; current_a: motor current [A] (signed, in the
-    joint's direction); voltage_v: input voltage [V]; temperature_c: [degC];
+    position_rad: joint angle [rad] (calibrated: 0 = upper link horizontal, + down).
+    The servo readings (:data:`READINGS`, each a float column with its unit) follow it.
     hardware_errors: per joint, the names of the Hardware Error Status bits set (empty if
     none); moving: per joint, the servo's Moving flag; stamp_s: time.monotonic() at read [s]
     (a simulator's state: when the simulator produced it).
@@ -67,20 +74,49 @@ class JointState:
     """
 
     position_rad: np.ndarray
-    velocity_rad_s: np.ndarray
-    current_a: np.ndarray
-    voltage_v: np.ndarray
-    temperature_c: np.ndarray
-    moving: np.ndarray
-    hardware_errors: tuple[tuple[str, ...], ...]
-    stamp_s: float
-    sim_time_s: float | None = None
-    torque_enabled: tuple[bool, ...] | None = None
+    velocity_rad_s: np.ndarray = reading("rad/s", "joint velocity (Present Velocity)")
+    current_a: np.ndarray = reading(
+        "A", "motor current (Present Current), signed in the joint's direction"
+    )
+    voltage_v: np.ndarray = reading("V", "input voltage (Present Input Voltage)")
+    temperature_c: np.ndarray = reading("degC", "internal temperature (Present Temperature)")
+    pwm: np.ndarray = reading(
+        "1", "PWM duty cycle (Present PWM / 885), signed in the joint's direction; 1 = full"
+    )
+    moving: np.ndarray = field(kw_only=True)
+    hardware_errors: tuple[tuple[str, ...], ...] = field(kw_only=True)
+    stamp_s: float = field(kw_only=True)
+    sim_time_s: float | None = field(default=None, kw_only=True)
+    torque_enabled: tuple[bool, ...] | None = field(default=None, kw_only=True)
+
+    def readings(self) -> dict[str, np.ndarray]:
+        """The servo readings by name (:data:`READINGS`), each of shape (n_joints,)."""
+        return {name: getattr(self, name) for name in READINGS}
+
+    def joints(self, count: int) -> JointState:
+        """This read's first ``count`` joints (e.g. the legs of a read that has a wrist)."""
+        per_joint = {name: getattr(self, name)[:count] for name in ("position_rad", *READINGS)}
+        torque = None if self.torque_enabled is None else tuple(self.torque_enabled[:count])
+        return replace(
+            self,
+            **per_joint,
+            moving=self.moving[:count],
+            hardware_errors=tuple(self.hardware_errors[:count]),
+            torque_enabled=torque,
+        )
 
     @property
     def faulted(self) -> bool:
         """True if any joint reports a hardware error."""
         return any(self.hardware_errors)
+
+
+#: The servo readings of a :class:`JointState`, in order: name -> (unit, description).
+READINGS: dict[str, tuple[str, str]] = {
+    f.name: (f.metadata["unit"], f.metadata["description"])
+    for f in fields(JointState)
+    if "unit" in f.metadata
+}
 
 
 @dataclass(frozen=True)

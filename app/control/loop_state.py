@@ -15,7 +15,7 @@ from app.config import SafetySettings
 from app.control.gravity import GravityOffset
 from app.control.safety import FeedbackFreshness, FollowingError, MissCounter
 from app.control.sources import GoalSource
-from app.control.state import Fault, RobotInfo, Snapshot, WristReading
+from app.control.state import Fault, RobotInfo, Snapshot, WristReading, unread
 from app.control.timing import TickTiming, TimingRecorder
 from hardware.bus import BusStats, JointState, PositionGains
 
@@ -154,10 +154,7 @@ class LoopState:
             joints_commanded_rad=commanded,
             point_commanded_m=self.commanded_point_m,
             goal_m=self.goal_m,
-            velocity_rad_s=state.velocity_rad_s if state else nan3,
-            current_a=state.current_a if state else nan3,
-            voltage_v=state.voltage_v if state else nan3,
-            temperature_c=state.temperature_c if state else nan3,
+            readings=state.readings() if state else unread(),
             moving=tuple(bool(m) for m in state.moving) if state else (False,) * 3,
             hardware_errors=state.hardware_errors if state else ((),) * 3,
             torque_enabled=_torque_read(state),

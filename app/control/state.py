@@ -3,15 +3,21 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from app.control.timing import TimingStats
-from hardware.bus import BusStats, PositionGains
+from hardware.bus import READINGS, BusStats, PositionGains
 
 _NAN3 = np.full(3, np.nan)
 _NO_TIMING = TimingStats(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0)
+
+
+def unread(count: int = 3) -> dict[str, np.ndarray]:
+    """Every servo reading (hardware/bus.py READINGS) unknown: NaN, shape (count,)."""
+    return {name: np.full(count, np.nan) for name in READINGS}
 
 
 @dataclass(frozen=True)
@@ -117,10 +123,8 @@ class Snapshot:
     goal_m: np.ndarray = field(default_factory=lambda: _NAN3)
     # where a new path starts (commands.start_point's rule): what a plan must start from
     start_m: np.ndarray = field(default_factory=lambda: _NAN3)
-    velocity_rad_s: np.ndarray = field(default_factory=lambda: _NAN3)
-    current_a: np.ndarray = field(default_factory=lambda: _NAN3)
-    voltage_v: np.ndarray = field(default_factory=lambda: _NAN3)
-    temperature_c: np.ndarray = field(default_factory=lambda: _NAN3)
+    # the servo readings by name (hardware/bus.py READINGS: velocity, current, ...), (3,)
+    readings: Mapping[str, np.ndarray] = field(default_factory=lambda: unread())
     moving: tuple[bool, ...] = (False, False, False)
     hardware_errors: tuple[tuple[str, ...], ...] = ((), (), ())
     # per leg servo, its Torque Enable as read from it (None: not known); ``torque`` is
@@ -150,6 +154,11 @@ class Snapshot:
     loop_total: TimingStats = _NO_TIMING
     loop_window: TimingStats = _NO_TIMING
     bus_stats: BusStats = field(default_factory=BusStats)
+
+    @property
+    def velocity_rad_s(self) -> np.ndarray:
+        """The joints' velocity as read [rad/s], (3,) (a reading: ``readings``)."""
+        return self.readings["velocity_rad_s"]
 
     @property
     def tracking_error_m(self) -> np.ndarray:

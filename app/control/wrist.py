@@ -86,18 +86,7 @@ class WristBus:
             tuple(state.hardware_errors[k]),
             None if state.torque_enabled is None else bool(state.torque_enabled[k]),
         )
-        return JointState(
-            position_rad=state.position_rad[:k],
-            velocity_rad_s=state.velocity_rad_s[:k],
-            current_a=state.current_a[:k],
-            voltage_v=state.voltage_v[:k],
-            temperature_c=state.temperature_c[:k],
-            moving=state.moving[:k],
-            hardware_errors=tuple(state.hardware_errors[:k]),
-            stamp_s=state.stamp_s,
-            sim_time_s=state.sim_time_s,
-            torque_enabled=None if state.torque_enabled is None else state.torque_enabled[:k],
-        )
+        return state.joints(k)
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
         self.bus.set_profile(velocity_rad_s, acceleration_rad_s2)

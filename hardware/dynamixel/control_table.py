@@ -217,6 +217,14 @@ def ampere_to_current(ampere: float) -> int:
     return round(ampere / AMPERE_PER_CURRENT_UNIT)
 
 
+PWM_FULL_SCALE = 885  # Present PWM / Goal PWM at full duty (e-manual: 0.113 % per unit)
+
+
+def pwm_to_fraction(units: _Units) -> _Units:
+    """PWM register units (-885..885) -> duty cycle as a fraction of full (-1..1)."""
+    return units / PWM_FULL_SCALE
+
+
 def voltage_to_volt(units: _Units) -> _Units:
     """Input voltage register units (0.1 V) -> V."""
     return units * VOLT_PER_VOLTAGE_UNIT

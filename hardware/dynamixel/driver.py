@@ -46,6 +46,7 @@ from hardware.dynamixel.control_table import (
     current_to_ampere,
     decode,
     profile_units,
+    pwm_to_fraction,
     velocity_to_rad_s,
     voltage_to_volt,
 )
@@ -529,6 +530,7 @@ class DynamixelBus:
             current_a=sign * current_to_ampere(column(Reg.PRESENT_CURRENT)),
             voltage_v=voltage_to_volt(column(Reg.PRESENT_INPUT_VOLTAGE)),
             temperature_c=column(Reg.PRESENT_TEMPERATURE),
+            pwm=sign * pwm_to_fraction(column(Reg.PRESENT_PWM)),
             moving=column(Reg.MOVING).astype(bool),
             hardware_errors=tuple(alerts.get(i, ()) for i in self.ids),
             stamp_s=time.monotonic(),

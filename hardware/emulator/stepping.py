@@ -88,7 +88,7 @@ def store_state(servo: EmulatedServo, state: MotionState, now_s: float) -> None:
         _PRESENT_START,
         moving,
         0,  # Moving Status: profile details are not modelled
-        0,  # Present PWM: not modelled
+        t.get(Reg.PRESENT_PWM),  # Present PWM: a physical model's (_store_outputs), else 0
         current,
         velocity,
         position,
@@ -120,6 +120,8 @@ def _store_outputs(model: MotionModel, servos: Sequence[EmulatedServo], outputs)
             model.reboot(index)  # type: ignore[attr-defined]
             servo.model_reboots = servo.reboots  # type: ignore[attr-defined]
         servo.table.set(Reg.PRESENT_TEMPERATURE, max(0, min(100, round(output.temperature_c))))
+        limit = servo.table.get(Reg.PWM_LIMIT)
+        servo.table.set(Reg.PRESENT_PWM, max(-limit, min(limit, round(output.pwm))))
         # latch what the model newly reports; its outputs lag a reboot by one physics step
         seen = getattr(servo, "model_error_seen", 0)
         if output.hardware_error and output.hardware_error != seen:

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from hardware.base_motion import BaseMotion
-from hardware.bus import BusStats, JointState, PositionGains, ServoInfo
+from hardware.bus import READINGS, BusStats, JointState, PositionGains, ServoInfo
 from hardware.calibration import goal_ticks
 from hardware.dynamixel.control_table import OperatingMode, hardware_error_names
 from hardware.errors import BusError, NotConnectedError
@@ -51,13 +51,16 @@ REPLY_TIMEOUT_S = 10.0
 STALE_S = 2.0
 
 # shared frame: state written by the child, goal written by the parent (float64 slots);
-# room for four servos per column (three legs and a wrist), a bus uses its first n
+# room for four servos per column (three legs and a wrist), a bus uses its first n; one
+# column per servo reading (hardware/bus.py READINGS), then the flags
 _W = 4
-_POS, _VEL, _CUR, _VOLT, _TEMP, _MOVING, _ERR, _TORQUE = (
-    slice(_W * k, _W * k + _W) for k in range(8)
-)
-_STAMP, _PLATFORM, _GOAL_SEQ, _GOAL, _SIM_TIME = 32, slice(33, 36), 36, slice(37, 41), 41
-_FRAME_SIZE = 42
+_COLUMNS = ("position_rad", *READINGS, "moving", "errors", "torque")
+_COLUMN = {name: slice(_W * k, _W * k + _W) for k, name in enumerate(_COLUMNS)}
+_POS, _MOVING, _ERR, _TORQUE = (_COLUMN[c] for c in ("position_rad", "moving", "errors", "torque"))
+_STAMP = _W * len(_COLUMNS)
+_PLATFORM = slice(_STAMP + 1, _STAMP + 4)
+_GOAL_SEQ, _GOAL, _SIM_TIME = _STAMP + 4, slice(_STAMP + 5, _STAMP + 5 + _W), _STAMP + 5 + _W
+_FRAME_SIZE = _SIM_TIME + 1
 
 
 class ProcessSimBus:
@@ -159,10 +162,7 @@ class ProcessSimBus:
         n = self.n
         return JointState(
             position_rad=values[_POS][:n],
-            velocity_rad_s=values[_VEL][:n],
-            current_a=values[_CUR][:n],
-            voltage_v=values[_VOLT][:n],
-            temperature_c=values[_TEMP][:n],
+            **{name: values[_COLUMN[name]][:n] for name in READINGS},
             moving=values[_MOVING][:n] > 0.5,
             hardware_errors=tuple(hardware_error_names(int(c)) for c in values[_ERR][:n]),
             stamp_s=float(values[_STAMP]),
@@ -330,12 +330,9 @@ def _publish(bus: SimBus, frame: np.ndarray, lock: Any) -> None:
     platform = bus.twin.platform_m
     n = bus.n
     with lock:
-        frame[_POS][:n], frame[_VEL][:n], frame[_CUR][:n] = (
-            state.position_rad,
-            state.velocity_rad_s,
-            state.current_a,
-        )
-        frame[_VOLT][:n], frame[_TEMP][:n] = state.voltage_v, state.temperature_c
+        frame[_POS][:n] = state.position_rad
+        for name, values in state.readings().items():
+            frame[_COLUMN[name]][:n] = values
         frame[_MOVING][:n], frame[_ERR][:n] = state.moving, codes
         frame[_TORQUE][:n] = state.torque_enabled
         frame[_STAMP], frame[_PLATFORM] = state.stamp_s, platform

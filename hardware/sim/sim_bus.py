@@ -33,6 +33,7 @@ from hardware.dynamixel.control_table import (
     current_to_ampere,
     hardware_error_names,
     profile_units,
+    pwm_to_fraction,
     rad_s_to_velocity,
     velocity_to_rad_s,
 )
@@ -303,6 +304,7 @@ class SimBus:
             current_a=sign * np.array(current),
             voltage_v=np.full(self.n, round(twin.config.servo.supply_voltage_v * 10) / 10),
             temperature_c=np.array([float(round(s.temperature_c)) for s in twin.servos]),
+            pwm=sign * np.array([pwm_to_fraction(round(o.pwm)) for o in outputs]),
             moving=np.array(moving),
             hardware_errors=tuple(hardware_error_names(s.hardware_error) for s in twin.servos),
             stamp_s=time.monotonic(),

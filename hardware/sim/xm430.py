@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from hardware.dynamixel.control_table import (
+    PWM_FULL_SCALE,
     RAD_PER_TICK,
     RAD_S_PER_VELOCITY_UNIT,
     HardwareErrorFlag,
@@ -39,7 +40,6 @@ from hardware.shaft_motion import MotionCommand
 from hardware.sim.xm430_profile import ProfileState, step_profile
 
 RPM = 2.0 * math.pi / 60.0
-PWM_FULL_SCALE = 885
 _POSITION_MODES = (
     OperatingMode.POSITION,
     OperatingMode.EXTENDED_POSITION,

@@ -133,7 +133,8 @@ function servoRow(j, i, torque) {
     : held ? "torque on" : "relaxed";
   return `<tr><th scope="row">${j.servo_ids[i]}</th><td>${deg(j.position_rad[i])}</td>` +
     `<td>${deg(j.commanded_rad[i])}</td><td>${deg(j.velocity_rad_s[i], 0)}</td>` +
-    `<td>${fixed(j.current_a[i], 3)}</td><td>${fixed(j.voltage_v[i], 1)}</td>` +
+    `<td>${fixed(j.current_a[i], 3)}</td><td>${fixed(j.pwm[i] == null ? null : 100 * j.pwm[i], 0)}</td>` +
+    `<td>${fixed(j.voltage_v[i], 1)}</td>` +
     `<td>${fixed(j.temperature_c[i], 0)}</td>${errorCell}<td>${reboot}</td></tr>`;
 }
 

@@ -21,6 +21,7 @@ def read(position, sim_time_s=None, current=0.0) -> JointState:
         current_a=np.full(3, current),
         voltage_v=np.full(3, 12.0),
         temperature_c=np.full(3, 30.0),
+        pwm=np.zeros(3),
         moving=np.zeros(3, dtype=bool),
         hardware_errors=((), (), ()),
         stamp_s=0.0,

@@ -63,6 +63,7 @@ class FakeBus:
             current_a=np.zeros(n),
             voltage_v=np.full(n, 12.0),
             temperature_c=np.full(n, 30.0),
+            pwm=np.zeros(n),
             moving=np.zeros(n, dtype=bool),
             hardware_errors=self.errors,
             stamp_s=time.monotonic(),

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, create_model
 
 from app.control.authority import LeaseView
 from app.control.timing import TimingStats
 from app.server.api.records import model_of
-from hardware.bus import BusStats
+from hardware.bus import READINGS, BusStats
 
 MaybeFloat = float | None
 MaybeVector3 = Annotated[
@@ -47,14 +47,24 @@ class FaultOut(_Out):
     last_time_s: float
 
 
-class JointsStatus(_Out):
+class _JointsRead(_Out):
     servo_ids: list[int]
     position_rad: MaybeVector3
     commanded_rad: MaybeVector3
-    velocity_rad_s: MaybeVector3
-    current_a: MaybeVector3
-    voltage_v: MaybeVector3
-    temperature_c: MaybeVector3
+
+
+# the servo readings, one field each, as hardware/bus.py declares them (READINGS)
+_JointsReadings = create_model(
+    "JointsReadings",
+    __base__=_JointsRead,
+    **{
+        name: (MaybeVector3, Field(description=f"{description} [{unit}]"))
+        for name, (unit, description) in READINGS.items()
+    },
+)
+
+
+class JointsStatus(_JointsReadings):  # type: ignore[misc,valid-type]
     moving: list[bool]
     hardware_errors: list[list[str]] = Field(description="per servo, its hardware error flags")
     torque_enabled: list[bool | None] = Field(

@@ -4,13 +4,16 @@ e-stop receipts and pose status), never from live controller attributes."""
 from __future__ import annotations
 
 from concurrent.futures import Future
+from dataclasses import replace
+
+import numpy as np
 
 from app.control.state import RobotInfo, Snapshot
 from app.control.timing import TimingStats
 from app.server.api import serialize
-from app.server.api.responses import StatusOut
+from app.server.api.responses import JointsStatus, StatusOut
 from app.server.estop import EstopReceipt, EstopReceipts
-from hardware.bus import BusStats, PositionGains
+from hardware.bus import READINGS, BusStats, PositionGains
 
 
 def _snapshot() -> Snapshot:
@@ -100,3 +103,16 @@ def test_presses_without_an_id_are_presses_of_their_own():
     receipts.press("route")
     assert list(receipts.latest().arrivals_unix_s) == ["route"]
     assert receipts.latest() is not first
+
+
+def test_every_servo_reading_reaches_the_status_and_its_schema():
+    """A reading declared once (hardware/bus.py READINGS) is in the snapshot, in
+    /api/status's joints, and in the response model with its unit: no layer lists them."""
+    readings = {name: np.array([0.5, -0.25, np.nan]) for name in READINGS}
+    out = serialize.status(replace(_snapshot(), readings=readings))
+    StatusOut.model_validate(out)
+    schema = JointsStatus.model_json_schema()["properties"]
+    for name, (unit, _) in READINGS.items():
+        assert out["joints"][name] == [0.5, -0.25, None]
+        assert schema[name]["description"].endswith(f"[{unit}]")
+    assert "pwm" in READINGS  # the last one added: Present PWM

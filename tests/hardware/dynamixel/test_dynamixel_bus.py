@@ -323,3 +323,13 @@ def test_baud_rates_beyond_the_sdk_list(emulator: ServoEmulator) -> None:
         bus.disconnect()
     with pytest.raises(CommError, match="refused baud rate 12345"):
         DynamixelBus(make_config(emulator.port, baudrate=12345)).connect()
+
+
+def test_present_pwm_is_read_as_a_signed_fraction_of_full_duty(bus, emulator) -> None:
+    """Present PWM (124, signed, 885 = 100 %) reaches the state in the joint's direction."""
+    units = {1: -442, 2: 885, 3: 0}
+    for servo in emulator.servos:
+        servo.table.set(Reg.PRESENT_PWM, units[servo.servo_id])
+    sign = np.array([cal.direction for cal in bus.config.joints], dtype=float)
+    expected = sign * np.array([units[i] for i in IDS]) / 885
+    wait_for(lambda: np.allclose(bus.read_state().pwm, expected), 5.0, "the PWM written")

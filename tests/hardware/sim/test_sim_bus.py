@@ -167,3 +167,24 @@ def test_an_overload_shuts_the_servo_down_and_its_torque_reads_off(bus: SimBus) 
     assert not bus.commands[0].torque_enabled
     bus.reboot([1])
     assert bus.read_state().torque_enabled == (False, True, True)
+
+
+def test_the_pwm_read_drives_the_current_read_through_the_winding(bus: SimBus) -> None:
+    """At rest, holding the arm up, the motor's equation V * pwm = R * i (no back-EMF)
+    relates the two readings: Present PWM (a fraction of full duty) and Present Current,
+    each rounded to its register's unit."""
+    bus.write_goal([0.4, 0.4, 0.4])
+    bus.advance(1.0)
+    state = bus.read_state()
+    params = bus.twin.servos[0].params
+    assert np.all(state.pwm < 0) and np.all(np.abs(state.pwm) <= 1.0)  # the arm hangs
+    volts = params.supply_voltage_v * state.pwm
+    amperes = volts / params.resistance_ohm
+    assert state.current_a == pytest.approx(amperes, abs=2 * AMPERE_PER_CURRENT_UNIT)
+    assert set(state.readings()) == {
+        "velocity_rad_s",
+        "current_a",
+        "voltage_v",
+        "temperature_c",
+        "pwm",
+    }
