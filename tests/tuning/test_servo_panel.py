@@ -142,8 +142,8 @@ class StandIn:
     """What plan_joint_step reads of a controller: its snapshot, servo ids, gate, robot and
     settings (no loop, no bus)."""
 
-    def __init__(self, **snap) -> None:
-        from app.control.state import Snapshot
+    def __init__(self, velocity_rad_s=(0.0, 0.0, 0.0), **snap) -> None:
+        from app.control.state import Snapshot, unread
 
         joints = THESIS_DELTA.ik(HOME).joints
         base = {
@@ -152,7 +152,7 @@ class StandIn:
             "joints_commanded_rad": joints,
             "point_commanded_m": HOME,
             "goal_m": HOME,
-            "velocity_rad_s": np.zeros(3),
+            "readings": {**unread(), "velocity_rad_s": np.asarray(velocity_rad_s, float)},
         }
         self.snap = Snapshot(**{**base, **snap})
         self.servo_ids = (11, 12, 13)
