@@ -470,3 +470,29 @@ def reset_now(state: LoopState, ctx: CommandContext, bus: ServoBus) -> dict:
     state.freshness.reset()
     state.misses.ok()
     return {"rebooted": failing}
+
+
+OPERATOR_SOURCES = ("jog", "move")  # the sources an operator drives live (go-to, jogs)
+
+
+def link_lost(state: LoopState, why: str, stop_runs: bool = True) -> str | None:
+    """The link that commands the robot is lost: the operator's motion stops and the robot
+    holds where it is (a jog brakes to a stop within the jog limits, a move stops where it
+    is commanded, a held jog is released); a run or a hold-in-world too when
+    ``stop_runs``. ``why`` goes to the notice. Returns the name of the motion stopped
+    (None: none was running)."""
+    source = state.source
+    if source is None:
+        return None
+    if source.name not in OPERATOR_SOURCES and not stop_runs:
+        return None
+    held = state.hold_velocity_m_s is not None
+    if isinstance(source, JogSource) and source.at_rest and not held:
+        return None  # a jog standing at its goal holds a point: nothing moves
+    state.hold_deadline_s = state.hold_velocity_m_s = None
+    if isinstance(source, JogSource):
+        source.brake()
+    else:
+        stop_source(state, source)
+    state.notice = why
+    return source.name

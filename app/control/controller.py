@@ -78,6 +78,7 @@ class Controller:
         backend_description: str = "",
         clock: Callable[[], float] = time.monotonic,
         tick_clock: TickClock | None = None,
+        thread_setup: Callable[[], Any] | None = None,
     ) -> None:
         self.settings = settings
         # the robot model and the limits; replaced whole by use_model (app/control/model.py)
@@ -118,6 +119,10 @@ class Controller:
         # paces the thread; None: real time at loop.rate_hz (tests may give a virtual one)
         self._tick_clock = tick_clock
         self._t0 = clock()
+        # run first in the loop's thread (a robot node's real-time scheduling: what it
+        # got is kept in ``thread_setup_result``)
+        self._thread_setup = thread_setup
+        self.thread_setup_result: Any = None
         self._snapshot = self.state.snapshot(0.0, self._bus_stats())
 
     # ---- lifecycle ----
@@ -497,6 +502,8 @@ class Controller:
 
     # ---- the loop (control thread) ----
     def _run(self) -> None:
+        if self._thread_setup is not None:
+            self.thread_setup_result = self._thread_setup()
         loop = self.settings.loop
         clock = self._tick_clock or TickClock(loop.rate_hz, loop.spin_s)
         previous: float | None = None

@@ -89,6 +89,7 @@ class LoopState:
     gravity: GravityOffset | None = None
     recorder: TimingRecorder = field(default_factory=lambda: TimingRecorder(200.0))
     info: RobotInfo = field(default_factory=RobotInfo)
+    finished_source_id: str | None = None  # the last source (with an id) that ran to its end
 
     @classmethod
     def initial(
@@ -176,6 +177,10 @@ class LoopState:
             loop_total=self.recorder.since_start(),
             loop_window=self.recorder.last_window(),
             bus_stats=bus_stats or BusStats(),
+            source_id=getattr(self.source, "source_id", None),
+            source_t_s=getattr(self.source, "t_s", None),
+            source_line=getattr(self.source, "program_line", None),
+            finished_source_id=self.finished_source_id,
         )
 
     def _servos_hold(self) -> bool:

@@ -154,6 +154,13 @@ class Snapshot:
     loop_total: TimingStats = _NO_TIMING
     loop_window: TimingStats = _NO_TIMING
     bus_stats: BusStats = field(default_factory=BusStats)
+    # the active goal source as a station follows it over the link (app/link/): its id
+    # (None: none, or one with no id), its time [s] and a program's line being executed;
+    # and the id of the last source that ran to its end (not stopped, faulted or replaced)
+    source_id: str | None = None
+    source_t_s: float | None = None
+    source_line: int | None = None
+    finished_source_id: str | None = None
 
     @property
     def velocity_rad_s(self) -> np.ndarray:

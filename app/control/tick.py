@@ -123,6 +123,7 @@ def advance(state: LoopState, ctx: CommandContext, ports: TickPorts, now: Clock)
         _follow(state, ctx, ports, now, setpoint)
     if setpoint.finished and state.source is source:
         state.source = None
+        state.finished_source_id = getattr(source, "source_id", None)
 
 
 def _follow(

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from app.control.sources import Progress, Setpoint
+from app.link.paths import SampledPath
 from app.runs.trajectories import PlannedRun
 
 
@@ -25,6 +28,38 @@ class TrajectorySource:
         # two ticks (a tick late by more than the line lasts), which no sample shows
         self.lines_met: list[int] = []
         self._timed_s: float | None = None  # the timed part's time at the last tick
+
+    def sampled(self, period_s: float) -> SampledPath:
+        """This run as data for a robot node (app/link/paths.py): its points, wrist angles,
+        phases and program lines at every ``period_s`` [s], what :meth:`next` gives there."""
+        plan = self.plan
+        times, points = plan.sample(period_s)
+        if times[-1] < plan.duration_s:  # rounding: one more sample, at or past the end
+            times = np.append(times, times[-1] + period_s)
+            points = np.vstack([points, plan.point_at(plan.duration_s)])
+        times = np.arange(len(times)) * period_s  # sample k at k periods, exactly
+        phases = ("approach", "timed", "stop")
+        index = np.array([phases.index(plan.phase_at(float(t))) for t in times])
+        phi = None
+        if plan.moves_wrist:
+            phi = np.array([plan.phi_at(float(t)) for t in times], dtype=float)
+        lines = None
+        if self._line_at is not None:
+            timed = np.clip(times - plan.approach_s, 0.0, plan.params.duration_s)
+            lines = np.where(index == 1, self._line_at(timed), -1).astype(int)
+        return SampledPath(
+            period_s=period_s,
+            duration_s=plan.duration_s,
+            points_m=points,
+            phases=phases,
+            phase_index=index,
+            phi_rad=phi,
+            lines=lines,
+            lead_s=self.lead_s,
+            approach_s=plan.approach_s,
+            timed_s=plan.params.duration_s,
+            name=self.name,
+        )
 
     def progress(self) -> Progress:
         t, plan = self.t_s, self.plan  # t_s is one float: safe to read from another thread
