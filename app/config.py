@@ -346,6 +346,13 @@ class LoopSettings(_Section):
     """The control loop's timing."""
 
     rate_hz: float = Field(200.0, gt=0, le=2000, description="control loop rate [Hz]")
+    realtime: bool = Field(
+        True,
+        description="the robot node's loop thread asks for SCHED_FIFO (needs root or "
+        "CAP_SYS_NICE; its status says whether it got it)",
+    )
+    priority: int = Field(50, ge=1, le=99, description="its SCHED_FIFO priority")
+    cpu: int | None = Field(None, ge=0, description="the one CPU its thread runs on (None: any)")
     spin_s: float = Field(
         3e-4, ge=0, le=2e-3, description="busy-wait before each deadline [s] (timer slack)"
     )
@@ -454,6 +461,59 @@ class ServerSettings(_Section):
     estop_port: int = Field(
         0, ge=0, le=65535, description="its port (0: any free one; /api/info says which)"
     )
+
+
+class LinkSettings(_Section):
+    """The link between the station (``deltadash serve``) and the robot node (``deltadash
+    robot``), over Eclipse Zenoh (docs/server.md, "The robot node")."""
+
+    robot: str = Field(
+        "embedded",
+        description='where the loop runs: "embedded" (serve starts a robot node as its '
+        'child process), "in-process" (a thread of the station: tests and the headless '
+        "run), or the Zenoh endpoint of a robot node elsewhere, e.g. tcp/192.168.1.20:7447",
+    )
+    listen: str = Field(
+        "tcp/127.0.0.1:7447",
+        description="the Zenoh endpoint a robot node listens on (deltadash robot --listen)",
+    )
+    key_prefix: str = Field(
+        "deltadash/robot",
+        pattern=r"^[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*$",
+        description="the robot node's keys are under this (one prefix per robot)",
+    )
+    heartbeat_s: float = Field(
+        0.02, gt=0, le=1, description="a station says it is alive this often [s]"
+    )
+    station_timeout_s: float = Field(
+        0.06,
+        gt=0,
+        le=5,
+        description="a robot node that hears no heartbeat this long stops the operator's "
+        "motion and holds [s]",
+    )
+    robot_timeout_s: float = Field(
+        0.5,
+        gt=0,
+        le=10,
+        description="a station that gets no state this long says robot offline [s]",
+    )
+    on_station_lost: Literal["stop", "continue"] = Field(
+        "stop",
+        description="a run or a hold-in-world when the station is lost: stop and hold, or "
+        "carry on to its end (operator motion always stops)",
+    )
+    take_over: bool = Field(
+        False,
+        description="a station takes the robot's link from another live station (logged)",
+    )
+    user: str | None = Field(None, description="Zenoh user name (with password): the link's login")
+    password: str | None = Field(None, min_length=8, description="Zenoh password")
+    tls_root_ca: str | None = Field(
+        None, description="TLS: the CA certificate file a station checks the node with"
+    )
+    tls_certificate: str | None = Field(None, description="TLS: this side's certificate file")
+    tls_private_key: str | None = Field(None, description="TLS: this side's private key file")
 
 
 class RunSettings(_Section):
@@ -595,6 +655,7 @@ class Settings(BaseSettings):
     world: WorldSettings = WorldSettings()
     programs: ProgramSettings = ProgramSettings()
     wrist: WristSettings = WristSettings()
+    link: LinkSettings = LinkSettings()
 
     @model_validator(mode="after")
     def _wrist_id_free(self) -> Settings:

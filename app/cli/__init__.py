@@ -1,8 +1,8 @@
 """The ``deltadash`` command line: one module per sub-command in this package.
 
-``serve`` (serve.py), ``run`` (run.py), ``runs`` (runs.py), ``design`` (design/), ``home``
-(home.py), ``ik`` and ``fk`` (kinematics.py); ``emulate`` (emulate.py); ``gcode``
-(gcode.py); ``calibrate`` (calibrate.py); ``tune`` (tune.py).
+``serve`` (serve.py), ``robot`` (robot.py), ``run`` (run.py), ``runs`` (runs.py),
+``design`` (design/), ``home`` (home.py), ``ik`` and ``fk`` (kinematics.py); ``emulate``
+(emulate.py); ``gcode`` (gcode.py); ``calibrate`` (calibrate.py); ``tune`` (tune.py).
 
 Building the parser imports no heavy library (fastapi, uvicorn, mujoco, matplotlib, scipy,
 viser, pydantic): each handler imports what it needs, so ``deltadash --help``, ``ik`` and
@@ -15,7 +15,19 @@ import argparse
 import os
 import sys
 
-from app.cli import calibrate, design, emulate, gcode, home, kinematics, run, runs, serve, tune
+from app.cli import (
+    calibrate,
+    design,
+    emulate,
+    gcode,
+    home,
+    kinematics,
+    robot,
+    run,
+    runs,
+    serve,
+    tune,
+)
 from kinematics import DeltaError
 
 DESCRIPTION = """\
@@ -47,6 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
         dest="command", required=True, title="commands", metavar="COMMAND"
     )
     serve.add_parser(commands)
+    robot.add_parser(commands)
     run.add_parser(commands)
     runs.add_parser(commands)
     design.add_parser(commands)

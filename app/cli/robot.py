@@ -1,0 +1,123 @@
+"""``deltadash robot``: the robot node alone, e.g. on the drone's computer.
+
+It owns the servo bus and runs the control loop; a station (``deltadash serve --robot
+ENDPOINT``) commands it over Eclipse Zenoh (docs/server.md, "The robot node"). It prints
+one line once it listens, and stops on Ctrl-C or SIGTERM, relaxing the servos as its
+config says (``safety.torque_off_on_exit``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+import threading
+
+
+def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = commands.add_parser(
+        "robot",
+        help="run the robot node: the control loop and the servo bus, linked over Zenoh",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--config", help="TOML config file (see app/config.py)")
+    parser.add_argument("--backend", choices=["sim", "emulated", "dynamixel"])
+    parser.add_argument("--port", help="serial port of the servo bus, e.g. /dev/ttyUSB0")
+    parser.add_argument("--baud", type=int, help="bus baud rate [bit/s], e.g. 4000000")
+    parser.add_argument(
+        "--listen",
+        help="the Zenoh endpoint to listen on (default link.listen: tcp/127.0.0.1:7447; "
+        "tcp/0.0.0.0:7447 for every interface, which needs link.user and link.password)",
+    )
+    parser.add_argument(
+        "--parent",
+        type=int,
+        help=argparse.SUPPRESS,  # deltadash serve's pid: an embedded node ends after it
+    )
+    parser.add_argument(
+        "--orphan-hold-s",
+        type=float,
+        default=5.0,
+        help=argparse.SUPPRESS,  # how long an embedded node holds once its station is gone
+    )
+    parser.set_defaults(handler=run)
+    return parser
+
+
+def _overrides(args: argparse.Namespace) -> dict:
+    hardware = {
+        k: v
+        for k, v in (("backend", args.backend), ("port", args.port), ("baud", args.baud))
+        if v is not None
+    }
+    link = {"listen": args.listen} if args.listen else {}
+    return {k: v for k, v in (("hardware", hardware), ("link", link)) if v}
+
+
+def check_exposure(listen: str, user: str | None, password: str | None) -> None:
+    """Listening beyond loopback without a login would hand the robot to the network."""
+    from app.config import ConfigError
+
+    host = listen.split("/", 1)[-1].rsplit(":", 1)[0].strip("[]")
+    loopback = host in ("localhost", "::1") or host.startswith("127.")
+    if not loopback and (user is None or password is None):
+        raise ConfigError(
+            f"link.listen = {listen!r} is reachable from other machines: set link.user and "
+            "link.password (DELTADASH_LINK__USER, DELTADASH_LINK__PASSWORD; 8+ characters), "
+            "or TLS (docs/server.md)"
+        )
+
+
+def run(args: argparse.Namespace) -> int:
+    from app.config import ConfigError, load_settings
+    from app.control.controller import Controller
+    from app.robot.node import RobotNode
+    from app.robot.realtime import ask_realtime
+    from app.robot.zenoh_server import NodeServer
+    from app.server.backends import open_backend
+
+    try:
+        settings = load_settings(args.config, **_overrides(args))
+        link = settings.link
+        check_exposure(link.listen, link.user, link.password)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    with open_backend(settings) as backend:
+        controller = Controller(
+            settings,
+            backend.bus,
+            backend.kind,
+            backend.description,
+            thread_setup=lambda: ask_realtime(settings.loop),
+        )
+        node = RobotNode(settings, controller, station_timeout_s=link.station_timeout_s)
+        node.start()
+        server = NodeServer(node, link, link.listen)
+        print(
+            f"deltadash robot: listening on {link.listen} (keys {link.key_prefix}/...), "
+            f"backend {backend.kind}",
+            flush=True,
+        )
+        try:
+            while not stop.wait(0.5):
+                if args.parent is not None and os.getppid() != args.parent:
+                    print(
+                        f"deltadash robot: station {args.parent} is gone; holding "
+                        f"{args.orphan_hold_s:g} s, then stopping",
+                        flush=True,
+                    )
+                    stop.wait(args.orphan_hold_s)
+                    break
+        finally:
+            server.close()
+            unsafe = node.stop()
+    if unsafe:
+        print(f"error: {unsafe}", file=sys.stderr)
+        return 3
+    return 0

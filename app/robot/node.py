@@ -1,0 +1,344 @@
+"""The robot node: the control loop, the only owner of the servo bus, behind a link.
+
+It runs the :class:`~app.control.controller.Controller` (read, FK, goal source, gate, IK,
+write, safety, publish) on its own bus and takes commands from the station that holds its
+link (app/robot/holder.py): operator motion (goal, jog, held jog, move, the wrist), the
+runs the station planned and checked (as data: app/link/paths.py), torque, e-stop (from
+anyone), reset, gains, joint offsets and the robot model. Each command is an op name and
+JSON arguments (app/link/protocol.py); its answer is JSON data or the refusal's error,
+with the same kinds the API maps to HTTP codes. What it executes was checked by the
+station; the node checks the arguments again and gates every setpoint, as the loop does.
+
+The transport is not here: app/link/zenoh_link.py serves a node over Eclipse Zenoh (the
+``deltadash robot`` process), app/link/local.py calls it in one process (the tests).
+
+When the holder's heartbeat stops (``link.station_timeout_s``), the next tick stops the
+operator's motion (jog, held jog, go-to) and holds; a run or a hold-in-world too unless
+``link.on_station_lost`` is ``continue``. Nothing moves again until a station holds the
+link and sends a command.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import Future
+from typing import Any
+
+import numpy as np
+
+from app.config import Settings
+from app.control import commands
+from app.control.controller import Controller
+from app.control.errors import MotionRefused
+from app.control.state import Snapshot
+from app.link import robots
+from app.link.codec import decode, plain
+from app.link.paths import PathSource, SampledPath
+from app.link.protocol import PROTOCOL
+from app.robot.holder import LinkHolder
+from hardware.bus import PositionGains
+
+log = logging.getLogger(__name__)
+ANYONE = ("estop", "link", "info", "tap", "release")  # ops that need no link
+
+
+def _vector(args: dict[str, Any], name: str, size: int = 3) -> np.ndarray:
+    value = args.get(name)
+    try:
+        vector = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected {size} numbers, got {value!r:.80}") from None
+    if vector.shape != (size,) or not np.isfinite(vector).all():
+        raise ValueError(f"{name}: expected {size} finite numbers, got {value!r:.80}")
+    return vector
+
+
+def _optional_vector(args: dict[str, Any], name: str) -> np.ndarray | None:
+    return None if args.get(name) is None else _vector(args, name)
+
+
+def _number(args: dict[str, Any], name: str, default: float | None = None) -> float:
+    value = args.get(name, default)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"{name}: expected a finite number, got {value!r:.80}")
+    return float(value)
+
+
+def _optional_number(args: dict[str, Any], name: str) -> float | None:
+    return None if args.get(name) is None else _number(args, name)
+
+
+def _flag(args: dict[str, Any], name: str, default: bool = False) -> bool:
+    value = args.get(name, default)
+    if not isinstance(value, bool):
+        raise ValueError(f"{name}: expected true or false, got {value!r:.80}")
+    return value
+
+
+def _text(args: dict[str, Any], name: str, limit: int = 200) -> str:
+    value = args.get(name)
+    if not isinstance(value, str) or not 0 < len(value) <= limit:
+        raise ValueError(f"{name}: expected a text of 1 to {limit} characters")
+    return value
+
+
+def _done(value: Any) -> Future:
+    future: Future = Future()
+    future.set_result(value)
+    return future
+
+
+def _then(future: Future, convert: Callable[[Any], Any]) -> Future:
+    """A Future of ``convert(result)`` once ``future`` is done (its error passed on)."""
+    out: Future = Future()
+
+    def finish(done: Future) -> None:
+        error = done.exception()
+        if error is not None:
+            out.set_exception(error)
+            return
+        try:
+            out.set_result(convert(done.result()))
+        except Exception as exc:  # a conversion bug: the caller sees it, the loop does not
+            out.set_exception(exc)
+
+    future.add_done_callback(finish)
+    return out
+
+
+class RobotNode:
+    """One robot's loop and its link's authority (``station_timeout_s`` None: its station
+    is in the same process and never lost)."""
+
+    def __init__(
+        self,
+        settings: Settings,
+        controller: Controller,
+        station_timeout_s: float | None = None,
+        name: str = "robot",
+    ) -> None:
+        self.settings, self.controller, self.name = settings, controller, name
+        self.holder = LinkHolder(station_timeout_s)
+        self._stop_runs = settings.link.on_station_lost == "stop"
+        self._taps = 0
+        self._tap_lock = threading.Lock()
+        self._tick_listeners: list[Callable[[Snapshot], None]] = []
+        self._started_s = time.time()
+        controller.add_listener(self._after_tick)
+
+    # ---- lifecycle ----
+    def start(self) -> None:
+        self.controller.start()
+
+    def stop(self) -> str | None:
+        """Stop the loop (torque off at exit per config); why it could not, else None."""
+        return self.controller.stop()
+
+    # ---- the link ----
+    def heartbeat(self, station: str) -> None:
+        self.holder.heartbeat(station)
+
+    def info(self) -> dict[str, Any]:
+        """What a station needs to know of this robot: its config (the robot, joints,
+        limits, safety, wrist, tool, loop), the model in use, the gains, joint offsets,
+        whether gravity is compensated, and the link's holder."""
+        controller = self.controller
+        view = self.holder.view()
+        settings = controller.settings.model_dump(
+            mode="json", exclude={"server": {"token"}, "link": {"password"}}
+        )
+        return {
+            "protocol": PROTOCOL,
+            "name": self.name,
+            "backend": controller.backend,
+            "backend_description": controller.backend_description,
+            "servo_ids": list(controller.servo_ids),
+            "period_s": controller.period_s,
+            "settings": settings,
+            "model": {
+                "robot": robots.robot_data(controller.robot),
+                "version": controller.model.version,
+                "origin": controller.model.origin,
+            },
+            "joint_offsets_rad": controller.joint_offsets_rad.tolist(),
+            "gravity": controller.gravity is not None,
+            "holder": view.holder,
+            "started_unix_s": self._started_s,
+            "realtime": plain(controller.thread_setup_result),
+        }
+
+    def call(self, station: str, op: str, args: dict[str, Any] | None = None) -> Future:
+        """Run command ``op`` with ``args`` for ``station``: a Future of ``(answer, tick)``
+        (the answer as plain JSON data; the tick whose snapshot shows it), or of its
+        refusal (LinkRefused when ``station`` does not hold the link; GoalRejected,
+        MotionRefused, ValueError naming the argument, as the loop refuses). Raises
+        nothing itself."""
+        try:
+            handler = getattr(self, f"_op_{op}", None)
+            if handler is None or not isinstance(op, str) or not op.isidentifier():
+                raise ValueError(f"op: no command {op!r}")
+            if not isinstance(args, dict | None):
+                raise ValueError("args: expected an object")
+            if op not in ANYONE:
+                self.holder.require(station)
+            outcome = handler(station, args or {})
+        except Exception as exc:
+            failed: Future = Future()
+            failed.set_exception(exc)
+            return failed
+        answered = outcome if isinstance(outcome, Future) else _done(outcome)
+        return _then(answered, lambda result: (plain(result), self.controller.snapshot().tick))
+
+    def add_tick_listener(self, listener: Callable[[Snapshot], None]) -> None:
+        """``listener(snapshot)`` after every tick, in the control thread (keep it fast)."""
+        self._tick_listeners.append(listener)
+
+    @property
+    def tapped(self) -> bool:
+        """A station asked for every tick (a run's log): the transport sends them all."""
+        return self._taps > 0
+
+    # ---- the control thread ----
+    def _after_tick(self, snap: Snapshot) -> None:
+        lost = self.holder.check_lost()
+        if lost is not None:
+            self.controller.submit(self._link_lost)
+        for listener in tuple(self._tick_listeners):
+            listener(snap)
+
+    def _link_lost(self) -> str | None:
+        state = self.controller.state
+        stopped = commands.link_lost(
+            state, "stopped: the station's link was lost (no heartbeat)", self._stop_runs
+        )
+        if stopped is not None:
+            log.warning("station lost: %s stopped, holding", stopped)
+        return stopped
+
+    # ---- the ops ----
+    def _op_link(self, station: str, args: dict[str, Any]) -> dict[str, Any]:
+        protocol = args.get("protocol", PROTOCOL)
+        if protocol != PROTOCOL:
+            raise ValueError(
+                f"protocol: this robot node speaks link protocol {PROTOCOL}, the station "
+                f"{protocol!r}: update one of them"
+            )
+        took = self.holder.take(station, _flag(args, "take_over"))
+        return {"took_over_from": took, **self.info()}
+
+    def _op_release(self, station: str, args: dict[str, Any]) -> bool:
+        return self.holder.release(station)
+
+    def _op_info(self, station: str, args: dict[str, Any]) -> dict[str, Any]:
+        return self.info()
+
+    def _op_tap(self, station: str, args: dict[str, Any]) -> int:
+        with self._tap_lock:
+            self._taps = max(0, self._taps + (1 if _flag(args, "on") else -1))
+            return self._taps
+
+    def _op_estop(self, station: str, args: dict[str, Any]) -> Future:
+        return self.controller.estop()
+
+    def _op_reset(self, station: str, args: dict[str, Any]) -> Future:
+        return self.controller.reset()
+
+    def _op_torque(self, station: str, args: dict[str, Any]) -> Future:
+        return self.controller.set_torque(_flag(args, "enabled"))
+
+    def _model(self, args: dict[str, Any]) -> Any:
+        """The model in use, if ``model_version`` (what the station checked against) is
+        its version; MotionRefused otherwise."""
+        model = self.controller.model
+        version = args.get("model_version")
+        if version is not None and version != model.version:
+            raise MotionRefused(
+                f"the robot model changed since this was checked ({model.origin} in use "
+                "now): send it again"
+            )
+        return model
+
+    def _op_goal(self, station: str, args: dict[str, Any]) -> Future:
+        self._model(args)
+        point = _vector(args, "point_m")
+        return self.controller.set_goal(point, _number(args, "phi_rad", 0.0))
+
+    def _op_jog(self, station: str, args: dict[str, Any]) -> Future:
+        speed = _optional_number(args, "speed_m_s")
+        return self.controller.jog(_vector(args, "delta_m"), speed)
+
+    def _op_hold_jog(self, station: str, args: dict[str, Any]) -> Future:
+        return _then(self.controller.hold_jog(_vector(args, "velocity_m_s")), plain)
+
+    def _op_move(self, station: str, args: dict[str, Any]) -> Future:
+        self._model(args)
+        return self.controller.move(
+            _optional_vector(args, "point_m"),
+            _optional_vector(args, "joints_rad"),
+            _optional_number(args, "duration_s"),
+            _flag(args, "joint_space"),
+            _number(args, "phi_rad", 0.0),
+        )
+
+    def _op_turn_wrist(self, station: str, args: dict[str, Any]) -> Future:
+        return self.controller.turn_wrist(_number(args, "phi_rad"))
+
+    def _op_stop(self, station: str, args: dict[str, Any]) -> Future:
+        return self.controller.stop_any()
+
+    def _op_stop_source(self, station: str, args: dict[str, Any]) -> Future:
+        source_id = _text(args, "source_id")
+
+        def stop() -> bool:
+            source = self.controller.state.source
+            if getattr(source, "source_id", None) != source_id:
+                return False
+            return commands.stop_source(self.controller.state, source)
+
+        return self.controller.submit(stop)
+
+    def _op_run_path(self, station: str, args: dict[str, Any]) -> Future:
+        model = self._model(args)
+        source_id = _text(args, "source_id")
+        path = decode(SampledPath, args.get("path") or {})
+        if abs(path.period_s - self.controller.period_s) > 1e-12:
+            raise ValueError(
+                f"path.period_s: {path.period_s} s, the loop's period is "
+                f"{self.controller.period_s} s"
+            )
+        start = _vector(args, "expected_start_m")
+        tolerance = args.get("tolerance_m")
+        tolerance_m = math.inf if tolerance is None else _number(args, "tolerance_m")
+        return self.controller.run_source(PathSource(path, source_id), start, tolerance_m, model)
+
+    def _op_set_gains(self, station: str, args: dict[str, Any]) -> Future:
+        given = args.get("gains")
+        if not isinstance(given, dict):
+            raise ValueError("gains: expected an object of servo id -> gains")
+        try:
+            gains = {int(sid): PositionGains(**values) for sid, values in given.items()}
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"gains: {exc}") from None
+        return _then(self.controller.set_gains(gains), _gains_out)
+
+    def _op_read_gains(self, station: str, args: dict[str, Any]) -> Future:
+        return _then(self.controller.read_gains(), _gains_out)
+
+    def _op_joint_offsets(self, station: str, args: dict[str, Any]) -> Future:
+        return _then(self.controller.set_joint_offsets(_vector(args, "offsets_rad")), plain)
+
+    def _op_use_model(self, station: str, args: dict[str, Any]) -> Future:
+        robot = robots.robot_of(args.get("robot"))
+        offsets = _vector(args, "offsets_rad")
+        origin = _text(args, "origin")
+        swapped = self.controller.use_model(robot, offsets, origin)
+        return _then(swapped, lambda model: {"version": model.version, "origin": model.origin})
+
+
+def _gains_out(gains: dict[int, PositionGains]) -> dict[str, dict[str, int]]:
+    return {str(sid): dataclasses.asdict(g) for sid, g in gains.items()}

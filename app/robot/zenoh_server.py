@@ -1,0 +1,131 @@
+"""A robot node served over Eclipse Zenoh (the ``deltadash robot`` process).
+
+Keys and messages: app/link/protocol.py; the session: app/link/zenoh_session.py. The
+node's state goes out from a thread of its own: the control thread only leaves each
+snapshot in a one-slot mailbox (and, while a station taps every tick, in a list), so a
+slow network or a slow station never holds a tick.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import threading
+import time
+from concurrent.futures import Future
+
+import zenoh
+
+from app.config import LinkSettings
+from app.control.state import Snapshot
+from app.link.codec import encode, plain
+from app.link.protocol import Keys, reply_error
+from app.link.zenoh_session import zenoh_config
+from app.robot.node import RobotNode
+
+log = logging.getLogger(__name__)
+PUBLISH_EVERY_S = 0.002  # the publisher thread's longest wait for a new snapshot
+TICK_BATCH_S = 0.05  # a tapping station gets every tick in batches this often
+NODE_STATUS_S = 1.0
+
+
+class NodeServer:
+    """Serves ``node`` on a Zenoh session listening on ``listen``."""
+
+    def __init__(self, node: RobotNode, link: LinkSettings, listen: str) -> None:
+        self.node, self.keys = node, Keys(link.key_prefix)
+        config, self._cleanup = zenoh_config(link, listen=listen)
+        self.session = zenoh.open(config)
+        self._latest: Snapshot | None = None
+        self._ticks: list[Snapshot] = []
+        self._wake = threading.Event()
+        self._closed = threading.Event()
+        self._state = self.session.declare_publisher(
+            self.keys.state,
+            congestion_control=zenoh.CongestionControl.DROP,
+            express=True,
+            priority=zenoh.Priority.DATA_HIGH,
+        )
+        self._tick_pub = self.session.declare_publisher(
+            self.keys.ticks,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+            reliability=zenoh.Reliability.RELIABLE,
+        )
+        self._status = self.session.declare_publisher(self.keys.node)
+        self._queryable = self.session.declare_queryable(self.keys.commands, self._on_query)
+        self._heartbeats = self.session.declare_subscriber(self.keys.heartbeats, self._on_heartbeat)
+        self._token = self.session.liveliness().declare_token(self.keys.alive)
+        node.add_tick_listener(self._on_tick)
+        self._thread = threading.Thread(target=self._publish, name="link-publish", daemon=True)
+        self._thread.start()
+
+    # control thread: leave the snapshot, never wait
+    def _on_tick(self, snap: Snapshot) -> None:
+        self._latest = snap
+        if self.node.tapped:
+            self._ticks.append(snap)
+        self._wake.set()
+
+    def _publish(self) -> None:
+        last_batch = last_status = time.monotonic()
+        while not self._closed.is_set():
+            self._wake.wait(PUBLISH_EVERY_S)
+            self._wake.clear()
+            snap, self._latest = self._latest, None
+            try:
+                if snap is not None:
+                    self._state.put(encode(snap))
+                now = time.monotonic()
+                if self._ticks and (now - last_batch >= TICK_BATCH_S or not self.node.tapped):
+                    batch, self._ticks = self._ticks, []
+                    self._tick_pub.put(b"[" + b",".join(encode(s) for s in batch) + b"]")
+                    last_batch = now
+                if now - last_status >= NODE_STATUS_S:
+                    self._status.put(json.dumps(plain(self.node.holder.view())).encode())
+                    last_status = now
+            except zenoh.ZError as exc:  # the session is closing
+                log.debug("link publish: %s", exc)
+
+    # Zenoh's threads
+    def _on_heartbeat(self, sample: zenoh.Sample) -> None:
+        station = str(sample.key_expr).rsplit("/", 1)[-1]
+        self.node.heartbeat(station)
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        op = str(query.key_expr).rsplit("/", 1)[-1]
+        station = query.parameters.get("station") or ""
+        key = query.key_expr
+        try:
+            raw = query.payload.to_bytes() if query.payload is not None else b"{}"
+            args = json.loads(raw or b"{}")
+        except ValueError as exc:
+            query.reply(key, reply_error(ValueError(f"args: not JSON ({exc})")))
+            query.drop()
+            return
+        answered = self.node.call(station, op, args)
+
+        def reply(done: Future) -> None:
+            try:
+                error = done.exception()
+                if error is not None:
+                    query.reply(key, reply_error(error))
+                else:
+                    result, tick = done.result()
+                    body = {"ok": True, "result": result, "tick": tick}
+                    query.reply(key, json.dumps(body, separators=(",", ":")).encode())
+            except zenoh.ZError as exc:
+                log.debug("link reply: %s", exc)
+            finally:
+                query.drop()
+
+        answered.add_done_callback(reply)
+
+    def close(self) -> None:
+        self._closed.set()
+        self._wake.set()
+        self._thread.join(timeout=2.0)
+        with contextlib.suppress(zenoh.ZError):
+            self._token.undeclare()
+        self.session.close()
+        self._cleanup()
