@@ -18,6 +18,7 @@ import logging
 import sys
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
+from typing import Any
 
 from fastapi import Depends, FastAPI
 from fastapi.staticfiles import StaticFiles
@@ -27,7 +28,6 @@ from app.calibration.probe import Touch, twin_probe
 from app.calibration.procedure import CalibrationManager, per_leg, pose_input
 from app.config import Settings
 from app.control.authority import Authority
-from app.control.controller import Controller
 from app.origins import OriginPolicy
 from app.programs.workers import ProgramWorkers
 from app.runs.manager import RunManager
@@ -53,6 +53,7 @@ from app.server.estop import EstopFirst, EstopListener, EstopReceipts
 from app.server.limits import RequestLimits
 from app.server.origins import OriginCheck
 from app.server.queries import WorkspaceQueries
+from app.server.robot_link import open_robot
 from app.static_files import static_dir
 from app.tuning.procedure import TuningManager
 from app.world.service import WorldService
@@ -90,7 +91,7 @@ def begin_shutdown(app: FastAPI) -> None:
             workers.close()
 
 
-def _twin_probe(settings: Settings, controller: Controller) -> Touch | None:
+def _twin_probe(settings: Settings, controller: Any) -> Touch | None:
     """The simulated robot's probe (touches from its true model), None on real hardware."""
     drawing = settings.robot.symmetric()  # the twin is built around it (backends._twin)
     if settings.hardware.backend != "sim" or not isinstance(drawing, RotaryDelta):
@@ -117,28 +118,27 @@ def create_app(
         # only walk new objects.
         gc.collect()
         gc.freeze()
-        with backend_opener(settings) as backend:
-            clock = getattr(backend, "sim_clock", None)  # simulated time (tests drive it)
-            controller = Controller(
-                settings,
-                backend.bus,
-                backend.kind,
-                backend.description,
-                **({} if clock is None else {"clock": clock.now, "tick_clock": clock}),
-            )
-            controller.start()
+        with open_robot(settings, backend_opener) as opened:
+            controller = opened.client  # the loop, in this process or in a robot node
+            # the robot's sections (robot, joints, limits, ...) are the node's own config
+            live = app.state.settings = controller.settings
             app.state.controller = controller
+            app.state.node = opened.node  # the robot node, when it runs in this process
+            app.state.robot_child = opened.child  # the embedded node's process, if any
+            backend = opened.backend
             app.state.estop_receipts = EstopReceipts(controller)
             app.state.estop_listener = _start_estop_listener(settings, app.state.estop_receipts)
             app.state.backend = backend
             app.state.runs = RunManager(controller, settings.runs.folder_path)
-            app.state.world = WorldService(controller)
+            # hold-in-world: its pose inputs and hold source run beside the loop, in this
+            # process for now (a node's loop in another process: refused, link.robot)
+            app.state.world = WorldService(opened.node.controller if opened.node else controller)
             # program checks and dry runs in worker processes (started on the first one)
             app.state.program_workers = ProgramWorkers(
-                settings, programs.CONCURRENT_CHECKS, settings.programs.check_timeout_s
+                live, programs.CONCURRENT_CHECKS, settings.programs.check_timeout_s
             )
             # workspace queries (nearest point, sections) too: no request costs the loop
-            app.state.queries = WorkspaceQueries(settings)
+            app.state.queries = WorkspaceQueries(live)
             # one mover at a time: a procedure claims controller.owner while it runs (every
             # motion command asks it: app/control/owner.py), and starts only when the owner
             # says nothing holds the robot (the run manager answers it for its runs)
@@ -146,7 +146,7 @@ def create_app(
                 controller,
                 settings.runs.folder_path / "calibration",
                 config_path=config_path,
-                probe=_twin_probe(settings, controller),
+                probe=_twin_probe(live, controller),
                 pose_measure=pose_input(app.state.world.platform),
             )
             app.state.tuning = TuningManager(
@@ -157,7 +157,7 @@ def create_app(
             )
             runs = lambda: app.state.runs  # noqa: E731
             app.state.scene = await asyncio.to_thread(
-                start_scene, settings, controller, runs, app.state.authority
+                start_scene, live, controller, runs, app.state.authority
             )
             try:
                 yield
@@ -172,7 +172,6 @@ def create_app(
                 app.state.world.close()
                 if app.state.estop_listener is not None:
                     await asyncio.to_thread(app.state.estop_listener.close)
-                await asyncio.to_thread(controller.stop)
 
     app = FastAPIOffline(  # /docs and /redoc from local assets: they work with no internet
         title="deltadash",

@@ -19,6 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.control.errors import GoalRejected, MotionRefused
+from app.link.protocol import RemoteError, RobotOffline
 from app.programs.workers import WorkerError
 from hardware.errors import BusError
 from kinematics import PoseError
@@ -139,6 +140,16 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(BusError)
     async def bus_error(_: Request, exc: BusError) -> JSONResponse:
         return _error(503, f"servo bus: {exc}")
+
+    @app.exception_handler(RobotOffline)  # the robot node did not answer
+    async def robot_offline(_: Request, exc: RobotOffline) -> JSONResponse:
+        return JSONResponse(
+            {"detail": f"robot offline: {exc}"}, status_code=503, headers={"Retry-After": "1"}
+        )
+
+    @app.exception_handler(RemoteError)  # the robot node failed on a command (a bug there)
+    async def remote_error(_: Request, exc: RemoteError) -> JSONResponse:
+        return _error(503, f"robot node: {exc}")
 
     @app.exception_handler(WorkerError)  # a workspace query refused (busy) or not answered
     async def query_unavailable(_: Request, exc: WorkerError) -> JSONResponse:

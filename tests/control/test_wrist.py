@@ -178,7 +178,7 @@ def test_a_setpoint_beyond_the_wrist_s_limits_is_never_written(controller) -> No
 def test_the_server_with_a_wrist_drives_four_servos_on_the_twin(tmp_path: Path) -> None:
     with make_client(tmp_path, backend="sim", wrist=WRIST) as client:
         control = client.app.state.controller
-        assert control.bus.ids == (1, 2, 3, 4)
+        assert client.app.state.node.controller.bus.ids == (1, 2, 3, 4)
         control.set_torque(True).result(timeout=10)
         control.turn_wrist(-0.5).result(timeout=10)
         wait_for(

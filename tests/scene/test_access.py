@@ -83,6 +83,7 @@ def app_client(tmp_path_factory) -> Iterator[TestClient]:
     settings = load_settings(
         hardware={"backend": "emulated"},
         runs={"folder": str(folder)},
+        link={"robot": "in-process"},
         server={"viser_port": 0, "token": TOKEN},
     )
     opener = functools.partial(open_backend, emulator_in_process=True)

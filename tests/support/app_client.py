@@ -79,7 +79,8 @@ def make_client(
         **overrides.pop("server", {}),
     }
     runs = {"folder": str(runs_folder), **overrides.pop("runs", {})}
-    settings = load_settings(hardware=hardware, server=server, runs=runs, **overrides)
+    link = {"robot": "in-process", **overrides.pop("link", {})}
+    settings = load_settings(hardware=hardware, server=server, runs=runs, link=link, **overrides)
     if sim_time is None:
         sim_time = os.environ.get(REAL_TIME_ENV) != "1"
     opener = functools.partial(

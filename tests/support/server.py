@@ -95,6 +95,9 @@ class Server:
             return False
 
 
+PATIENT_LINK_S = 5.0
+
+
 @contextmanager
 def serve(folder: Path, scene: bool = False, preamble: str = "", **env: str) -> Iterator[Server]:
     """`deltadash serve` on free ports with runs under ``folder``, the 3D scene on if
@@ -108,6 +111,10 @@ def serve(folder: Path, scene: bool = False, preamble: str = "", **env: str) -> 
         "DELTADASH_SERVER__SCENE": "true" if scene else "false",
         "DELTADASH_RUNS__FOLDER": str(folder / "runs"),
         "DELTADASH_SERVER__COMMAND_TIMEOUT_S": str(COMMAND_WAIT_S),
+        # the station's heartbeat to its robot node (a thread of the served process) waits
+        # behind chromium's software WebGL on a loaded 2-core machine: tests of the link's
+        # loss set their own (tests/link/)
+        "DELTADASH_LINK__STATION_TIMEOUT_S": str(PATIENT_LINK_S),
         **env,
     }
     log = folder / "serve.log"

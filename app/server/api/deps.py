@@ -13,7 +13,7 @@ from starlette.requests import HTTPConnection
 from app.calibration.procedure import CalibrationManager
 from app.config import Settings
 from app.control.authority import Authority, ControlRefused, TokenRequired, is_loopback
-from app.control.controller import Controller
+from app.link.client import RobotClient
 from app.programs.workers import ProgramWorkers
 from app.runs.manager import RunManager
 from app.scene import Scene
@@ -25,10 +25,18 @@ from app.world.service import WorldService
 READS = ("GET", "HEAD")
 
 
-def get_controller(connection: HTTPConnection) -> Controller:
-    """The control loop; 503 when it is not running (before startup, after shutdown)."""
-    controller: Controller = connection.app.state.controller
+def get_controller(connection: HTTPConnection) -> RobotClient:
+    """The robot (its loop, here or in a robot node: app/link/client.py); 503 when it is
+    not running (before startup, after shutdown) or its node is offline."""
+    controller: RobotClient = connection.app.state.controller
     if not controller.running:
+        if getattr(controller, "offline_for_s", None) is not None:
+            raise HTTPException(
+                503,
+                f"robot offline: no state from the robot node for "
+                f"{controller.offline_for_s:.1f} s; reconnecting",
+                headers={"Retry-After": "1"},
+            )
         raise HTTPException(503, "the control loop is not running")
     return controller
 
@@ -148,7 +156,7 @@ def require_control(
         raise HTTPException(409, str(exc)) from None
 
 
-ControllerDep = Annotated[Controller, Depends(get_controller)]
+ControllerDep = Annotated[RobotClient, Depends(get_controller)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 CommandWait = Annotated[float, Depends(get_command_wait)]
 RunsDep = Annotated[RunManager, Depends(get_runs)]

@@ -200,7 +200,7 @@ def test_a_servo_shut_down_by_an_overload_shows_torque_off(client, fresh):
 def test_missed_reads_fault_after_the_limit(client, fresh, monkeypatch):
     # each missed read waits out the emulated bus's reply wait on its every try (wall
     # time): two reads of one try each, not the config's ten of three, are this test's
-    misses = client.app.state.controller.state.misses
+    misses = client.app.state.node.controller.state.misses
     monkeypatch.setattr(misses, "limit", 2)
     monkeypatch.setattr(client.app.state.backend.bus.link, "max_tries", 1)
     emulator = client.app.state.backend.emulator

@@ -54,6 +54,7 @@ def _app(tmp_path_factory, **server) -> TestClient:
     settings = load_settings(
         hardware={"backend": "emulated"},
         runs={"folder": str(folder)},
+        link={"robot": "in-process"},
         server={"viser_port": 0, "token": TOKEN, **server},
     )
     opener = functools.partial(open_backend, emulator_in_process=True)

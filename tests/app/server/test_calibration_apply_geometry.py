@@ -162,7 +162,7 @@ def test_a_geometry_fit_becomes_the_model_of_every_route_and_nothing_moves(clien
     # hold-in-world clamps its goals with the gate of the model in use
     world = client.app.state.world
     hold = world.hold_source(np.zeros(3), world.provider(DroneSimParams()), False)
-    assert hold.gate.robot is client.app.state.controller.robot and not hold.gate.inside(bottom)
+    assert hold.gate.robot == client.app.state.controller.robot and not hold.gate.inside(bottom)
 
     # the config file holds the legs, read back as the same robot
     assert applied["config_written"] == str(config)
