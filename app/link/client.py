@@ -133,7 +133,11 @@ class RobotClient:
         self._adopt(self._take())
 
     def _take(self) -> dict[str, Any]:
-        args = {"take_over": self._take_over, "protocol": PROTOCOL}
+        args = {
+            "take_over": self._take_over,
+            "protocol": PROTOCOL,
+            "page_port": self.settings.server.http_port,  # its pages call the node's e-stop
+        }
         sent = self.transport.call("link", args, self._timeout_s)
         try:
             result, _ = sent.result(timeout=self._timeout_s + 1.0)
@@ -356,6 +360,14 @@ class RobotClient:
         send(op not in ("link", "release"))
         return out
 
+    def request(self, op: str, args: dict[str, Any]) -> Future:
+        """Any other op of the node (its pose inputs, ...): a Future of its answer."""
+        return self._call(op, args)
+
+    @property
+    def command_timeout_s(self) -> float:
+        return self._timeout_s
+
     def _motion(self, op: str, args: dict[str, Any]) -> Future:
         """A command that moves the robot: refused here while a procedure holds it."""
         with self.owner.permit():
@@ -413,25 +425,23 @@ class RobotClient:
         tolerance_m: float = 2e-3,
         model: RobotModel | None = None,
     ) -> Future:
-        """Send a planned source as data (``source.sampled(period_s)``: a run, a program)
-        to play from ``expected_start_m`` [m]; MotionRefused for a source that is not
-        data (it runs only in the node's own process)."""
+        """Send a planned source to the node to play from ``expected_start_m`` [m]: a run
+        as data (``source.sampled(period_s)``: a path, a program), or a source the node
+        builds itself (``source.remote_op`` with ``source.remote_args()``: a hold-in-world).
+        A Future of the node's answer; MotionRefused for a source that is neither."""
         sampled = getattr(source, "sampled", None)
+        remote_op = getattr(source, "remote_op", None)
+        if sampled is None and remote_op is None:
+            raise MotionRefused(f"a {getattr(source, 'name', 'source')} cannot run on a robot node")
         source_id = getattr(source, "source_id", None) or uuid.uuid4().hex[:12]
         source.source_id = source_id
         self._sources[source_id] = source
         if len(self._sources) > 32:  # keep the last ones: a late tick may name them
             self._sources.pop(next(iter(self._sources)))
-        if sampled is None:  # code, not data: only a node in this process can run it
-            local = getattr(self.transport, "run_source", None)
-            if local is None:
-                raise MotionRefused(
-                    f"a {getattr(source, 'name', 'source')} runs only with the loop in the "
-                    "station's process (link.robot = in-process) for now"
-                )
-            with self.owner.permit():
-                return _then(local(source, expected_start_m, tolerance_m, model), _first)
         used = model or self.model
+        if remote_op is not None:
+            args = {**source.remote_args(), "source_id": source_id, "model_version": used.version}
+            return self._motion(remote_op, args)
         tolerance = None if not np.isfinite(tolerance_m) else float(tolerance_m)
         args = {
             "source_id": source_id,
@@ -529,10 +539,6 @@ def _then(future: Future, convert: Callable[[Any], Any]) -> Future:
 
     future.add_done_callback(finish)
     return out
-
-
-def _first(answer: tuple[Any, int]) -> Any:
-    return answer[0]
 
 
 def _gains_in(wire: dict[str, dict[str, int]]) -> dict[int, PositionGains]:

@@ -54,25 +54,5 @@ class LocalTransport:
         wire = json.loads(json.dumps(args))
         return self.node.call(self.station, op, wire)
 
-    def run_source(self, source: Any, start_m: Any, tolerance_m: float, model: Any) -> Future:
-        """Hand the node's loop a source that is code, not data (a hold-in-world, whose
-        pose input is in this process): only here, never over a network."""
-        node = self.node
-        in_use = node.controller.model  # the station's mirror of it checked the source
-        if model is None or getattr(model, "version", None) == in_use.version:
-            model = in_use
-        started = node.controller.run_source(source, start_m, tolerance_m, model)
-        out: Future = Future()
-
-        def done(f: Future) -> None:
-            error = f.exception()
-            if error is not None:
-                out.set_exception(error)
-            else:
-                out.set_result((f.result(), node.controller.snapshot().tick))
-
-        started.add_done_callback(done)
-        return out
-
     def close(self) -> None:
         self._on_state = self._on_ticks = None

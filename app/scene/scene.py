@@ -206,7 +206,7 @@ class Scene:
             )
             self.ghost.visible = bool(commanded and self.gui_ghost.value)
             self.goals.update(snap, now_s)
-            self.world.update(self.controller.current_source)
+            self.world.update(snap)
             self.tests.record(snap, now_s)
             if self.frames % PANEL_EVERY == 0:
                 self.panel.update(snap)

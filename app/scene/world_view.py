@@ -2,7 +2,7 @@
 
 The scene is drawn in the base frame, so while the drone drifts the world frame (and the
 goal fixed in it) move and the robot stays put, which is what the servos see. Shown only
-while the loop's goal source is the hold-world mode (``app.world.hold.HoldSource``).
+while the loop holds in the world (mode ``hold-world``, app/world/hold.py).
 """
 
 from __future__ import annotations
@@ -17,19 +17,16 @@ from kinematics import Pose
 HOLD_MODE = "hold-world"
 
 
-def drone_pose(source: Any) -> Pose | None:
-    """The drone's body-to-world pose the hold source works from, if it can be read
-    without side effects: the simulated drone's truth at the source's time, else the
-    external tracker's latest sample (never ``provider.observe``, which updates state)."""
-    provider = getattr(source, "provider", None)
-    if provider is None:
+def drone_pose(snap: Any) -> Pose | None:
+    """The drone's body-to-world pose a hold works from, as the loop's snapshot ``snap``
+    carries it (``extra["drone_pose"]``: position [m], quaternion (w, x, y, z); the
+    simulated drone's truth, else the pose input's latest sample); None outside a hold
+    or before a pose."""
+    extra = getattr(snap, "extra", None) or {}
+    values = extra.get("drone_pose")
+    if values is None or len(values) != 7:
         return None
-    pose = provider.true_pose(source.t_s) if hasattr(provider, "true_pose") else None
-    tracker = getattr(provider, "tracker", None)
-    if pose is None and tracker is not None:
-        sample, _ = tracker.latest()
-        pose = sample.pose if sample is not None else None
-    return pose
+    return Pose.from_arrays(values[:3], values[3:])
 
 
 class WorldView:
@@ -56,10 +53,11 @@ class WorldView:
         self.world_label = scene.add_label("/world_frame/label", "world", position=(0.0, 0.0, 0.03))
         self.active = False
 
-    def update(self, source: Any) -> None:
-        """Show the frames while ``source`` is hold-in-world; place the world frame."""
-        self.active = getattr(source, "name", "") == HOLD_MODE
-        pose = drone_pose(source) if self.active else None
+    def update(self, snap: Any) -> None:
+        """Show the frames while the loop holds in the world (the snapshot ``snap``'s mode);
+        place the world frame where the drone's pose says."""
+        self.active = getattr(snap, "mode", "") == HOLD_MODE
+        pose = drone_pose(snap) if self.active else None
         self.drone.visible = self.active
         self.world.visible = pose is not None
         if pose is not None:

@@ -241,6 +241,19 @@ class HoldSource:
         weight = 10 * s**3 - 15 * s**4 + 6 * s**5
         return self._start + weight * (goal_base - self._start)
 
+    def drone_pose(self, truth: Pose | None = None) -> list[float] | None:
+        """The drone's body-to-world pose this source works from, as position [m] and
+        quaternion (w, x, y, z): the simulated drone's truth, else the external tracker's
+        latest sample (never ``provider.observe``, which updates state); None: none yet."""
+        pose = truth
+        tracker = getattr(self.provider, "tracker", None)
+        if pose is None and tracker is not None:
+            sample, _ = tracker.latest()
+            pose = sample.pose if sample is not None else None
+        if pose is None:
+            return None
+        return [*np.asarray(pose.position).tolist(), *np.asarray(pose.quaternion).tolist()]
+
     def _world(self, outside: bool, age_s: float, limited: bool = False) -> dict:
         truth = self.provider.true_pose(self.t_s)
         measured_world = None
@@ -251,6 +264,7 @@ class HoldSource:
             "measured_world_m": measured_world,
             "outside": outside,
             "pose_age_s": age_s,
+            "drone_pose": self.drone_pose(truth),
         }
         if self.wrist is not None:  # the heading: goal, measured (true pose, wrist read)
             measured_heading = None

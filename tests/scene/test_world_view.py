@@ -15,20 +15,13 @@ from kinematics.pose import quaternion_to_matrix
 from tests.support.wait import WAIT_S, wait_for
 
 
-class _Provider:
-    def __init__(self, pose: Pose) -> None:
-        self.pose = pose
+class _Snapshot:
+    """A snapshot in hold-world mode whose hold works from ``pose``."""
 
-    def true_pose(self, t_s: float) -> Pose:
-        return self.pose
-
-
-class _HoldSource:
-    name = "hold-world"
-    t_s = 0.0
+    mode = "hold-world"
 
     def __init__(self, pose: Pose) -> None:
-        self.provider = _Provider(pose)
+        self.extra = {"drone_pose": [*pose.position, *pose.quaternion]}
 
 
 def test_world_frame_maps_world_points_into_the_base_frame():
@@ -38,7 +31,7 @@ def test_world_frame_maps_world_points_into_the_base_frame():
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
         view = WorldView(server, mount)
-        view.update(_HoldSource(pose))
+        view.update(_Snapshot(pose))
         assert view.world.visible and view.drone.visible
         world_point = np.array([0.3, 0.1, 1.2])
         drawn = quaternion_to_matrix(view.world.wxyz) @ world_point + view.world.position

@@ -146,7 +146,13 @@ def test_without_a_wrist_the_hold_sends_no_phi_and_no_heading():
     for _ in range(300):
         setpoint = source.next(0.005)
         assert setpoint.phi_rad is None
-        assert set(setpoint.extra) == {"goal_world_m", "measured_world_m", "outside", "pose_age_s"}
+        assert set(setpoint.extra) == {
+            "goal_world_m",
+            "measured_world_m",
+            "outside",
+            "pose_age_s",
+            "drone_pose",
+        }
 
 
 def test_telemetry_world_frame_gives_the_wrapped_heading_error():

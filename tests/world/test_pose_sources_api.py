@@ -59,7 +59,7 @@ def test_a_poison_datagram_is_counted_named_and_the_input_goes_on(udp):
 
 def test_a_dead_udp_input_shows_in_the_status_and_reset_restarts_it(udp):
     client, port = udp
-    listener = next(x for x in client.app.state.world._listeners if x.name == "udp")
+    listener = next(x for x in client.app.state.node.world.service._listeners if x.name == "udp")
     listener.socket.close()  # the socket fails under the thread
     wait_for(lambda: _source(client, "udp")["alive"] is False, "the dead input in the status")
     assert "socket" in _source(client, "udp")["last_error"]

@@ -24,9 +24,9 @@ from app.server.api.deps import (
 from app.server.api.models import Accepted
 from app.server.api.responses import PoseAccepted, PoseInputStatus, RunStarted
 from app.server.errors import CONTROL, INVALID, UNAUTHORISED
+from app.server.world_client import WorldClient
 from app.world.drone_sim import DroneSimParams
 from app.world.inputs import body_of, parse_pose, sample_from_json
-from app.world.service import WorldService
 from kinematics import PoseError
 
 router = APIRouter(tags=["drone"])
@@ -87,10 +87,10 @@ class HoldTestRequest(BaseModel):
         return DroneSimParams(**{name: getattr(self, name) for name in fields})
 
 
-def _push(world: WorldService, data: dict[str, Any]) -> dict[str, Any]:
-    tracker = world.tracker_for(body_of(data))
-    accepted = tracker.push(sample_from_json(data))
-    return {"accepted": accepted, "input": tracker.status()}
+def _push(world: WorldClient, data: dict[str, Any]) -> dict[str, Any]:
+    body_of(data)  # checked here: a bad body or field is the caller's 422, not the node's
+    sample_from_json(data)
+    return world.push(data)
 
 
 @router.post("/mav/pose", response_model=PoseAccepted, responses={**UNAUTHORISED, **INVALID})
@@ -109,8 +109,7 @@ def get_pose_status(
     refused datagrams), and ``sources``: each pose source, what it accepts (open, token,
     trusted, signed, refused), whether its listener is alive, its counters and last
     error."""
-    status = world.tracker_for(body).status()
-    return status | {"udp_errors": world.udp_errors(), "sources": world.sources()}
+    return world.pose_status(body)
 
 
 @router.websocket("/mav/pose")
@@ -130,7 +129,7 @@ async def stream_poses(websocket: WebSocket, world: WorldDep) -> None:
         try:
             if text is None:
                 raise PoseError("a pose is a JSON text frame, got a binary frame")
-            _push(world, parse_pose(text))
+            await asyncio.to_thread(_push, world, parse_pose(text))
         except (ValueError, KeyError, TypeError, PoseError) as exc:
             await websocket.send_json({"error": str(exc)})
 
@@ -142,24 +141,22 @@ async def post_hold(
     """Start mode hold-world: the tool stays at a world point while the drone drifts."""
     if body.frame == "world" and body.position_m is None:
         raise GoalRejected("position_m: required with frame 'world'")
-    provider = world.provider(DroneSimParams() if body.source == "simulated" else None)
     goal = None if body.frame == "current" else np.asarray(body.position_m)
-    model = controller.model  # the source is built on it (refused if it changes meanwhile)
-    source = world.hold_source(goal, provider, body.latency_compensation, body.heading_rad)
+    simulated = DroneSimParams() if body.source == "simulated" else None
+    hold = world.hold(goal, simulated, body.latency_compensation, body.heading_rad)
+    model = controller.model  # the hold is checked on it (refused if it changes meanwhile)
     # the hold mode blends in from wherever the robot is: no start point to check
-    started = controller.run_source(source, np.zeros(3), tolerance_m=math.inf, model=model)
-    await asyncio.wait_for(asyncio.wrap_future(started), 2.0)
-    return Accepted(result={"goal_world_m": source.goal_world.tolist()})
+    started = controller.run_source(hold, np.zeros(3), tolerance_m=math.inf, model=model)
+    answer = await asyncio.wait_for(asyncio.wrap_future(started), 2.0)
+    return Accepted(result={"goal_world_m": answer["goal_world_m"]})
 
 
 @router.post("/tests/hold", response_model=RunStarted, responses=CONTROL)
 async def post_hold_test(body: HoldTestRequest, world: WorldDep, runs: RunsDep, _: ControlClient):
     """Hold the current tool position in the world under a simulated drifting drone, as a run
     with world-frame stats (stats.world.{x,y,z}) and the time the goal spent outside."""
-    provider = world.provider(body.drone())
-    model = runs.controller.model  # the source is built on it (refused if it changes)
-    source = world.hold_source(None, provider, body.latency_compensation)
-    source.duration_s = body.duration_s + source.approach_s
+    model = runs.controller.model  # the hold is checked on it (refused if it changes)
+    hold = world.hold(None, body.drone(), body.latency_compensation, duration_s=body.duration_s)
     params = {**body.model_dump(), "drone": asdict(body.drone())}
-    run = await asyncio.to_thread(runs.start_source, "hold", params, source, model)
+    run = await asyncio.to_thread(runs.start_source, "hold", params, hold, model)
     return {"run_id": run.run_id}

@@ -159,8 +159,8 @@ def test_a_geometry_fit_becomes_the_model_of_every_route_and_nothing_moves(clien
     response = client.post("/api/tests/waypoints", json=waypoints)
     assert response.status_code == 422 and "outside the workspace" in response.text
     assert _status(client)["mode"] == "idle"
-    # hold-in-world clamps its goals with the gate of the model in use
-    world = client.app.state.world
+    # hold-in-world (the robot node's) clamps its goals with the gate of the model in use
+    world = client.app.state.node.world.service
     hold = world.hold_source(np.zeros(3), world.provider(DroneSimParams()), False)
     assert hold.gate.robot == client.app.state.controller.robot and not hold.gate.inside(bottom)
 
