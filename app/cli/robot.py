@@ -98,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
         )
         node = RobotNode(settings, controller, station_timeout_s=link.station_timeout_s)
         node.start()
+        node.start_estop_listener()
         server = NodeServer(node, link, link.listen)
         print(
             f"deltadash robot: listening on {link.listen} (keys {link.key_prefix}/...), "

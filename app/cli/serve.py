@@ -26,6 +26,12 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser.add_argument("--host", help="bind address (default 127.0.0.1)")
     parser.add_argument("--http-port", type=int, help="HTTP port (default 8000)")
     parser.add_argument(
+        "--robot",
+        help="where the control loop runs: embedded (default: a robot node started here as "
+        "a child process), the Zenoh endpoint of a robot node elsewhere (e.g. "
+        "tcp/192.168.1.20:7447, see deltadash robot), or in-process",
+    )
+    parser.add_argument(
         "--token",
         default=os.environ.get("DELTADASH_TOKEN"),
         help="control token ($DELTADASH_TOKEN)",
@@ -45,7 +51,9 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
         for k, v in (("host", args.host), ("http_port", args.http_port), ("token", args.token))
         if v is not None
     }
-    return {key: value for key, value in (("hardware", hardware), ("server", server)) if value}
+    link = {"robot": args.robot} if args.robot else {}
+    sections = (("hardware", hardware), ("server", server), ("link", link))
+    return {key: value for key, value in sections if value}
 
 
 def _is_loopback(host: str) -> bool:
@@ -82,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     server = settings.server
     print(
         f"deltadash: dashboard and API on http://{server.host}:{server.http_port}/ "
-        f"(API docs at /docs), backend {settings.hardware.backend}",
+        f"(API docs at /docs), backend {settings.hardware.backend}, robot {settings.link.robot}",
         flush=True,
     )
     if server.scene:

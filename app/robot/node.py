@@ -40,11 +40,13 @@ from app.link import robots
 from app.link.codec import decode, plain
 from app.link.paths import PathSource, SampledPath
 from app.link.protocol import PROTOCOL
+from app.robot.estop import EstopListener, EstopReceipts
 from app.robot.holder import LinkHolder
+from app.robot.world import NodeWorld
 from hardware.bus import PositionGains
 
 log = logging.getLogger(__name__)
-ANYONE = ("estop", "link", "info", "tap", "release")  # ops that need no link
+ANYONE = ("estop", "link", "info", "tap", "release", "estop_receipt")  # ops that need no link
 
 
 def _vector(args: dict[str, Any], name: str, size: int = 3) -> np.ndarray:
@@ -129,6 +131,11 @@ class RobotNode:
         self._tap_lock = threading.Lock()
         self._tick_listeners: list[Callable[[Snapshot], None]] = []
         self._started_s = time.time()
+        # hold-in-world and the drone's pose inputs live beside the loop (app/robot/world.py)
+        self.world = NodeWorld(controller)
+        # the e-stop's own path into the node (app/robot/estop.py): start_estop_listener
+        self.receipts = EstopReceipts(controller)
+        self.estop_listener: EstopListener | None = None
         controller.add_listener(self._after_tick)
 
     # ---- lifecycle ----
@@ -136,8 +143,33 @@ class RobotNode:
         self.controller.start()
 
     def stop(self) -> str | None:
-        """Stop the loop (torque off at exit per config); why it could not, else None."""
-        return self.controller.stop()
+        """Stop the loop (torque off at exit per config) and the pose inputs; why the
+        robot could not be left as the config says, else None."""
+        try:
+            return self.controller.stop()
+        finally:
+            self.world.close()
+            if self.estop_listener is not None:
+                self.estop_listener.close()
+
+    def start_estop_listener(self) -> EstopListener | None:
+        """The node's e-stop listener on ``server.host:server.estop_port`` (0: any free
+        port); None (logged) when the config turns it off or the port cannot be bound:
+        an e-stop over the link still stops."""
+        server = self.settings.server
+        if not server.estop_listener:
+            return None
+        try:
+            self.estop_listener = EstopListener(
+                self.receipts,
+                server.host,
+                server.estop_port,
+                server.http_port,
+                server.command_timeout_s,
+            )
+        except OSError as exc:
+            log.warning("e-stop listener not started on port %s: %s", server.estop_port, exc)
+        return self.estop_listener
 
     # ---- the link ----
     def heartbeat(self, station: str) -> None:
@@ -170,6 +202,7 @@ class RobotNode:
             "holder": view.holder,
             "started_unix_s": self._started_s,
             "realtime": plain(controller.thread_setup_result),
+            "estop_port": None if self.estop_listener is None else self.estop_listener.port,
         }
 
     def call(self, station: str, op: str, args: dict[str, Any] | None = None) -> Future:
@@ -229,6 +262,9 @@ class RobotNode:
                 f"{protocol!r}: update one of them"
             )
         took = self.holder.take(station, _flag(args, "take_over"))
+        page_port = args.get("page_port")  # the station's pages may read the listener's answers
+        if self.estop_listener is not None and isinstance(page_port, int) and page_port > 0:
+            self.estop_listener.allow_page(page_port)
         return {"took_over_from": took, **self.info()}
 
     def _op_release(self, station: str, args: dict[str, Any]) -> bool:
@@ -236,6 +272,10 @@ class RobotNode:
 
     def _op_info(self, station: str, args: dict[str, Any]) -> dict[str, Any]:
         return self.info()
+
+    def _op_estop_receipt(self, station: str, args: dict[str, Any]) -> Any:
+        """The last press that reached the node's own e-stop listener."""
+        return self.receipts.latest()
 
     def _op_tap(self, station: str, args: dict[str, Any]) -> int:
         with self._tap_lock:
@@ -338,6 +378,32 @@ class RobotNode:
         origin = _text(args, "origin")
         swapped = self.controller.use_model(robot, offsets, origin)
         return _then(swapped, lambda model: {"version": model.version, "origin": model.origin})
+
+    # ---- hold-in-world and the pose inputs (app/robot/world.py) ----
+    def _op_pose(self, station: str, args: dict[str, Any]) -> dict[str, Any]:
+        return self.world.push(args)
+
+    def _op_pose_status(self, station: str, args: dict[str, Any]) -> dict[str, Any]:
+        return self.world.status(args)
+
+    def _op_pose_latest(self, station: str, args: dict[str, Any]) -> dict[str, Any]:
+        return self.world.latest(args)
+
+    def _op_restart_inputs(self, station: str, args: dict[str, Any]) -> None:
+        self.world.restart(args)
+
+    def _op_hold(self, station: str, args: dict[str, Any]) -> Future:
+        model = self._model(args)
+        source = self.world.hold_source(args)
+        source.source_id = _text(args, "source_id")  # type: ignore[attr-defined]
+        reply = {
+            "goal_world_m": source.goal_world.tolist(),
+            "approach_s": source.approach_s,
+            "duration_s": source.duration_s,
+        }
+        # the hold blends in from wherever the robot is: no start point to check
+        started = self.controller.run_source(source, np.zeros(3), math.inf, model)
+        return _then(started, lambda _: reply)
 
 
 def _gains_out(gains: dict[int, PositionGains]) -> dict[str, dict[str, int]]:

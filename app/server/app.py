@@ -49,34 +49,19 @@ from app.server.api.deps import require_read_token
 from app.server.backends import open_backend
 from app.server.bodies import StrictJSON
 from app.server.errors import install_error_handlers
-from app.server.estop import EstopFirst, EstopListener, EstopReceipts
+from app.server.estop import EstopFirst, EstopReceipts
 from app.server.limits import RequestLimits
 from app.server.origins import OriginCheck
 from app.server.queries import WorkspaceQueries
 from app.server.robot_link import open_robot
+from app.server.world_client import WorldClient
 from app.static_files import static_dir
 from app.tuning.procedure import TuningManager
-from app.world.service import WorldService
 from kinematics import PerLegRotaryDelta, RotaryDelta
 
 log = logging.getLogger(__name__)
 GIL_SWITCH_S = 2.5e-4
 STATIC_DIR = static_dir()
-
-
-def _start_estop_listener(settings: Settings, receipts: EstopReceipts) -> EstopListener | None:
-    """The e-stop's own listener (app/server/estop.py); None (logged) when it cannot bind
-    or the config turns it off: POST /api/estop still stops."""
-    server = settings.server
-    if not server.estop_listener:
-        return None
-    try:
-        return EstopListener(
-            receipts, server.host, server.estop_port, server.http_port, server.command_timeout_s
-        )
-    except OSError as exc:
-        log.warning("e-stop listener not started on port %s: %s", server.estop_port, exc)
-        return None
 
 
 def begin_shutdown(app: FastAPI) -> None:
@@ -126,13 +111,19 @@ def create_app(
             app.state.node = opened.node  # the robot node, when it runs in this process
             app.state.robot_child = opened.child  # the embedded node's process, if any
             backend = opened.backend
-            app.state.estop_receipts = EstopReceipts(controller)
-            app.state.estop_listener = _start_estop_listener(settings, app.state.estop_receipts)
+            app.state.estop_receipts = EstopReceipts(controller)  # /api/estop's presses
+            # the page's other e-stop path is the robot node's own listener: its port
+            node_listener = opened.node.estop_listener if opened.node is not None else None
+            app.state.estop_listener = node_listener
+            app.state.estop_port = (
+                node_listener.port
+                if node_listener is not None
+                else controller.info.get("estop_port")
+            )
             app.state.backend = backend
             app.state.runs = RunManager(controller, settings.runs.folder_path)
-            # hold-in-world: its pose inputs and hold source run beside the loop, in this
-            # process for now (a node's loop in another process: refused, link.robot)
-            app.state.world = WorldService(opened.node.controller if opened.node else controller)
+            # hold-in-world: the pose inputs and the hold run beside the loop, in the node
+            app.state.world = WorldClient(controller)
             # program checks and dry runs in worker processes (started on the first one)
             app.state.program_workers = ProgramWorkers(
                 live, programs.CONCURRENT_CHECKS, settings.programs.check_timeout_s
@@ -170,8 +161,6 @@ def create_app(
                 await asyncio.to_thread(app.state.calibration.close)
                 await asyncio.to_thread(app.state.runs.close)
                 app.state.world.close()
-                if app.state.estop_listener is not None:
-                    await asyncio.to_thread(app.state.estop_listener.close)
 
     app = FastAPIOffline(  # /docs and /redoc from local assets: they work with no internet
         title="deltadash",

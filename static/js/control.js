@@ -414,10 +414,12 @@ export function startControl(info) {
   if (info && Array.isArray(info.home_m)) homeM = info.home_m;
   // the listener speaks plain http: from an https page the browser would block it
   if (info && info.estop_port && location.protocol === "http:") {
-    estopListenerUrl = `http://${location.hostname}:${info.estop_port}/estop`;
+    // the robot node's own listener: on its machine (estop_host), else this page's host
+    const host = info.estop_host || location.hostname;
+    estopListenerUrl = `http://${host}:${info.estop_port}/estop`;
     // keep a connection to it open (the server keeps it alive 30 s): a press then needs no
     // new connection, which cost the browser tens of ms on a loaded machine
-    const ready = `http://${location.hostname}:${info.estop_port}/ready`;
+    const ready = `http://${host}:${info.estop_port}/ready`;
     const warm = () => fetch(ready, { cache: "no-store" }).catch(() => {});
     warm();
     setInterval(warm, 5000);

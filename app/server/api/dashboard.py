@@ -63,6 +63,16 @@ def _viser_port(scene: Scene | None) -> int | None:
     return server.get_port() if server is not None else scene.port
 
 
+def node_host(robot: str) -> str | None:
+    """The host of a robot node elsewhere (``link.robot`` an endpoint, e.g.
+    tcp/192.168.1.20:7447 -> 192.168.1.20): where the page reaches its e-stop listener;
+    None where the node runs on the station's machine (the page's own host)."""
+    if robot in ("embedded", "in-process") or "/" not in robot:
+        return None
+    host = robot.split("/", 1)[1].rsplit(":", 1)[0].strip("[]")
+    return None if host in ("127.0.0.1", "localhost", "::1") else host
+
+
 @router.get("/api/info", response_model=InfoOut)
 def get_info(
     settings: SettingsDep, scene: SceneDep, estop_port: EstopPortDep, controller: ControllerDep
@@ -74,6 +84,7 @@ def get_info(
     return {
         "viser_port": _viser_port(scene),
         "estop_port": estop_port,
+        "estop_host": node_host(settings.link.robot),
         "token_required": settings.server.token is not None,
         "telemetry_hz": settings.server.telemetry_hz,
         "jog_max_velocity_m_s": settings.jog.max_velocity_m_s,

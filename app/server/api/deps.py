@@ -19,8 +19,8 @@ from app.runs.manager import RunManager
 from app.scene import Scene
 from app.server.estop import EstopReceipts
 from app.server.queries import WorkspaceQueries
+from app.server.world_client import WorldClient
 from app.tuning.procedure import TuningManager
-from app.world.service import WorldService
 
 READS = ("GET", "HEAD")
 
@@ -72,7 +72,7 @@ def get_tuning(connection: HTTPConnection) -> TuningManager:
     return connection.app.state.tuning
 
 
-def get_world(connection: HTTPConnection) -> WorldService:
+def get_world(connection: HTTPConnection) -> WorldClient:
     return connection.app.state.world
 
 
@@ -82,9 +82,8 @@ def get_scene(connection: HTTPConnection) -> Scene | None:
 
 
 def get_estop_port(connection: HTTPConnection) -> int | None:
-    """The e-stop listener's bound port (app/server/estop.py), None when it is not running."""
-    listener = getattr(connection.app.state, "estop_listener", None)
-    return None if listener is None else listener.port
+    """The robot node's e-stop listener's port (app/robot/estop.py), None when it runs none."""
+    return getattr(connection.app.state, "estop_port", None)
 
 
 def get_estop_receipts(connection: HTTPConnection) -> EstopReceipts:
@@ -164,7 +163,7 @@ ProgramWorkersDep = Annotated[ProgramWorkers, Depends(get_program_workers)]
 QueriesDep = Annotated[WorkspaceQueries, Depends(get_queries)]
 CalibrationDep = Annotated[CalibrationManager, Depends(get_calibration)]
 TuningDep = Annotated[TuningManager, Depends(get_tuning)]
-WorldDep = Annotated[WorldService, Depends(get_world)]
+WorldDep = Annotated[WorldClient, Depends(get_world)]
 SceneDep = Annotated[Scene | None, Depends(get_scene)]
 AuthorityDep = Annotated[Authority, Depends(get_authority)]
 EstopPortDep = Annotated[int | None, Depends(get_estop_port)]

@@ -518,8 +518,11 @@ class InfoOut(_Out):
 
     viser_port: int | None
     estop_port: int | None = Field(
-        description="the e-stop listener's port (POST /estop there stops, as /api/estop "
-        "does; same host); null: not running"
+        description="the robot node's e-stop listener's port (POST /estop there stops, as "
+        "/api/estop does, without passing through this server); null: not running"
+    )
+    estop_host: str | None = Field(
+        description="its host, for a robot node on another machine; null: this page's host"
     )
     token_required: bool
     telemetry_hz: float

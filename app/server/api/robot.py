@@ -10,6 +10,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Header, HTTPException, Request
 
 from app.control.authority import LeaseHeld
+from app.link.codec import decode
 from app.server import estop
 from app.server.api import serialize
 from app.server.api.deps import (
@@ -31,6 +32,7 @@ from app.server.api.models import (
 )
 from app.server.api.responses import LeaseOut, LeaseTaken, StatusOut
 from app.server.errors import CONFLICT, CONTROL, INVALID, UNAUTHORISED, UNAVAILABLE
+from app.server.estop import EstopReceipt, merged
 
 router = APIRouter(tags=["robot"])
 
@@ -48,7 +50,9 @@ def get_status(
 ) -> dict[str, Any]:
     """Mode, backend, faults, joints, the measured and commanded tool tip, the platform
     centre, the wrist angle, the goal and loop timing."""
-    return serialize.status(controller.snapshot(), receipts.latest(), world.tracker.status())
+    node_receipt = decode(EstopReceipt, controller.request("estop_receipt", {}).result(timeout=5))
+    receipt = merged(receipts.latest(), node_receipt)  # the node's listener and /api/estop
+    return serialize.status(controller.snapshot(), receipt, world.tracker.status())
 
 
 @router.post("/goal", response_model=Accepted, responses=CONTROL)

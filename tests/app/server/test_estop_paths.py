@@ -143,7 +143,7 @@ def test_connections_held_open_or_trickling_cannot_lock_a_press_out(fresh):
     connection is closed for it) and stops the robot."""
     import socket
 
-    from app.server.estop import MAX_CONNECTIONS
+    from app.robot.estop import MAX_CONNECTIONS
 
     port = ok_json(fresh.get("/api/info"))["estop_port"]
     held = []

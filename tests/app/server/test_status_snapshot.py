@@ -10,9 +10,9 @@ import numpy as np
 
 from app.control.state import RobotInfo, Snapshot
 from app.control.timing import TimingStats
+from app.robot.estop import EstopReceipt, EstopReceipts
 from app.server.api import serialize
 from app.server.api.responses import JointsStatus, StatusOut
-from app.server.estop import EstopReceipt, EstopReceipts
 from hardware.bus import READINGS, BusStats, PositionGains
 
 
