@@ -28,7 +28,8 @@ class SampledPath:
     phase names (approach, timed, stop, ...) and phase_index: (n,) the index of each
     sample's; lines: (n,) a G-code program's line at each sample, -1 where none (None:
     not a program); lead_s: the point commanded is this far ahead of the goal shown
-    (feed-forward for the servos' lag) [s]; approach_s / timed_s: the approach's length
+    (feed-forward for the servos' lag) [s], and commanded_m: (n, 3) that point at each
+    sample (None: interpolated from points_m); approach_s / timed_s: the approach's length
     and the timed part's (a run's progress) [s]; name: the loop's mode while it plays.
     """
 
@@ -39,6 +40,7 @@ class SampledPath:
     phase_index: np.ndarray
     phi_rad: np.ndarray | None = None
     lines: np.ndarray | None = None
+    commanded_m: np.ndarray | None = None
     lead_s: float = 0.0
     approach_s: float = 0.0
     timed_s: float = 0.0
@@ -57,6 +59,11 @@ class SampledPath:
             values = getattr(self, name)
             if values is not None and np.shape(values) != (n,):
                 raise ValueError(f"{name}: expected {n} values, one per sample")
+        commanded = self.commanded_m
+        if commanded is not None and (
+            np.shape(commanded) != (n, 3) or not np.isfinite(commanded).all()
+        ):
+            raise ValueError(f"commanded_m: expected {n} finite points, one per sample")
         index = np.asarray(self.phase_index)
         if n and (index.min() < 0 or index.max() >= len(self.phases)):
             raise ValueError("phase_index: an index names no phase")
@@ -66,12 +73,13 @@ class SampledPath:
         if not (math.isfinite(self.lead_s) and self.lead_s >= 0):
             raise ValueError(f"lead_s: must be >= 0, got {self.lead_s}")
 
-    def point_at(self, t_s: float) -> np.ndarray:
-        """The point at ``t_s`` [s] (3,): linear between samples, clamped to the ends."""
-        u = min(max(t_s / self.period_s, 0.0), len(self.points_m) - 1.0)
-        k = min(int(u), len(self.points_m) - 2)
+    def point_at(self, t_s: float, points: np.ndarray | None = None) -> np.ndarray:
+        """The point at ``t_s`` [s] (3,) of ``points_m`` (or of ``points``, one per sample):
+        linear between samples, clamped to the ends."""
+        points = self.points_m if points is None else points
+        u = min(max(t_s / self.period_s, 0.0), len(points) - 1.0)
+        k = min(int(u), len(points) - 2)
         f = u - k
-        points = self.points_m
         return points[k] + f * (points[k + 1] - points[k])
 
     def phi_at(self, t_s: float) -> float | None:
@@ -115,7 +123,10 @@ class PathSource:
         path = self.path
         k = path.sample_at(self.t_s)
         goal = path.point_at(self.t_s)
-        commanded = path.point_at(self.t_s + path.lead_s) if path.lead_s else goal
+        if path.commanded_m is not None:  # the point ahead, as planned (exact at a sample)
+            commanded = path.point_at(self.t_s, path.commanded_m)
+        else:
+            commanded = path.point_at(self.t_s + path.lead_s) if path.lead_s else goal
         self.finished = self.t_s >= path.duration_s - 1e-9
         phase = path.phases[int(path.phase_index[k])]
         if path.lines is not None:

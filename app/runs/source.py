@@ -43,6 +43,9 @@ class TrajectorySource:
         phi = None
         if plan.moves_wrist:
             phi = np.array([plan.phi_at(float(t)) for t in times], dtype=float)
+        commanded = None
+        if self.lead_s:  # the feed-forward point, as next() commands it
+            commanded = np.array([plan.point_at(float(t) + self.lead_s) for t in times])
         lines = None
         if self._line_at is not None:
             timed = np.clip(times - plan.approach_s, 0.0, plan.params.duration_s)
@@ -55,6 +58,7 @@ class TrajectorySource:
             phase_index=index,
             phi_rad=phi,
             lines=lines,
+            commanded_m=commanded,
             lead_s=self.lead_s,
             approach_s=plan.approach_s,
             timed_s=plan.params.duration_s,

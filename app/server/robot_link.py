@@ -150,6 +150,7 @@ def open_robot(settings: Settings, backend_opener: Callable) -> Iterator[OpenRob
             )
             node = RobotNode(settings, controller)
             node.start()
+            node.start_estop_listener()
             client = RobotClient(settings, LocalTransport(node))
             try:
                 client.start()

@@ -76,7 +76,9 @@ def test_jacobian_matches_finite_differences(robot, seed, groups):
         step = np.zeros_like(params)
         step[k] = h
         fd = (ident.predict(params + step, joints) - ident.predict(params - step, joints)) / (2 * h)
-        np.testing.assert_allclose(jac[..., k], fd, atol=1e-7 * max(1.0, np.abs(jac).max()))
+        # a central difference's truncation error grows with the curvature of a small,
+        # sharply bent design (seen: 5e-7 of 2.9); a wrong term is of the order of 1
+        np.testing.assert_allclose(jac[..., k], fd, atol=1e-6 * max(1.0, np.abs(jac).max()))
 
 
 def test_the_prediction_is_the_fk_seen_from_the_frame():

@@ -24,7 +24,8 @@ import pytest
 
 from tests.support import wait as waiting
 
-START_S = 60.0  # generous: the simulator and viser start slowly on a loaded 2-core machine
+# generous: the station, its robot node and viser start slowly on a loaded 2-core machine
+START_S = 120.0
 # a command's wait for the loop: the product's 2 s is sized for a quiet machine; beside
 # CPU hogs a niced test server's loop can be late longer than that (CI saw a 503)
 COMMAND_WAIT_S = 10.0
