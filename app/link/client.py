@@ -208,6 +208,12 @@ class RobotClient:
         received = self._received_s
         return math.inf if received is None else time.monotonic() - received
 
+    def node_status(self) -> dict[str, Any]:
+        """The node's own status (its link, its e-stop listener's last press, the drone's
+        pose input: app/robot/node.py ``status_view``), as last heard; {} if none yet."""
+        status = getattr(self.transport, "node_status", None)
+        return (status() if status is not None else None) or {}
+
     @property
     def info(self) -> dict[str, Any]:
         """What the node said of itself when the link was taken (app/robot/node.py)."""

@@ -40,6 +40,7 @@ class StationTransport:
         self._heartbeat: threading.Thread | None = None
         self.alive = False
         self.state_received = 0
+        self._node_status: dict[str, Any] | None = None
 
     def open(
         self,
@@ -69,11 +70,16 @@ class StationTransport:
         def alive(sample: zenoh.Sample) -> None:
             self.alive = sample.kind == zenoh.SampleKind.PUT
 
+        def node(sample: zenoh.Sample) -> None:
+            with contextlib.suppress(ValueError):
+                self._node_status = json.loads(sample.payload.to_bytes())
+
         session, keys = self.session, self.keys
         self._subscribers = [
             session.declare_subscriber(keys.state, state),
             session.declare_subscriber(keys.ticks, ticks),
             session.liveliness().declare_subscriber(keys.alive, alive, history=True),
+            session.declare_subscriber(keys.node, node),
         ]
         self._heartbeat = threading.Thread(target=self._beat, name="link-heartbeat", daemon=True)
         self._heartbeat.start()
@@ -90,6 +96,10 @@ class StationTransport:
                 publisher.put(b"%.6f" % time.time())
             except zenoh.ZError:
                 return
+
+    def node_status(self) -> dict[str, Any] | None:
+        """The node's own status as it last published it (every 0.1 s); None: none yet."""
+        return self._node_status
 
     def call(self, op: str, args: dict[str, Any], timeout_s: float) -> Future:
         future: Future = Future()

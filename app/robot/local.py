@@ -54,5 +54,9 @@ class LocalTransport:
         wire = json.loads(json.dumps(args))
         return self.node.call(self.station, op, wire)
 
+    def node_status(self) -> dict[str, Any]:
+        """The node's own status (app/robot/node.py ``status_view``), as it is now."""
+        return self.node.status_view()
+
     def close(self) -> None:
         self._on_state = self._on_ticks = None

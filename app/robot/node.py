@@ -205,6 +205,16 @@ class RobotNode:
             "estop_port": None if self.estop_listener is None else self.estop_listener.port,
         }
 
+    def status_view(self) -> dict[str, Any]:
+        """The node's own status beside the loop's snapshot, as plain data: its link
+        (holder, take-overs, losses), the last press at its e-stop listener, and the drone's
+        pose input (``pose``: the tracker's status)."""
+        return {
+            "link": plain(self.holder.view()),
+            "estop": plain(self.receipts.latest()),
+            "pose": self.world.service.tracker.status(),
+        }
+
     def call(self, station: str, op: str, args: dict[str, Any] | None = None) -> Future:
         """Run command ``op`` with ``args`` for ``station``: a Future of ``(answer, tick)``
         (the answer as plain JSON data; the tick whose snapshot shows it), or of its

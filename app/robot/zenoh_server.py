@@ -27,7 +27,7 @@ from app.robot.node import RobotNode
 log = logging.getLogger(__name__)
 PUBLISH_EVERY_S = 0.002  # the publisher thread's longest wait for a new snapshot
 TICK_BATCH_S = 0.05  # a tapping station gets every tick in batches this often
-NODE_STATUS_S = 1.0
+NODE_STATUS_S = 0.1  # the node's own status (link, e-stop receipt, pose input) this often
 
 
 class NodeServer:
@@ -82,7 +82,7 @@ class NodeServer:
                     self._tick_pub.put(b"[" + b",".join(encode(s) for s in batch) + b"]")
                     last_batch = now
                 if now - last_status >= NODE_STATUS_S:
-                    self._status.put(json.dumps(plain(self.node.holder.view())).encode())
+                    self._status.put(json.dumps(plain(self.node.status_view())).encode())
                     last_status = now
             except zenoh.ZError as exc:  # the session is closing
                 log.debug("link publish: %s", exc)

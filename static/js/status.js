@@ -26,11 +26,22 @@ export function setStreamOnline(online) {
 function updateConnection() {
   const ok = state.online && state.streamOnline;
   const conn = document.getElementById("conn");
-  conn.textContent = ok ? "connected" : state.online ? "no telemetry" : "offline";
+  // the server answers, but its robot node does not (503 "robot offline: ...")
+  const robotOffline = !state.online && state.why.startsWith("robot offline");
+  conn.textContent = ok
+    ? "connected"
+    : state.online
+      ? "no telemetry"
+      : robotOffline
+        ? "robot offline"
+        : "offline";
   conn.className = ok ? "ok" : "bad";
   const banner = document.getElementById("banner");
   banner.hidden = ok;
-  if (!state.online) {
+  if (robotOffline) {
+    const why = state.why.replace(/^robot offline: /, "");
+    banner.textContent = `Robot offline: ${why}. The server keeps trying to reach it…`;
+  } else if (!state.online) {
     banner.textContent = `Connection to the server lost (${state.why}). Reconnecting…`;
   } else if (!ok) {
     banner.textContent = "Telemetry stream disconnected. Reconnecting…";
@@ -168,7 +179,9 @@ async function poll() {
   } catch (err) {
     setOnline(false, err.message || "no answer");
   }
-  setTimeout(poll, state.online ? POLL_MS : 1000);
+  // the server answers but its robot is offline: asked again soon, the banner goes at once
+  const robotOffline = !state.online && state.why.startsWith("robot offline");
+  setTimeout(poll, state.online ? POLL_MS : robotOffline ? 500 : 1000);
 }
 
 export function startStatus() {

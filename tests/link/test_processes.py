@@ -238,6 +238,9 @@ def test_the_pages_e_stop_reaches_the_node_with_the_station_hung_or_killed(
         finally:
             if signum == signal.SIGSTOP:
                 server.process.send_signal(signal.SIGCONT)
-        if signum == signal.SIGSTOP:  # the station's status shows the node's receipt
-            status = server.get("/api/status")
+        if signum == signal.SIGSTOP:  # back, the station's status shows the node's receipt
+            status = wait_for(
+                lambda: (got := server.get("/api/status"))["estop_arrivals_unix_s"] and got,
+                "the node's receipt of the press in the station's status",
+            )
             assert status["estopped"] and "listener" in status["estop_arrivals_unix_s"]
