@@ -485,6 +485,13 @@ class LinkSettings(_Section):
     heartbeat_s: float = Field(
         0.02, gt=0, le=1, description="a station says it is alive this often [s]"
     )
+    state_hz: float = Field(
+        200.0,
+        gt=0,
+        le=2000,
+        description="the robot node publishes its state at most this often [Hz] (every tick "
+        "of a 200 Hz loop; a station recording a run gets every tick anyway)",
+    )
     station_timeout_s: float = Field(
         0.06,
         gt=0,

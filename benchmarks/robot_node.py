@@ -35,6 +35,8 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import json
+import math
 import os
 import platform
 import random
@@ -58,6 +60,7 @@ import httpx  # noqa: E402
 import numpy as np  # noqa: E402
 
 CIRCLE = (ROOT / "examples" / "circle.ngc").read_text()
+WIFI_STATION_TIMEOUT_S = 0.5  # the node's link.station_timeout_s between the namespaces
 
 
 def free_port() -> int:
@@ -225,6 +228,8 @@ def node_process(endpoint: str, folder: Path, netns: str | None = None) -> Itera
     if netns:
         command = ["ip", "netns", "exec", netns, *command]
         env["DELTADASH_LINK__USER"], env["DELTADASH_LINK__PASSWORD"] = "bench", "bench-password"
+        # a lossy link (a TCP segment lost costs 200 ms) would lose 60 ms heartbeats
+        env["DELTADASH_LINK__STATION_TIMEOUT_S"] = str(WIFI_STATION_TIMEOUT_S)
     log = folder / "robot.log"
     process = subprocess.Popen(command, env=env, stdout=log.open("wb"), stderr=subprocess.STDOUT)
     try:
@@ -354,16 +359,29 @@ def link(args: argparse.Namespace) -> None:
             tempfile.TemporaryDirectory() as folder,
             node_process("tcp/10.77.0.1:7447", Path(folder), netns="dd-robot"),
         ):
-            # this process joins the station's namespace for the proxy and the station
-            fd = os.open("/run/netns/dd-station", os.O_RDONLY)
-            os.setns(fd, os.CLONE_NEWNET)
-            direct = _round_trips("tcp/10.77.0.1:7447", args.count, login=True)
-            print(_link_line("veth, two netns", direct))
-            DelayProxy(("10.77.0.2", 7448), ("10.77.0.1", 7447))
-            delayed = _round_trips("tcp/10.77.0.2:7448", args.count, login=True)
-            print(_link_line("veth + 5+-5 ms, 1 % +200 ms", delayed))
+            print(f"(between the namespaces: link.station_timeout_s {WIFI_STATION_TIMEOUT_S} s)")
+            for name, proxy in (("veth, two netns", False), ("veth + 5+-5 ms, 1 % +200 ms", True)):
+                # the station in the other namespace: a process of its own (setns(2) moves
+                # one thread, and Zenoh's runtime threads would stay behind)
+                command = ["ip", "netns", "exec", "dd-station", sys.executable, __file__]
+                command += ["station", "--count", str(args.count)] + (["--proxy"] if proxy else [])
+                out = subprocess.run(command, capture_output=True, text=True, timeout=600)
+                if out.returncode != 0:
+                    raise SystemExit(out.stderr)
+                print(_link_line(name, json.loads(out.stdout.strip().splitlines()[-1])))
     finally:
         _netns_down()
+
+
+def station(args: argparse.Namespace) -> None:
+    """(in the station's namespace) the round trips to the node in the robot's, directly
+    or through the delaying proxy; one JSON line."""
+    endpoint = "tcp/10.77.0.1:7447"
+    if args.proxy:
+        DelayProxy(("10.77.0.2", 7448), ("10.77.0.1", 7447))
+        endpoint = "tcp/10.77.0.2:7448"
+    print(json.dumps(_round_trips(endpoint, args.count, login=True)), flush=True)
+    os._exit(0)  # the proxy's threads: nothing to wait for
 
 
 def _link_line(name: str, shown: dict) -> str:
@@ -399,14 +417,20 @@ def lost(args: argparse.Namespace) -> None:
             )
             session.declare_subscriber(keys.heartbeats, lambda s: beats.append(time.monotonic()))
             for speed in (0.02, 0.1):
-                results = []
-                for _ in range(args.repeat):
-                    results.append(_one_loss(Path(folder), endpoint, speed, states, beats))
-                shown = ", ".join(f"{r * 1e3:.0f}" for r in results)
-                print(
-                    f"{speed * 1e3:5.0f} mm/s: last heartbeat to rest {shown} ms "
-                    f"(median {statistics.median(results) * 1e3:.0f} ms)"
-                )
+                tries = [
+                    _one_loss(Path(folder), endpoint, speed, states, beats)
+                    for _ in range(args.repeat)
+                ]
+                for name, values in (
+                    ("the node's stop (braking from there)", [s for s, _, _ in tries]),
+                    ("command still", [c for _, c, _ in tries]),
+                    ("arm at rest (0.2 mm)", [r for _, _, r in tries]),
+                ):
+                    shown = ", ".join(f"{v * 1e3:.0f}" for v in values)
+                    print(
+                        f"{speed * 1e3:5.0f} mm/s: last heartbeat to {name}: {shown} ms "
+                        f"(median {statistics.median(values) * 1e3:.0f} ms)"
+                    )
             session.close()
             cleanup()
 
@@ -434,14 +458,19 @@ def _one_loss(folder: Path, endpoint: str, speed: float, states: list, beats: li
         killed = time.monotonic()
         time.sleep(1.5)
     last_beat = max(b for b in beats if b <= killed + 0.01)
-    after = [(t, s) for t, s in states if t >= last_beat]
+    after = [(t, snap) for t, snap in states if t >= last_beat]
+    said = next((t for t, snap in after if "link was lost" in (snap.notice or "")), math.nan)
+    commanded = rest = math.nan
     for k in range(1, len(after)):
         t, snap = after[k]
         moved = np.linalg.norm(snap.point_commanded_m - after[k - 1][1].point_commanded_m)
+        if moved < 1e-6 and math.isnan(commanded):
+            commanded = t - last_beat  # the node's command stands still
         settled = np.linalg.norm(snap.point_measured_m - snap.point_commanded_m) < 2e-4
-        if moved < 1e-6 and settled:
-            return t - last_beat
-    return float("nan")
+        if not math.isnan(commanded) and settled:
+            rest = t - last_beat  # and the arm has caught up with it
+            break
+    return said - last_beat, commanded, rest
 
 
 def main() -> None:
@@ -455,6 +484,10 @@ def main() -> None:
     lnk.add_argument("--count", type=int, default=500)
     lnk.add_argument("--netns", action="store_true", help="also between two network namespaces")
     lnk.set_defaults(run=link)
+    sta = commands.add_parser("station", help=argparse.SUPPRESS)
+    sta.add_argument("--count", type=int, default=500)
+    sta.add_argument("--proxy", action="store_true")
+    sta.set_defaults(run=station)
     lst = commands.add_parser("lost")
     lst.add_argument("--repeat", type=int, default=5)
     lst.set_defaults(run=lost)

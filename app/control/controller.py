@@ -199,6 +199,10 @@ class Controller:
             )
         return ctx
 
+    def thread_native_id(self) -> int | None:
+        """The loop thread's kernel thread id (None before it starts)."""
+        return None if self._thread is None else self._thread.native_id
+
     @property
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()

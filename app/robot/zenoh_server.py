@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import threading
 import time
 from concurrent.futures import Future
@@ -39,6 +40,9 @@ class NodeServer:
         self.session = zenoh.open(config)
         self._latest: Snapshot | None = None
         self._ticks: list[Snapshot] = []
+        # the state goes out at most link.state_hz: at a 1 kHz loop, every fifth tick
+        self._state_every_s = 1.0 / link.state_hz
+        self._state_at = -float("inf")
         self._wake = threading.Event()
         self._closed = threading.Event()
         self._state = self.session.declare_publisher(
@@ -57,17 +61,30 @@ class NodeServer:
         self._heartbeats = self.session.declare_subscriber(self.keys.heartbeats, self._on_heartbeat)
         self._token = self.session.liveliness().declare_token(self.keys.alive)
         node.add_tick_listener(self._on_tick)
+        self._loop_tid = node.controller.thread_native_id() or 0
         self._thread = threading.Thread(target=self._publish, name="link-publish", daemon=True)
         self._thread.start()
 
     # control thread: leave the snapshot, never wait
     def _on_tick(self, snap: Snapshot) -> None:
-        self._latest = snap
-        if self.node.tapped:
+        tapped = self.node.tapped
+        if tapped:
             self._ticks.append(snap)
-        self._wake.set()
+        if snap.time_s - self._state_at >= self._state_every_s - 1e-6:
+            self._state_at = snap.time_s
+            self._latest = snap
+            self._wake.set()
+        elif tapped and len(self._ticks) == 1:
+            self._wake.set()
 
     def _publish(self) -> None:
+        # It holds the GIL while it encodes: preempted then by a process of the station's,
+        # it would keep the loop's real-time thread waiting for the GIL (priority
+        # inversion). Where the loop got SCHED_FIFO, this thread asks for it too, below it.
+        with contextlib.suppress(OSError, AttributeError):
+            if os.sched_getscheduler(self._loop_tid) == os.SCHED_FIFO:
+                below = max(1, os.sched_getparam(self._loop_tid).sched_priority - 10)
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(below))
         last_batch = last_status = time.monotonic()
         while not self._closed.is_set():
             self._wake.wait(PUBLISH_EVERY_S)
