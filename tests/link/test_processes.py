@@ -244,3 +244,32 @@ def test_the_pages_e_stop_reaches_the_node_with_the_station_hung_or_killed(
                 "the node's receipt of the press in the station's status",
             )
             assert status["estopped"] and "listener" in status["estop_arrivals_unix_s"]
+
+
+def test_a_station_killed_mid_run_leaves_the_robot_holding_where_the_run_was(
+    tmp_path: Path,
+) -> None:
+    """link.on_station_lost = stop (the default): the node stops the run it was playing
+    and holds; the station's next start finds the run interrupted."""
+    env = node_env(station_timeout_s=0.06)
+    with (
+        robot_node(tmp_path, **env) as node,
+        watch(node.endpoint) as seen,
+        serve(tmp_path, DELTADASH_LINK__ROBOT=node.endpoint) as server,
+    ):
+        lease = _lease(server)
+        _rest_and_move(server, lease)
+        body = {"duration_s": 20.0, "amplitude_m": [0.02, 0.02, 0.0]}
+        _station_api(server, "POST", "/api/tests/sinusoid", body, lease)
+        wait_for(
+            lambda: seen.latest.mode == "test" and seen.latest.phase == "timed",
+            "the run's timed part under way",
+            seen=lambda: (seen.latest.mode, seen.latest.phase),
+        )
+        server.process.kill()
+        lost = time.monotonic()
+        wait_for(lambda: seen.latest.mode != "test", "the node to stop the run")
+        assert "station's link was lost" in (seen.latest.notice or "")
+        wait_for(lambda: len(seen.since(lost + 1.0)) > 50, "a second of states after")
+        held = [s.point_commanded_m for s in seen.since(lost + 1.0)]
+        assert all(np.allclose(p, held[0], atol=1e-6) for p in held)
