@@ -19,13 +19,6 @@ settings.register_profile("soak", max_examples=3000, deadline=None)  # by hand, 
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
 
-def pytest_sessionfinish(session, exitstatus):
-    """Close the session's chromium (tests/support/browser.py), if a test started it."""
-    from tests.support.browser import close_shared_chromium
-
-    close_shared_chromium()
-
-
 def pytest_unconfigure(config):  # pragma: no cover - diagnostics
     """Say which threads outlive the session, and where they are: a daemon thread inside
     native code when the interpreter finalizes crashes the process after every test passed

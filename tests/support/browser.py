@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import os
 import shutil
+import tempfile
 from collections.abc import Iterator
-from contextlib import contextmanager, suppress
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -56,49 +57,28 @@ def require_browser() -> None:
         pytest.skip(reason)
 
 
-# One chromium per test process (issue 29): launched by the first page a test opens, each
-# page then in a context of its own (its own cookies, storage and cache, as a fresh
-# profile had), and closed when the session ends (tests/conftest.py). Every browser test
-# runs in one xdist worker (the real-time group), so a run starts one chromium.
-_SHARED: dict[str, Any] = {}
-
-
-def shared_chromium() -> Any:
-    """This process's Playwright chromium, launched on first use (again if it died)."""
+@contextmanager
+def chromium_page(width: int = 1280, height: int = 800) -> Iterator[Any]:
+    """A Playwright page in headless chromium with a fresh profile, closed afterwards."""
     require_browser()
-    browser = _SHARED.get("browser")
-    if browser is not None and browser.is_connected():
-        return browser
-    close_shared_chromium()
     from playwright.sync_api import sync_playwright
 
     executable = CHROMIUM if Path(CHROMIUM).exists() else shutil.which("chromium")
-    playwright = sync_playwright().start()
-    _SHARED["playwright"] = playwright
-    _SHARED["browser"] = playwright.chromium.launch(
-        executable_path=executable, headless=True, args=CHROMIUM_ARGS
-    )
-    return _SHARED["browser"]
-
-
-def close_shared_chromium() -> None:
-    """Close this process's chromium and Playwright, if they were started."""
-    browser, playwright = _SHARED.pop("browser", None), _SHARED.pop("playwright", None)
-    for close in (getattr(browser, "close", None), getattr(playwright, "stop", None)):
-        if close is not None:
-            with suppress(Exception):  # already gone (a crashed browser): nothing to close
-                close()
-
-
-@contextmanager
-def chromium_page(width: int = 1280, height: int = 800) -> Iterator[Any]:
-    """A Playwright page in headless chromium with a fresh context (cookies, storage,
-    cache: as a new profile), closed afterwards; the browser is the session's."""
-    context = shared_chromium().new_context(viewport={"width": width, "height": height})
-    try:
-        yield context.new_page()
-    finally:
-        context.close()
+    with (
+        tempfile.TemporaryDirectory(prefix="deltadash-chromium-") as profile,
+        sync_playwright() as playwright,
+    ):
+        context = playwright.chromium.launch_persistent_context(
+            profile,
+            executable_path=executable,
+            headless=True,
+            args=CHROMIUM_ARGS,
+            viewport={"width": width, "height": height},
+        )
+        try:
+            yield context.pages[0] if context.pages else context.new_page()
+        finally:
+            context.close()
 
 
 # The page tests' servers: the simulator's process, starved on a loaded 2-core machine
