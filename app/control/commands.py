@@ -210,6 +210,39 @@ def begin_motion(state: LoopState, source: GoalSource) -> None:
 
 
 # ---- motion ----
+def check_goal(
+    gate: Gate, point: Any, phi_rad: float, near_rad: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """A jog target's tip [m] (3,) and wrist angle [rad], checked strictly in the caller's
+    thread: GoalRejected for a wrist angle beyond its limits, a tip whose platform point is
+    outside the workspace (with the nearest), or one the IK cannot reach from ``near_rad``."""
+    phi = gate.check_phi(phi_rad)
+    goal = gate.check_point(point, phi)
+    gate.solve(goal, near_rad, phi)
+    return goal, phi
+
+
+def check_vector(value: Any, name: str) -> np.ndarray:
+    """``value`` as 3 finite numbers (a jog step [m], a held jog's velocity [m/s]);
+    GoalRejected naming ``name`` otherwise."""
+    vector = np.asarray(value, dtype=np.float64)
+    if vector.shape != (3,) or not np.isfinite(vector).all():
+        raise GoalRejected(f"{name}: expected 3 finite numbers, got {value!r}")
+    return vector
+
+
+def ordered_gains(gains: dict[int, Any], servo_ids: tuple[int, ...]) -> list[Any]:
+    """Position gains per leg servo id, in joint order; ValueError naming the ids that are
+    not the legs' (or the legs' that are missing)."""
+    unknown = sorted(set(gains) - set(servo_ids))
+    missing = [sid for sid in servo_ids if sid not in gains]
+    if unknown or missing:
+        raise ValueError(
+            f"gains: servo ids {unknown or missing} are not the legs' {list(servo_ids)}"
+        )
+    return [gains[sid] for sid in servo_ids]
+
+
 def check_move(
     gate: Gate,
     point: Any,

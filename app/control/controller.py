@@ -242,9 +242,7 @@ class Controller:
         """Jog target: the tool tip [m] at wrist angle ``phi_rad`` [rad], checked strictly
         (a tip whose platform point is outside the workspace is refused with the nearest)."""
         model = self.model
-        phi = model.gate.check_phi(phi_rad)
-        goal = model.gate.check_point(point, phi)
-        model.gate.solve(goal, self._near_measured(), phi)
+        goal, phi = commands.check_goal(model.gate, point, phi_rad, self._near_measured())
         return self.submit_motion(
             lambda: commands.jog_to(self.state, self._checked(model), goal, phi_rad=phi)
         )
@@ -253,9 +251,7 @@ class Controller:
         """Relative jog step [m] from what the loop commands when the step runs (not from a
         goal the caller saw); a target outside the workspace is clamped onto it.
         ``speed_m_s`` caps the speed per axis (None: the configured jog limit)."""
-        delta = np.asarray(delta_m, dtype=np.float64)
-        if delta.shape != (3,) or not np.isfinite(delta).all():
-            raise GoalRejected(f"delta_m: expected 3 finite numbers, got {delta_m!r}")
+        delta = commands.check_vector(delta_m, "delta_m")
         if speed_m_s is not None and not (math.isfinite(speed_m_s) and speed_m_s > 0):
             raise GoalRejected(f"speed_m_s: expected a positive number, got {speed_m_s!r}")
         return self.submit_motion(lambda: commands.jog_by(self.state, self.ctx, delta, speed_m_s))
@@ -264,9 +260,7 @@ class Controller:
         """Start or renew a held jog at ``velocity_m_s`` [m/s] (zero stops it): it moves
         only while these calls keep coming; the loop stops it ``jog.hold_timeout_s`` after
         the last one (app/control/held_jog.py)."""
-        velocity = np.asarray(velocity_m_s, dtype=np.float64)
-        if velocity.shape != (3,) or not np.isfinite(velocity).all():
-            raise GoalRejected(f"velocity_m_s: expected 3 finite numbers, got {velocity_m_s!r}")
+        velocity = commands.check_vector(velocity_m_s, "velocity_m_s")
         return self.submit_motion(
             lambda: held_jog.hold_jog(self.state, self.ctx, velocity, self._now())
         )
@@ -422,13 +416,7 @@ class Controller:
         control thread; refused while a motion runs (MotionRefused in the Future) and for
         ids that are not the legs' (ValueError, at once). The Future holds the gains now in
         use (`gains`)."""
-        unknown = sorted(set(gains) - set(self.servo_ids))
-        missing = [sid for sid in self.servo_ids if sid not in gains]
-        if unknown or missing:
-            raise ValueError(
-                f"gains: servo ids {unknown or missing} are not the legs' {list(self.servo_ids)}"
-            )
-        ordered = [gains[sid] for sid in self.servo_ids]
+        ordered = commands.ordered_gains(gains, tuple(self.servo_ids))
 
         def write() -> dict[int, PositionGains]:
             if (moving := self._moving()) is not None:

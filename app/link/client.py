@@ -30,13 +30,20 @@ from typing import Any, Protocol
 import numpy as np
 
 from app.config import Settings
-from app.control.commands import CommandContext, check_move
-from app.control.errors import GoalRejected, MotionRefused
+from app.control.commands import (
+    CommandContext,
+    check_goal,
+    check_move,
+    check_vector,
+    ordered_gains,
+)
+from app.control.errors import MotionRefused
 from app.control.model import Robot, RobotModel
 from app.control.owner import MotionOwner
-from app.control.state import RobotInfo, Snapshot
+from app.control.state import Snapshot
 from app.link import robots
 from app.link.codec import plain
+from app.link.futures import done, then
 from app.link.protocol import PROTOCOL, LinkRefused, RobotOffline
 from hardware.bus import PositionGains
 
@@ -58,7 +65,8 @@ SHOWN_WITHIN_S = 0.5  # a reply waits this long for the snapshot of its tick
 
 
 class Transport(Protocol):
-    """How a station reaches one robot node (app/link/local.py, app/link/zenoh_link.py)."""
+    """How a station reaches one robot node (app/robot/local.py in one process,
+    app/link/zenoh_station.py over Zenoh)."""
 
     def call(self, op: str, args: dict[str, Any], timeout_s: float) -> Future:
         """Command ``op``: a Future of ``(result, tick)`` (the tick that answered it), or
@@ -385,22 +393,16 @@ class RobotClient:
 
     def set_goal(self, point: Any, phi_rad: float = 0.0) -> Future:
         model = self.model
-        phi = model.gate.check_phi(phi_rad)
-        goal = model.gate.check_point(point, phi)
-        model.gate.solve(goal, self._near_measured(), phi)
+        goal, phi = check_goal(model.gate, point, phi_rad, self._near_measured())
         args = {"point_m": goal, "phi_rad": phi, "model_version": model.version}
         return self._motion("goal", args)
 
     def jog(self, delta_m: Any, speed_m_s: float | None = None) -> Future:
-        delta = np.asarray(delta_m, dtype=np.float64)
-        if delta.shape != (3,) or not np.isfinite(delta).all():
-            raise GoalRejected(f"delta_m: expected 3 finite numbers, got {delta_m!r}")
+        delta = check_vector(delta_m, "delta_m")
         return self._motion("jog", {"delta_m": delta, "speed_m_s": speed_m_s})
 
     def hold_jog(self, velocity_m_s: Any) -> Future:
-        velocity = np.asarray(velocity_m_s, dtype=np.float64)
-        if velocity.shape != (3,) or not np.isfinite(velocity).all():
-            raise GoalRejected(f"velocity_m_s: expected 3 finite numbers, got {velocity_m_s!r}")
+        velocity = check_vector(velocity_m_s, "velocity_m_s")
         return self._motion("hold_jog", {"velocity_m_s": velocity})
 
     def move(
@@ -461,7 +463,7 @@ class RobotClient:
     def stop_source(self, source: Any) -> Future:
         source_id = getattr(source, "source_id", None)
         if source_id is None:
-            return _done(False)
+            return done(False)
         return self._call("stop_source", {"source_id": source_id})
 
     def stop_any(self) -> Future:
@@ -481,17 +483,12 @@ class RobotClient:
         return self._motion("turn_wrist", {"phi_rad": phi})
 
     def set_gains(self, gains: dict[int, PositionGains]) -> Future:
-        unknown = sorted(set(gains) - set(self.servo_ids))
-        missing = [sid for sid in self.servo_ids if sid not in gains]
-        if unknown or missing:
-            raise ValueError(
-                f"gains: servo ids {unknown or missing} are not the legs' {list(self.servo_ids)}"
-            )
+        ordered_gains(gains, tuple(self.servo_ids))  # refused here naming the ids
         wire = {str(sid): g for sid, g in gains.items()}
-        return _then(self._motion("set_gains", {"gains": wire}), _gains_in)
+        return then(self._motion("set_gains", {"gains": wire}), _gains_in)
 
     def read_gains(self) -> Future:
-        return _then(self._call("read_gains", {}), _gains_in)
+        return then(self._call("read_gains", {}), _gains_in)
 
     def set_joint_offsets(self, offsets_rad: Any) -> Future:
         offsets = np.asarray(offsets_rad, dtype=float)
@@ -500,7 +497,7 @@ class RobotClient:
             self._offsets = offsets.copy()
             return result
 
-        return _then(self._motion("joint_offsets", {"offsets_rad": offsets}), applied)
+        return then(self._motion("joint_offsets", {"offsets_rad": offsets}), applied)
 
     def use_model(self, robot: Robot, offsets_rad: Any, origin: str) -> Future:
         current = self.model
@@ -514,7 +511,7 @@ class RobotClient:
             return model
 
         args = {"robot": robots.robot_data(robot), "offsets_rad": offsets, "origin": origin}
-        return _then(self._motion("use_model", args), swapped)
+        return then(self._motion("use_model", args), swapped)
 
 
 class _Named:
@@ -524,33 +521,5 @@ class _Named:
         self.name = name
 
 
-def _done(value: Any) -> Future:
-    future: Future = Future()
-    future.set_result(value)
-    return future
-
-
-def _then(future: Future, convert: Callable[[Any], Any]) -> Future:
-    out: Future = Future()
-
-    def finish(done: Future) -> None:
-        error = done.exception()
-        if error is not None:
-            out.set_exception(error)
-            return
-        try:
-            out.set_result(convert(done.result()))
-        except Exception as exc:
-            out.set_exception(exc)
-
-    future.add_done_callback(finish)
-    return out
-
-
 def _gains_in(wire: dict[str, dict[str, int]]) -> dict[int, PositionGains]:
     return {int(sid): PositionGains(**values) for sid, values in wire.items()}
-
-
-def robot_info(client: RobotClient) -> RobotInfo:
-    """The robot as the node names it (backend, description, servo ids)."""
-    return RobotInfo(client.backend, client.backend_description, tuple(client.servo_ids))

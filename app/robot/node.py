@@ -38,6 +38,7 @@ from app.control.errors import MotionRefused
 from app.control.state import Snapshot
 from app.link import robots
 from app.link.codec import decode, plain
+from app.link.futures import done, then
 from app.link.paths import PathSource, SampledPath
 from app.link.protocol import PROTOCOL
 from app.robot.estop import EstopListener, EstopReceipts
@@ -87,30 +88,6 @@ def _text(args: dict[str, Any], name: str, limit: int = 200) -> str:
     if not isinstance(value, str) or not 0 < len(value) <= limit:
         raise ValueError(f"{name}: expected a text of 1 to {limit} characters")
     return value
-
-
-def _done(value: Any) -> Future:
-    future: Future = Future()
-    future.set_result(value)
-    return future
-
-
-def _then(future: Future, convert: Callable[[Any], Any]) -> Future:
-    """A Future of ``convert(result)`` once ``future`` is done (its error passed on)."""
-    out: Future = Future()
-
-    def finish(done: Future) -> None:
-        error = done.exception()
-        if error is not None:
-            out.set_exception(error)
-            return
-        try:
-            out.set_result(convert(done.result()))
-        except Exception as exc:  # a conversion bug: the caller sees it, the loop does not
-            out.set_exception(exc)
-
-    future.add_done_callback(finish)
-    return out
 
 
 class RobotNode:
@@ -234,8 +211,8 @@ class RobotNode:
             failed: Future = Future()
             failed.set_exception(exc)
             return failed
-        answered = outcome if isinstance(outcome, Future) else _done(outcome)
-        return _then(answered, lambda result: (plain(result), self.controller.snapshot().tick))
+        answered = outcome if isinstance(outcome, Future) else done(outcome)
+        return then(answered, lambda result: (plain(result), self.controller.snapshot().tick))
 
     def add_tick_listener(self, listener: Callable[[Snapshot], None]) -> None:
         """``listener(snapshot)`` after every tick, in the control thread (keep it fast)."""
@@ -323,7 +300,7 @@ class RobotNode:
         return self.controller.jog(_vector(args, "delta_m"), speed)
 
     def _op_hold_jog(self, station: str, args: dict[str, Any]) -> Future:
-        return _then(self.controller.hold_jog(_vector(args, "velocity_m_s")), plain)
+        return then(self.controller.hold_jog(_vector(args, "velocity_m_s")), plain)
 
     def _op_move(self, station: str, args: dict[str, Any]) -> Future:
         self._model(args)
@@ -374,20 +351,20 @@ class RobotNode:
             gains = {int(sid): PositionGains(**values) for sid, values in given.items()}
         except (TypeError, ValueError) as exc:
             raise ValueError(f"gains: {exc}") from None
-        return _then(self.controller.set_gains(gains), _gains_out)
+        return then(self.controller.set_gains(gains), _gains_out)
 
     def _op_read_gains(self, station: str, args: dict[str, Any]) -> Future:
-        return _then(self.controller.read_gains(), _gains_out)
+        return then(self.controller.read_gains(), _gains_out)
 
     def _op_joint_offsets(self, station: str, args: dict[str, Any]) -> Future:
-        return _then(self.controller.set_joint_offsets(_vector(args, "offsets_rad")), plain)
+        return then(self.controller.set_joint_offsets(_vector(args, "offsets_rad")), plain)
 
     def _op_use_model(self, station: str, args: dict[str, Any]) -> Future:
         robot = robots.robot_of(args.get("robot"))
         offsets = _vector(args, "offsets_rad")
         origin = _text(args, "origin")
         swapped = self.controller.use_model(robot, offsets, origin)
-        return _then(swapped, lambda model: {"version": model.version, "origin": model.origin})
+        return then(swapped, lambda model: {"version": model.version, "origin": model.origin})
 
     # ---- hold-in-world and the pose inputs (app/robot/world.py) ----
     def _op_pose(self, station: str, args: dict[str, Any]) -> dict[str, Any]:
@@ -413,7 +390,7 @@ class RobotNode:
         }
         # the hold blends in from wherever the robot is: no start point to check
         started = self.controller.run_source(source, np.zeros(3), math.inf, model)
-        return _then(started, lambda _: reply)
+        return then(started, lambda _: reply)
 
 
 def _gains_out(gains: dict[int, PositionGains]) -> dict[str, dict[str, int]]:
