@@ -14,6 +14,7 @@ import os
 import signal
 import sys
 import threading
+import time
 
 GIL_SWITCH_S = 2.5e-4  # as app/server/app.py
 
@@ -77,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from app.config import ConfigError, load_settings
     from app.control.controller import Controller
     from app.robot.node import RobotNode
-    from app.robot.realtime import ask_realtime
+    from app.robot.realtime import ask_realtime, share_realtime
     from app.robot.zenoh_server import NodeServer
     from app.server.backends import open_backend
 
@@ -108,6 +109,13 @@ def run(args: argparse.Namespace) -> int:
         node = RobotNode(settings, controller, station_timeout_s=link.station_timeout_s)
         node.start()
         node.start_estop_listener()
+        simulator = getattr(backend.bus, "simulator_pid", None)  # the twin's own process
+        if simulator is not None:
+            for _ in range(100):  # the loop's thread asks for SCHED_FIFO as it starts
+                if controller.thread_setup_result is not None:
+                    break
+                time.sleep(0.01)
+            share_realtime(controller.thread_setup_result, simulator)
         server = NodeServer(node, link, link.listen)
         print(
             f"deltadash robot: listening on {link.listen} (keys {link.key_prefix}/...), "

@@ -25,6 +25,19 @@ class Realtime:
     why_not: str = ""
 
 
+def share_realtime(realtime: Realtime | None, pid: int | None, below: int = 20) -> bool:
+    """Give process ``pid`` (the twin's simulator, whose shared-frame lock the loop waits
+    for) SCHED_FIFO ``below`` the loop's priority, when the loop got SCHED_FIFO; False
+    when it did not or the OS refused."""
+    if realtime is None or not realtime.fifo or pid is None:
+        return False
+    try:
+        os.sched_setscheduler(pid, os.SCHED_FIFO, os.sched_param(max(1, realtime.priority - below)))
+    except (OSError, AttributeError):
+        return False
+    return True
+
+
 def ask_realtime(loop: LoopSettings) -> Realtime:
     """Ask for SCHED_FIFO and the CPU for the calling thread (the loop's), per ``loop``;
     never raises: what was refused is in ``why_not``."""

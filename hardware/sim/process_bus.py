@@ -86,6 +86,13 @@ class ProcessSimBus:
         self._platform_at_read = np.full(3, np.nan)
 
     # -- ServoBus ------------------------------------------------------------------------
+    @property
+    def simulator_pid(self) -> int | None:
+        """The simulator's process id (None before connect): a real-time loop gives it a
+        real-time priority too (app/robot/realtime.py), or a station's processes could
+        preempt it while it holds the shared frame's lock."""
+        return None if self._process is None else self._process.pid
+
     def connect(self) -> None:
         self.disconnect()
         context = mp.get_context("spawn")  # never fork a process that runs threads
