@@ -10,6 +10,7 @@ stopped cannot colour what the test sees. Waits are conditions with deadlines.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import time
 import urllib.error
@@ -273,3 +274,44 @@ def test_a_station_killed_mid_run_leaves_the_robot_holding_where_the_run_was(
         wait_for(lambda: len(seen.since(lost + 1.0)) > 50, "a second of states after")
         held = [s.point_commanded_m for s in seen.since(lost + 1.0)]
         assert all(np.allclose(p, held[0], atol=1e-6) for p in held)
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            found.append(int(entry.name))
+    return found
+
+
+def test_the_embedded_node_is_started_again_when_it_dies(tmp_path: Path) -> None:
+    """`deltadash serve` with no robot named runs the loop in a child robot node and
+    supervises it: killed, it is started again and the station takes its link again."""
+    with serve(tmp_path) as server:
+        lease = _lease(server)
+        _rest_and_move(server, lease)
+        nodes = [
+            pid
+            for pid in _children(server.process.pid)
+            if b"robot" in Path(f"/proc/{pid}/cmdline").read_bytes()
+        ]
+        assert len(nodes) == 1, nodes
+        os.kill(nodes[0], signal.SIGKILL)
+
+        def linked_again() -> bool:
+            try:
+                return server.get("/api/status")["mode"] in ("idle", "jog")
+            except urllib.error.HTTPError:
+                return False
+
+        wait_for(lambda: not linked_again(), "the station to see its node gone", seen=server.brief)
+        wait_for(linked_again, "the node started again and linked", seen=server.brief)
+        assert "the robot node exited" in server.log.read_text()
+        _rest_and_move(server, lease)  # and it moves the robot again
