@@ -107,3 +107,17 @@ def test_a_lost_station_stops_a_jog_and_the_node_holds(node: RobotNode) -> None:
     with pytest.raises(LinkRefused):  # a's authority went with its heartbeat ...
         node.holder.require("a")
     answer(node, "link", {})  # ... until it takes the link again
+
+
+def test_a_goal_the_gate_refuses_moves_nothing_at_the_node(node: RobotNode) -> None:
+    """The node checks a goal again, whatever its station checked: refused, the loop's
+    command and mode do not change (a refusal after the jog was queued would move it)."""
+    answer(node, "torque", {"enabled": True})
+    before = node.controller.snapshot()
+    with pytest.raises(GoalRejected, match="outside the workspace"):
+        answer(node, "goal", {"point_m": [1.0, 0.0, -0.24]})
+    for _ in range(3):  # ticks after the refusal: nothing was queued
+        node.controller.submit(lambda: None).result(timeout=5)
+    after = node.controller.snapshot()
+    assert after.mode == "idle" and np.allclose(after.goal_m, before.goal_m, equal_nan=True)
+    np.testing.assert_allclose(after.point_commanded_m, before.point_commanded_m, atol=1e-12)
