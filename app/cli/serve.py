@@ -87,10 +87,14 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    server = settings.server
+    server, robot = settings.server, settings.link.robot
+    where = {
+        "embedded": f"a robot node of its own on backend {settings.hardware.backend}",
+        "in-process": f"the loop in this process on backend {settings.hardware.backend}",
+    }.get(robot, f"the robot node at {robot}")
     print(
         f"deltadash: dashboard and API on http://{server.host}:{server.http_port}/ "
-        f"(API docs at /docs), backend {settings.hardware.backend}, robot {settings.link.robot}",
+        f"(API docs at /docs), {where}",
         flush=True,
     )
     if server.scene:
