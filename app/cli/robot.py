@@ -9,6 +9,7 @@ config says (``safety.torque_off_on_exit``).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import os
 import signal
@@ -60,18 +61,36 @@ def _overrides(args: argparse.Namespace) -> dict:
     return {k: v for k, v in (("hardware", hardware), ("link", link)) if v}
 
 
+def listen_host(listen: str) -> str:
+    """The host of a Zenoh endpoint (tcp/0.0.0.0:7447 -> 0.0.0.0)."""
+    return listen.split("/", 1)[-1].rsplit(":", 1)[0].strip("[]")
+
+
+def is_loopback(host: str) -> bool:
+    return host in ("localhost", "::1") or host.startswith("127.")
+
+
 def check_exposure(listen: str, user: str | None, password: str | None) -> None:
     """Listening beyond loopback without a login would hand the robot to the network."""
     from app.config import ConfigError
 
-    host = listen.split("/", 1)[-1].rsplit(":", 1)[0].strip("[]")
-    loopback = host in ("localhost", "::1") or host.startswith("127.")
+    loopback = is_loopback(listen_host(listen))
     if not loopback and (user is None or password is None):
         raise ConfigError(
             f"link.listen = {listen!r} is reachable from other machines: set link.user and "
-            "link.password (DELTADASH_LINK__USER, DELTADASH_LINK__PASSWORD; 8+ characters), "
-            "or TLS (docs/server.md)"
+            "link.password (DELTADASH_LINK__USER, DELTADASH_LINK__PASSWORD; 8+ characters): "
+            "the stations log in with them; TLS adds encryption, not a login (docs/server.md)"
         )
+
+
+def _signal_when_parent_dies(signum: int) -> None:
+    """Linux's PR_SET_PDEATHSIG: ``signum`` to this process when its parent exits (killed
+    included); nothing elsewhere (the parent's pid is then polled)."""
+    import ctypes
+
+    with contextlib.suppress(OSError, AttributeError):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signum, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
 
 
 def run(args: argparse.Namespace) -> int:
@@ -98,6 +117,12 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
+    parent_gone = threading.Event()
+    if args.parent is not None:  # an embedded node hears at once that its station died
+        signal.signal(signal.SIGUSR1, lambda *_: parent_gone.set())
+        _signal_when_parent_dies(signal.SIGUSR1)
+        if os.getppid() != args.parent:  # gone before the request took effect
+            parent_gone.set()
     with open_backend(settings) as backend:
         controller = Controller(
             settings,
@@ -108,7 +133,9 @@ def run(args: argparse.Namespace) -> int:
         )
         node = RobotNode(settings, controller, station_timeout_s=link.station_timeout_s)
         node.start()
-        node.start_estop_listener()
+        # beyond loopback the pages reach the node's e-stop where they reach its link
+        host = listen_host(link.listen)
+        node.start_estop_listener(None if is_loopback(host) else host)
         simulator = getattr(backend.bus, "simulator_pid", None)  # the twin's own process
         if simulator is not None:
             for _ in range(100):  # the loop's thread asks for SCHED_FIFO as it starts
@@ -123,8 +150,12 @@ def run(args: argparse.Namespace) -> int:
             flush=True,
         )
         try:
-            while not stop.wait(0.5):
-                if args.parent is not None and os.getppid() != args.parent:
+            while not stop.is_set():
+                gone = parent_gone.wait(0.1) or (
+                    args.parent is not None and os.getppid() != args.parent
+                )
+                if gone:
+                    node.holder.expire()  # its link is lost now: the next tick stops and holds
                     print(
                         f"deltadash robot: station {args.parent} is gone; holding "
                         f"{args.orphan_hold_s:g} s, then stopping",

@@ -32,6 +32,13 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "tcp/192.168.1.20:7447, see deltadash robot), or in-process",
     )
     parser.add_argument(
+        "--take-over",
+        action="store_true",
+        default=None,
+        help="take the robot node's link from another station that holds it (logged by "
+        "the node; that station's commands are refused from then on)",
+    )
+    parser.add_argument(
         "--token",
         default=os.environ.get("DELTADASH_TOKEN"),
         help="control token ($DELTADASH_TOKEN)",
@@ -51,7 +58,9 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
         for k, v in (("host", args.host), ("http_port", args.http_port), ("token", args.token))
         if v is not None
     }
-    link = {"robot": args.robot} if args.robot else {}
+    link = {
+        k: v for k, v in (("robot", args.robot), ("take_over", args.take_over)) if v is not None
+    }
     sections = (("hardware", hardware), ("server", server), ("link", link))
     return {key: value for key, value in sections if value}
 

@@ -19,6 +19,7 @@ import logging
 import math
 import threading
 import time
+import uuid
 import weakref
 from collections.abc import Callable
 from concurrent.futures import Future
@@ -93,7 +94,8 @@ class Controller:
         # joint positions read and goals written through calibration's joint offsets
         self.joint_bus = OffsetBus(self.servos)
         self.backend_description = backend_description or backend
-        info = RobotInfo(backend, self.backend_description, tuple(self.servo_ids))
+        self.boot = uuid.uuid4().hex[:12]  # this loop's id, in every snapshot
+        info = RobotInfo(backend, self.backend_description, tuple(self.servo_ids), self.boot)
         self.state = LoopState.initial(settings.safety, self.period_s, info)
         # [control] gravity_compensation: servo goals shifted by the predicted sag (the
         # loop's commanded joints stay the goal's, so status and following errors see it);

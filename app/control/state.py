@@ -23,12 +23,14 @@ def unread(count: int = 3) -> dict[str, np.ndarray]:
 @dataclass(frozen=True)
 class RobotInfo:
     """What a loop's snapshots say of the robot that does not change while it runs: the
-    backend's name (``sim``, ``emulated``, ``dynamixel``, ...) and description, and the
-    legs' servo ids in joint order."""
+    backend's name (``sim``, ``emulated``, ``dynamixel``, ...) and description, the legs'
+    servo ids in joint order, and ``boot``, this loop's own id (a robot node started again
+    has another: a station then knows its snapshots are a new loop's)."""
 
     backend: str = ""
     backend_description: str = ""
     servo_ids: tuple[int, ...] = (1, 2, 3)
+    boot: str = ""
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ answer within ``server.command_timeout_s``. ``online`` says whether state still 
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import threading
@@ -44,7 +45,7 @@ from app.control.state import Snapshot
 from app.link import robots
 from app.link.codec import plain
 from app.link.futures import done, then
-from app.link.protocol import PROTOCOL, LinkRefused, RobotOffline
+from app.link.protocol import PROTOCOL, LinkRefused, RobotOffline, sign
 from hardware.bus import PositionGains
 
 log = logging.getLogger(__name__)
@@ -62,22 +63,29 @@ ROBOT_SECTIONS = (
     "wrist",
 )
 SHOWN_WITHIN_S = 0.5  # a reply waits this long for the snapshot of its tick
+UNSIGNED = ("estop", "link", "info", "estop_receipt")  # ops anyone may send (robot/node.py)
 
 
 class Transport(Protocol):
     """How a station reaches one robot node (app/robot/local.py in one process,
     app/link/zenoh_station.py over Zenoh)."""
 
-    def call(self, op: str, args: dict[str, Any], timeout_s: float) -> Future:
-        """Command ``op``: a Future of ``(result, tick)`` (the tick that answered it), or
-        of the refusal's exception (app/link/protocol.py ``exception_of``)."""
+    def call(self, op: str, body: bytes, seq: int, mac: str, timeout_s: float) -> Future:
+        """Command ``op`` with its JSON ``body``, signed (``seq``, ``mac``: protocol.py
+        ``sign``; 0 and "" for the ops anyone may send): a Future of ``(result, tick)``
+        (the tick that answered it), or of the refusal's exception."""
         ...
 
     def open(
-        self, station: str, on_state: Listener, on_ticks: Callable[[list[Snapshot]], None]
+        self,
+        station: str,
+        on_state: Listener,
+        on_ticks: Callable[[list[Snapshot]], None],
+        beat: Callable[[], tuple[int, str] | None],
     ) -> None:
         """Speak as ``station``: start delivering the node's states (latest only) and,
-        while tapped, every tick in order; start the station's heartbeat."""
+        while tapped, every tick in order; send the station's heartbeat (``beat()``: its
+        signed sequence number, None before the link is taken)."""
         ...
 
     def close(self) -> None: ...
@@ -108,6 +116,10 @@ class RobotClient:
         self._lock = threading.Lock()
         # answered commands waiting for the snapshot of their tick: (tick, deadline, ...)
         self._pending: list[tuple[int, float, Future, Any]] = []
+        self._key = b""  # the link's key (the node's answer to our take): signs our messages
+        self._seq = self._beat_seq = 0
+        self._boot = ""  # the node's loop we took the link of (RobotInfo.boot)
+        self._relinking = False
         self._snapshot = Snapshot()
         self._received_s: float | None = None
         self._offsets = np.zeros(3)
@@ -127,7 +139,7 @@ class RobotClient:
         Raises RobotOffline when it does not answer, LinkRefused when another live station
         holds it (and take-over is off)."""
         if not self._opened:
-            self.transport.open(self.station_id, self._on_state, self._on_ticks)
+            self.transport.open(self.station_id, self._on_state, self._on_ticks, self._beat)
             self._opened = True
         result = self._take()
         self.took_over_from = result.get("took_over_from")
@@ -146,12 +158,36 @@ class RobotClient:
             "protocol": PROTOCOL,
             "page_port": self.settings.server.http_port,  # its pages call the node's e-stop
         }
-        sent = self.transport.call("link", args, self._timeout_s)
+        body = json.dumps(args).encode()
+        sent = self.transport.call("link", body, 0, "", self._timeout_s)
         try:
             result, _ = sent.result(timeout=self._timeout_s + 1.0)
         except TimeoutError:
             raise RobotOffline("the robot node did not answer the link's take") from None
+        with self._lock:  # this link's key: every later command and heartbeat is signed
+            self._key = bytes.fromhex(str(result.get("key", "")))
+            self._seq = self._beat_seq = 0
+            self._boot = str(result.get("boot", ""))
         return result
+
+    def _sign(self, op: str, body: bytes) -> tuple[int, str]:
+        """The next sequence number and the signature of command ``op`` with ``body``
+        (0 and "" for the ops anyone may send)."""
+        if op in UNSIGNED:
+            return 0, ""
+        with self._lock:
+            self._seq += 1
+            seq, key = self._seq, self._key
+        return seq, sign(key, self.station_id, op, seq, body)
+
+    def _beat(self) -> tuple[int, str] | None:
+        """The next heartbeat's signed sequence number; None before the link is taken."""
+        with self._lock:
+            if not self._key:
+                return None
+            self._beat_seq += 1
+            seq, key = self._beat_seq, self._key
+        return seq, sign(key, self.station_id, "heartbeat", seq)
 
     def _adopt(self, info: dict[str, Any]) -> None:
         """The node's config and model become the station's robot."""
@@ -185,7 +221,7 @@ class RobotClient:
         """Give the link up and stop following the node (the node keeps its loop)."""
         if self._started:
             try:
-                self.transport.call("release", {}, 1.0).result(timeout=2.0)
+                self._call("release", {}).result(timeout=2.0)
             except Exception as exc:  # gone already: nothing to give up
                 log.info("link release: %s", exc)
         self.halt()
@@ -302,17 +338,47 @@ class RobotClient:
     def _on_state(self, snap: Snapshot) -> None:
         now = time.monotonic()
         with self._lock:
-            if snap.tick >= self._snapshot.tick or snap.tick <= 1:  # never an older one
-                self._snapshot = snap  # (a restarted node counts from 0 again)
-            self._received_s = now
-            shown = self._snapshot.tick
+            if self._boot and snap.info.boot != self._boot:
+                # another loop than the one whose link we hold: the node was started again
+                relink = not self._relinking
+                self._relinking = True
+            else:
+                relink = False
+                if snap.tick >= self._snapshot.tick or snap.info.boot != self._snapshot.info.boot:
+                    self._snapshot = snap  # never an older one of the same loop
+                self._received_s = now
             due, waiting = [], []
-            for pending in self._pending:
-                (due if pending[0] <= shown or pending[1] <= now else waiting).append(pending)
-            self._pending = waiting
+            if not relink:
+                shown = self._snapshot.tick
+                for pending in self._pending:
+                    done_now = pending[0] <= shown or pending[1] <= now
+                    (due if done_now else waiting).append(pending)
+                self._pending = waiting
+        if relink:
+            threading.Thread(target=self._relink, name="link-relink", daemon=True).start()
+            return
         self._mark_finished(snap)
         for _, _, out, result in due:
             out.set_result(result)
+
+    def _relink(self) -> None:
+        """The node's loop is a new one (it was started again): take its link again and
+        adopt what it says of itself (its model, its e-stop port), until it answers."""
+        try:
+            deadline = time.monotonic() + max(10.0, self._timeout_s)
+            while self._started:
+                try:
+                    self.reconnect()
+                    log.warning("the robot node was started again: its link taken again")
+                    return
+                except (RobotOffline, LinkRefused) as exc:
+                    if time.monotonic() > deadline:
+                        log.error("the restarted robot node's link was not taken: %s", exc)
+                        return
+                    time.sleep(0.2)
+        finally:
+            with self._lock:
+                self._relinking = False
 
     def _on_ticks(self, snaps: list[Snapshot]) -> None:
         for snap in snaps:
@@ -337,15 +403,16 @@ class RobotClient:
         restarted) while no other station took it takes the link again and is sent once
         more: the operator's command is the act that moves the robot again."""
         out: Future = Future()
-        wire = plain(args)
+        body = json.dumps(plain(args), separators=(",", ":")).encode()
 
         def send(again: bool) -> None:
+            seq, mac = self._sign(op, body)
             try:
-                sent = self.transport.call(op, wire, self._timeout_s)
+                sent = self.transport.call(op, body, seq, mac, self._timeout_s)
             except Exception as exc:
                 out.set_exception(exc)
                 return
-            sent.add_done_callback(lambda done: answered(done, again))
+            sent.add_done_callback(lambda finished: answered(finished, again))
 
         def answered(done: Future, again: bool) -> None:
             error = done.exception()

@@ -4,7 +4,11 @@ What crosses the link between the robot node and the station (app/link/): the pu
 :class:`~app.control.state.Snapshot` and the records inside it (faults, timing, the bus's
 counters, gains), and the commands' arguments and answers. Standard JSON (RFC 8259), so
 any Zenoh tool can read the link: a non-finite float is written ``null`` (NaN), ``"inf"``
-or ``"-inf"``, and read back as such where the field is a float or an array.
+or ``"-inf"``, and read back as such where the field is a float or an array. An array of
+more than PACKED_OVER values (a run's samples) goes as ``{"packed": base64, "dtype":
+"<f8" | "<i8", "shape": [...]}``: parsing a list of a million floats would hold the
+node's interpreter (and its loop) for a second, the bytes take milliseconds. A whole
+number, a text or a flag of the wrong type is refused naming the field.
 
 :func:`encode` works on any dataclass; :func:`decode` rebuilds one from its type hints
 (``np.ndarray`` fields as float arrays, tuples, nested dataclasses, mappings of arrays,
@@ -13,6 +17,7 @@ unions with None), so a field added to a record crosses the link without a chang
 
 from __future__ import annotations
 
+import base64
 import dataclasses
 import json
 import math
@@ -25,6 +30,7 @@ from typing import Any, TypeVar, get_args, get_origin
 import numpy as np
 
 T = TypeVar("T")
+PACKED_OVER = 64  # an array of more values goes as base64 bytes (a run's samples), not a list
 _INF = {"inf": math.inf, "-inf": -math.inf}
 
 
@@ -38,6 +44,10 @@ def plain(value: Any) -> Any:
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, np.ndarray):
+        if value.size > PACKED_OVER and value.dtype.kind in "fiub":
+            kind = "<i8" if value.dtype.kind in "iub" else "<f8"
+            data = np.ascontiguousarray(value, dtype=kind).tobytes()
+            return {"packed": base64.b64encode(data).decode(), "dtype": kind, "shape": value.shape}
         return [plain(v) for v in value.tolist()]
     if isinstance(value, bool | None | str | int) and not isinstance(value, np.generic):
         return value
@@ -74,9 +84,44 @@ def number(value: Any) -> float:
 
 
 def _array(value: Any) -> np.ndarray:
+    if isinstance(value, dict) and "packed" in value:
+        return _unpack(value)
     if not isinstance(value, list):
         raise CodecError(f"expected a list of numbers, got {type(value).__name__}")
     return np.array([_array(v) if isinstance(v, list) else number(v) for v in value], float)
+
+
+def _unpack(value: dict) -> np.ndarray:
+    """An array packed by :func:`plain` (base64 of little-endian float64 or int64)."""
+    kind, shape = value.get("dtype"), value.get("shape")
+    if kind not in ("<f8", "<i8") or not isinstance(shape, list):
+        raise CodecError("a packed array needs dtype <f8 or <i8 and a shape")
+    if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape):
+        raise CodecError(f"a packed array's shape must be sizes, got {shape!r}")
+    try:
+        data = base64.b64decode(value["packed"], validate=True)
+        array = np.frombuffer(data, dtype=kind)
+        return array.reshape(shape).astype(np.float64 if kind == "<f8" else np.int64)
+    except (ValueError, TypeError) as exc:
+        raise CodecError(f"a packed array does not decode: {exc}") from None
+
+
+def _int(value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise CodecError(f"expected a whole number, got {value!r:.40}")
+    return value
+
+
+def _str(value: Any) -> str:
+    if not isinstance(value, str):
+        raise CodecError(f"expected a text, got {value!r:.40}")
+    return value
+
+
+def _bool(value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise CodecError(f"expected true or false, got {value!r:.40}")
+    return value
 
 
 @cache
@@ -87,7 +132,13 @@ def _reader(hint: Any) -> Callable[[Any], Any]:
         return _array
     if hint is float:
         return number
-    if hint in (int, str, bool) or hint is Any or hint is type(None):
+    if hint is int:
+        return _int
+    if hint is str:
+        return _str
+    if hint is bool:
+        return _bool
+    if hint is Any or hint is type(None):
         return lambda v: v
     if dataclasses.is_dataclass(hint):
         return lambda v: _decode_record(hint, v)

@@ -16,16 +16,20 @@ default ``deltadash/robot``); ROS 2 topics (issue 31) live beside it under their
   second.
 - ``alive``: the node's liveliness token.
 
-A command names its station in the query's parameters (``?station=<id>``); the node takes
-commands only from the station that holds its link (``cmd/link``), but an e-stop from
-anyone. A reply is ``{"ok": true, "result": ...}`` or ``{"ok": false, "error": {"kind",
-"message", ...}}`` with the same kinds the API maps to HTTP codes (422 ``rejected``, 409
-``refused`` and ``link``, 503 ``bus`` / ``offline`` / ``timeout``), so a refusal that
-crossed the link reads as it did in one process.
+A command names its station in the query's parameters (``?station=<id>;seq=<n>;mac=<hex>``);
+the node takes commands only from the station that holds its link (``cmd/link``), signed
+with the key the node gave it then (:func:`sign`), but an e-stop from anyone. Heartbeats
+are signed the same way (``<seq>:<mac>``). A reply is ``{"ok": true, "result": ...}``
+or ``{"ok": false, "error": {"kind", "message", ...}}`` with the same kinds the API maps
+to HTTP codes (422 ``rejected``, 409 ``refused`` and ``link``, 503 ``bus`` /
+``offline`` / ``timeout``), so a refusal that crossed the link reads as it did in one
+process.
 """
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import json
 from dataclasses import dataclass
 from typing import Any
@@ -36,6 +40,7 @@ from app.control.errors import GoalRejected, MotionRefused
 from hardware.errors import BusError
 
 DEFAULT_PREFIX = "deltadash/robot"
+MAX_COMMAND_BYTES = 32 << 20  # a command's arguments; a larger one is refused unread
 PROTOCOL = 1  # bumped when a message changes shape; a node refuses another station's
 
 
@@ -74,6 +79,22 @@ class Keys:
 
     def heartbeat(self, station: str) -> str:
         return f"{self.prefix}/heartbeat/{station}"
+
+
+def sign(key: bytes, station: str, op: str, seq: int, body: bytes = b"") -> str:
+    """The holder's signature of one message: HMAC-SHA256 with the link's key (given to
+    the station alone, in the answer to its ``link``) over its station, op, sequence
+    number and body. A command (or a heartbeat: op ``heartbeat``) carries ``seq`` and this
+    ``mac``; the node takes it only from the holder, only once (``seq`` grows), and only
+    unchanged. A peer that reads the holder's id, a heartbeat or a command cannot forge
+    or replay one."""
+    head = f"{station}|{op}|{seq}|".encode()
+    return hmac.new(key, head + body, hashlib.sha256).hexdigest()
+
+
+def signed(key: bytes, station: str, op: str, seq: int, body: bytes, mac: str) -> bool:
+    """``mac`` is :func:`sign`'s for this message (compared in constant time)."""
+    return hmac.compare_digest(sign(key, station, op, seq, body), mac)
 
 
 class LinkRefused(MotionRefused):

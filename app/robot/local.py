@@ -32,7 +32,9 @@ class LocalTransport:
         station: str,
         on_state: Callable[[Snapshot], None],
         on_ticks: Callable[[list[Snapshot]], None],
+        beat: Callable[[], tuple[int, str] | None],
     ) -> None:
+        """(A station in the node's own process is never lost: no heartbeat is sent.)"""
         self.station, self._on_state, self._on_ticks = station, on_state, on_ticks
         self.node.add_tick_listener(self._tick)
         on_state(self.node.controller.snapshot())
@@ -49,10 +51,17 @@ class LocalTransport:
             self._on_ticks([snap])
         self._on_state(snap)
 
-    def call(self, op: str, args: dict[str, Any], timeout_s: float) -> Future:
-        """``op`` on the node; the arguments cross as JSON, as they would over the link."""
-        wire = json.loads(json.dumps(args))
-        return self.node.call(self.station, op, wire)
+    def call(self, op: str, body: bytes, seq: int, mac: str, timeout_s: float) -> Future:
+        """``op`` on the node: checked and signed, its arguments parsed from JSON, as they
+        would be over the link."""
+        try:
+            self.node.authorize(self.station, op, seq, mac, body)
+            args = json.loads(body)
+        except Exception as exc:
+            failed: Future = Future()
+            failed.set_exception(exc)
+            return failed
+        return self.node.call(self.station, op, args)
 
     def node_status(self) -> dict[str, Any]:
         """The node's own status (app/robot/node.py ``status_view``), as it is now."""

@@ -44,18 +44,25 @@ from app.link.protocol import PROTOCOL
 from app.robot.estop import EstopListener, EstopReceipts
 from app.robot.holder import LinkHolder
 from app.robot.world import NodeWorld
+from app.runs.feasibility import check_path
 from hardware.bus import PositionGains
 
 log = logging.getLogger(__name__)
-ANYONE = ("estop", "link", "info", "tap", "release", "estop_receipt")  # ops that need no link
+ANYONE = ("estop", "link", "info", "estop_receipt")  # ops that need no link
+MAX_MOVE_S = 60.0  # the longest move (the API's bound too)
+MAX_START_TOLERANCE_M = 0.01  # a run starts within this of where the robot is commanded
+PATH_AGREES_M = 1e-3  # a path's commanded points follow its goals (the lead's shift) to this
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def _vector(args: dict[str, Any], name: str, size: int = 3) -> np.ndarray:
     value = args.get(name)
-    try:
-        vector = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected {size} numbers, got {value!r:.80}") from None
+    if not isinstance(value, list) or not all(_is_number(v) for v in value):
+        raise ValueError(f"{name}: expected {size} numbers, got {value!r:.80}")
+    vector = np.asarray(value, dtype=np.float64)
     if vector.shape != (size,) or not np.isfinite(vector).all():
         raise ValueError(f"{name}: expected {size} finite numbers, got {value!r:.80}")
     return vector
@@ -74,6 +81,14 @@ def _number(args: dict[str, Any], name: str, default: float | None = None) -> fl
 
 def _optional_number(args: dict[str, Any], name: str) -> float | None:
     return None if args.get(name) is None else _number(args, name)
+
+
+def _duration(args: dict[str, Any], name: str, most_s: float) -> float | None:
+    """An optional duration [s]: None, or a number in (0, most_s]."""
+    value = _optional_number(args, name)
+    if value is not None and not 0.0 < value <= most_s:
+        raise ValueError(f"{name}: must be in (0, {most_s:g}] s, got {value}")
+    return value
 
 
 def _flag(args: dict[str, Any], name: str, default: bool = False) -> bool:
@@ -129,17 +144,18 @@ class RobotNode:
             if self.estop_listener is not None:
                 self.estop_listener.close()
 
-    def start_estop_listener(self) -> EstopListener | None:
-        """The node's e-stop listener on ``server.host:server.estop_port`` (0: any free
-        port); None (logged) when the config turns it off or the port cannot be bound:
-        an e-stop over the link still stops."""
+    def start_estop_listener(self, host: str | None = None) -> EstopListener | None:
+        """The node's e-stop listener on ``host`` (default ``server.host``; a node that
+        listens beyond loopback gives its link's address, where the pages reach it) and
+        ``server.estop_port`` (0: any free port); None (logged) when the config turns it
+        off or the port cannot be bound: an e-stop over the link still stops."""
         server = self.settings.server
         if not server.estop_listener:
             return None
         try:
             self.estop_listener = EstopListener(
                 self.receipts,
-                server.host,
+                host or server.host,
                 server.estop_port,
                 server.http_port,
                 server.command_timeout_s,
@@ -149,8 +165,9 @@ class RobotNode:
         return self.estop_listener
 
     # ---- the link ----
-    def heartbeat(self, station: str) -> None:
-        self.holder.heartbeat(station)
+    def heartbeat(self, station: str, seq: int, mac: str) -> bool:
+        """A station's heartbeat (signed: app/robot/holder.py); False when not kept."""
+        return self.holder.heartbeat(station, seq, mac)
 
     def info(self) -> dict[str, Any]:
         """What a station needs to know of this robot: its config (the robot, joints,
@@ -178,6 +195,7 @@ class RobotNode:
             "gravity": controller.gravity is not None,
             "holder": view.holder,
             "started_unix_s": self._started_s,
+            "boot": controller.boot,
             "realtime": plain(controller.thread_setup_result),
             "estop_port": None if self.estop_listener is None else self.estop_listener.port,
         }
@@ -192,20 +210,37 @@ class RobotNode:
             "pose": self.world.service.tracker.status(),
         }
 
-    def call(self, station: str, op: str, args: dict[str, Any] | None = None) -> Future:
+    def authorize(self, station: str, op: str, seq: int, mac: str, body: bytes) -> None:
+        """Raise unless command ``op`` may run for ``station``: an op that exists, and
+        (but for an e-stop, a take of the link and the node's own information) signed by
+        the link's holder (app/robot/holder.py). A transport asks this before it parses
+        the command's body: a body from anyone else is never read."""
+        if not isinstance(op, str) or not op.isidentifier() or not hasattr(self, f"_op_{op}"):
+            raise ValueError(f"op: no command {op!r}")
+        if op not in ANYONE:
+            self.holder.require(station, op, seq, mac, body)
+
+    def call(
+        self,
+        station: str,
+        op: str,
+        args: dict[str, Any] | None = None,
+        auth: tuple[int, str, bytes] | None = None,
+    ) -> Future:
         """Run command ``op`` with ``args`` for ``station``: a Future of ``(answer, tick)``
         (the answer as plain JSON data; the tick whose snapshot shows it), or of its
-        refusal (LinkRefused when ``station`` does not hold the link; GoalRejected,
-        MotionRefused, ValueError naming the argument, as the loop refuses). Raises
-        nothing itself."""
+        refusal (LinkRefused when ``station`` does not hold the link or did not sign it;
+        GoalRejected, MotionRefused, ValueError naming the argument, as the loop
+        refuses). ``auth``: the command's ``(seq, mac, body)`` to check (:meth:`authorize`);
+        None: the transport checked it already. Raises nothing itself."""
         try:
+            if auth is not None:
+                self.authorize(station, op, *auth)
             handler = getattr(self, f"_op_{op}", None)
-            if handler is None or not isinstance(op, str) or not op.isidentifier():
+            if handler is None or not op.isidentifier():
                 raise ValueError(f"op: no command {op!r}")
             if not isinstance(args, dict | None):
                 raise ValueError("args: expected an object")
-            if op not in ANYONE:
-                self.holder.require(station)
             outcome = handler(station, args or {})
         except Exception as exc:
             failed: Future = Future()
@@ -248,11 +283,12 @@ class RobotNode:
                 f"protocol: this robot node speaks link protocol {PROTOCOL}, the station "
                 f"{protocol!r}: update one of them"
             )
-        took = self.holder.take(station, _flag(args, "take_over"))
+        taken = self.holder.take(station, _flag(args, "take_over"))
         page_port = args.get("page_port")  # the station's pages may read the listener's answers
         if self.estop_listener is not None and isinstance(page_port, int) and page_port > 0:
             self.estop_listener.allow_page(page_port)
-        return {"took_over_from": took, **self.info()}
+        # the key goes in this answer, to the station alone; it signs every later command
+        return {"took_over_from": taken.took_over_from, "key": taken.key.hex(), **self.info()}
 
     def _op_release(self, station: str, args: dict[str, Any]) -> bool:
         return self.holder.release(station)
@@ -307,7 +343,7 @@ class RobotNode:
         return self.controller.move(
             _optional_vector(args, "point_m"),
             _optional_vector(args, "joints_rad"),
-            _optional_number(args, "duration_s"),
+            _duration(args, "duration_s", MAX_MOVE_S),
             _flag(args, "joint_space"),
             _number(args, "phi_rad", 0.0),
         )
@@ -330,6 +366,11 @@ class RobotNode:
         return self.controller.submit(stop)
 
     def _op_run_path(self, station: str, args: dict[str, Any]) -> Future:
+        """Play a run the station planned and checked, as samples (app/link/paths.py):
+        checked here again before anything moves (its start where the robot is, its
+        commanded points its goals shifted by the lead, every sample inside the gate's
+        workspace, joint limits, singularity margin and joint speed: app/runs/feasibility.py);
+        a refusal names the sample's time and point."""
         model = self._model(args)
         source_id = _text(args, "source_id")
         path = decode(SampledPath, args.get("path") or {})
@@ -339,8 +380,13 @@ class RobotNode:
                 f"{self.controller.period_s} s"
             )
         start = _vector(args, "expected_start_m")
-        tolerance = args.get("tolerance_m")
-        tolerance_m = math.inf if tolerance is None else _number(args, "tolerance_m")
+        tolerance_m = _number(args, "tolerance_m")
+        if not 0.0 <= tolerance_m <= MAX_START_TOLERANCE_M:
+            raise ValueError(
+                f"tolerance_m: a run starts within {MAX_START_TOLERANCE_M * 1e3:g} mm of the "
+                f"robot, got {tolerance_m}"
+            )
+        check_sampled(model.gate, path, start, self.controller.snapshot().joints_measured_rad)
         return self.controller.run_source(PathSource(path, source_id), start, tolerance_m, model)
 
     def _op_set_gains(self, station: str, args: dict[str, Any]) -> Future:
@@ -391,6 +437,31 @@ class RobotNode:
         # the hold blends in from wherever the robot is: no start point to check
         started = self.controller.run_source(source, np.zeros(3), math.inf, model)
         return then(started, lambda _: reply)
+
+
+def check_sampled(gate: Any, path: SampledPath, start_m: np.ndarray, near: np.ndarray) -> None:
+    """Refuse (GoalRejected, ValueError) a run's samples that do not start at ``start_m``,
+    whose commanded points are not their goals shifted by the lead, or that any sample of
+    fails the gate's batch check (the station's own, app/runs/feasibility.py)."""
+    points = np.asarray(path.points_m, dtype=np.float64)
+    if np.linalg.norm(points[0] - start_m) > PATH_AGREES_M:
+        raise ValueError("path.points_m: the first sample is not the run's start point")
+    times = np.arange(len(points)) * path.period_s
+    phi = None if path.phi_rad is None else np.nan_to_num(path.phi_rad)
+    near = near if np.isfinite(near).all() else np.zeros(3)
+    check_path(gate, times, points, near, phi)
+    if path.commanded_m is not None:
+        index = np.arange(len(points))
+        u = np.clip((times + path.lead_s) / path.period_s, 0, len(points) - 1)
+        ahead = np.stack([np.interp(u, index, points[:, a]) for a in range(3)], axis=1)
+        off = np.linalg.norm(np.asarray(path.commanded_m) - ahead, axis=1)
+        if off.max() > PATH_AGREES_M:
+            k = int(np.argmax(off))
+            raise ValueError(
+                f"path.commanded_m: sample {k} is {off[k] * 1e3:.1f} mm from the goal "
+                f"{path.lead_s:g} s ahead (the lead)"
+            )
+        check_path(gate, times, np.asarray(path.commanded_m), near, phi)
 
 
 def _gains_out(gains: dict[int, PositionGains]) -> dict[str, dict[str, int]]:

@@ -21,7 +21,7 @@ import zenoh
 from app.config import LinkSettings
 from app.control.state import Snapshot
 from app.link.codec import encode, plain
-from app.link.protocol import Keys, reply_error
+from app.link.protocol import MAX_COMMAND_BYTES, Keys, LinkRefused, reply_error
 from app.link.zenoh_session import zenoh_config
 from app.robot.node import RobotNode
 
@@ -107,17 +107,29 @@ class NodeServer:
     # Zenoh's threads
     def _on_heartbeat(self, sample: zenoh.Sample) -> None:
         station = str(sample.key_expr).rsplit("/", 1)[-1]
-        self.node.heartbeat(station)
+        seq, _, mac = sample.payload.to_bytes()[:200].decode(errors="replace").partition(":")
+        if seq.isdigit():
+            self.node.heartbeat(station, int(seq), mac)  # kept only if the holder signed it
 
     def _on_query(self, query: zenoh.Query) -> None:
         op = str(query.key_expr).rsplit("/", 1)[-1]
-        station = query.parameters.get("station") or ""
+        params = query.parameters
+        station, mac = params.get("station") or "", params.get("mac") or ""
         key = query.key_expr
         try:
-            raw = query.payload.to_bytes() if query.payload is not None else b"{}"
+            seq_text = params.get("seq") or "0"
+            seq = int(seq_text) if seq_text.isdigit() else -1
+            size = len(query.payload) if query.payload is not None else 0
+            if size > MAX_COMMAND_BYTES:  # refused unread: parsing it would hold the loop
+                raise ValueError(f"args: {size} bytes, more than {MAX_COMMAND_BYTES}")
+            raw = query.payload.to_bytes() if query.payload is not None else b""
+            # who may send this, before its body is read (the signature covers the body)
+            self.node.authorize(station, op, seq, mac, raw)
             args = json.loads(raw or b"{}")
-        except ValueError as exc:
-            query.reply(key, reply_error(ValueError(f"args: not JSON ({exc})")))
+        except (ValueError, LinkRefused) as exc:
+            if isinstance(exc, json.JSONDecodeError):
+                exc = ValueError(f"args: not JSON ({exc})")
+            query.reply(key, reply_error(exc))
             query.drop()
             return
         answered = self.node.call(station, op, args)

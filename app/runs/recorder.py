@@ -198,6 +198,8 @@ class Recorder:
             return "e-stop"
         if snap.faults:
             return f"fault: {snap.faults[0].reason}"
+        if self.run.abort_reason is None and (snap.notice or "").startswith("stopped: "):
+            return snap.notice.removeprefix("stopped: ")  # e.g. the station's link was lost
         return self.run.abort_reason or "stopped by another command"
 
     def discard(self) -> None:

@@ -114,12 +114,7 @@ def create_app(
             app.state.estop_receipts = EstopReceipts(controller)  # /api/estop's presses
             # the page's other e-stop path is the robot node's own listener: its port
             node_listener = opened.node.estop_listener if opened.node is not None else None
-            app.state.estop_listener = node_listener
-            app.state.estop_port = (
-                node_listener.port
-                if node_listener is not None
-                else controller.info.get("estop_port")
-            )
+            app.state.estop_listener = node_listener  # (a node elsewhere: its info says)
             app.state.backend = backend
             app.state.runs = RunManager(controller, settings.runs.folder_path)
             # hold-in-world: the pose inputs and the hold run beside the loop, in the node

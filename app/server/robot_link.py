@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import secrets
 import signal
 import socket
 import subprocess
@@ -35,7 +36,7 @@ import tomli_w
 from app.config import Settings
 from app.control.controller import Controller
 from app.link.client import RobotClient
-from app.link.protocol import RobotOffline
+from app.link.protocol import LinkRefused, RobotOffline
 from app.robot.local import LocalTransport
 from app.robot.node import RobotNode
 
@@ -67,8 +68,8 @@ def free_port(host: str = "127.0.0.1") -> int:
 class EmbeddedNode:
     """``deltadash robot`` as a child process of the station, started again if it dies."""
 
-    def __init__(self, settings: Settings, endpoint: str, on_restart: Callable[[], None]) -> None:
-        self.endpoint, self._on_restart = endpoint, on_restart
+    def __init__(self, settings: Settings, endpoint: str) -> None:
+        self.endpoint = endpoint
         handle, path = tempfile.mkstemp(prefix="deltadash-robot-", suffix=".toml")
         with os.fdopen(handle, "wb") as out:  # the station's own settings, whole
             tomli_w.dump(settings.model_dump(mode="json", exclude_none=True), out)
@@ -102,9 +103,8 @@ class EmbeddedNode:
             log.error("the robot node exited (%s): starting it again", code)
             if self._stop.wait(RESTART_AFTER_S):
                 return
-            self.process = self._spawn()
+            self.process = self._spawn()  # the station takes its link again (client.py)
             self.restarts += 1
-            threading.Thread(target=self._on_restart, daemon=True).start()
 
     def close(self, timeout_s: float = 10.0) -> None:
         """Stop the node (it stops its loop as its config says) and wait for it."""
@@ -132,6 +132,21 @@ def _take_link(client: RobotClient, within_s: float) -> None:
             if time.monotonic() > deadline:
                 raise
             time.sleep(0.2)
+
+
+def embedded_settings(settings: Settings) -> Settings:
+    """The settings of a station and its embedded node: a login of their own on the link
+    (a random password, when the config gives none: no other process on this machine can
+    open a session with the node, as none can use the API without the token), and the
+    node's e-stop listener on a port chosen now, which a node started again binds again
+    (the page keeps the port it was given)."""
+    link, server = settings.link, settings.server
+    if link.user is None or link.password is None:
+        link = link.model_copy(update={"user": "station", "password": secrets.token_urlsafe(24)})
+    if server.estop_listener and server.estop_port == 0:
+        host = server.host if server.host not in ("0.0.0.0", "::") else "127.0.0.1"
+        server = server.model_copy(update={"estop_port": free_port(host)})
+    return settings.model_copy(update={"link": link, "server": server})
 
 
 @contextlib.contextmanager
@@ -167,34 +182,18 @@ def open_robot(settings: Settings, backend_opener: Callable) -> Iterator[OpenRob
         child: EmbeddedNode | None = None
         if where == EMBEDDED:
             endpoint = f"tcp/127.0.0.1:{free_port()}"
-            holder: list[RobotClient] = []
-            child = EmbeddedNode(settings, endpoint, lambda: _relink(holder))
+            settings = embedded_settings(settings)
+            child = EmbeddedNode(settings, endpoint)
             stack.callback(child.close)
         else:
             endpoint = where
         transport = StationTransport(settings.link, endpoint)
         stack.callback(transport.close)
         client = RobotClient(settings, transport)
-        _take_link(client, START_WITHIN_S)
-        if child is not None:
-            holder.append(client)
+        try:
+            _take_link(client, START_WITHIN_S)
+        except (RobotOffline, LinkRefused) as exc:
+            log.error("deltadash: the robot node at %s: %s", endpoint, exc)
+            raise
         stack.callback(client.stop)
         yield OpenRobot(client, None, None, child)
-
-
-def _relink(holder: list[RobotClient]) -> None:
-    """A restarted embedded node: take its link again once it answers."""
-    if holder:
-        try:
-            deadline = time.monotonic() + START_WITHIN_S
-            while True:
-                try:
-                    holder[0].reconnect()
-                    log.warning("the robot node is back: link taken again")
-                    return
-                except RobotOffline:
-                    if time.monotonic() > deadline:
-                        raise
-                    time.sleep(0.2)
-        except Exception as exc:
-            log.error("the restarted robot node's link was not taken: %s", exc)

@@ -5,6 +5,9 @@ on simulated time (app/control/sim_time.py): each command's tick is run for it."
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
+import json
 from collections.abc import Iterator
 
 import numpy as np
@@ -14,11 +17,15 @@ from app.config import load_settings
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
 from app.control.sim_time import SteppedClock
-from app.link.protocol import LinkRefused, error_of, exception_of
+from app.link.protocol import LinkRefused, error_of, exception_of, sign
 from app.robot.node import RobotNode
 from tests.support.fake_bus import HOME_M, FakeBus
 
 SETTINGS = load_settings()
+
+
+KEYS: dict[str, bytes] = {}
+SEQ = itertools.count(1)
 
 
 @pytest.fixture
@@ -28,14 +35,24 @@ def node() -> Iterator[RobotNode]:
     controller = Controller(SETTINGS, bus, "fake", clock=clock.now, tick_clock=clock)  # type: ignore[arg-type]
     node = RobotNode(SETTINGS, controller, station_timeout_s=None)
     node.start()
-    node.call("a", "link", {}).result(timeout=5)
+    take(node, "a")
     yield node
     node.stop()
 
 
+def take(node: RobotNode, station: str) -> None:
+    """``station`` takes the link; its key signs its commands from now on."""
+    result, _ = node.call(station, "link", {}).result(timeout=5)
+    KEYS[station] = bytes.fromhex(result["key"])
+
+
 def answer(node: RobotNode, op: str, args: dict | None = None, station: str = "a"):
-    """The op's answer, or its refusal as it would cross the link and be raised again."""
-    future = node.call(station, op, args)
+    """The op's answer, or its refusal as it would cross the link and be raised again;
+    signed with ``station``'s key (none: a station that never took the link)."""
+    body = json.dumps(args or {}).encode()
+    seq = next(SEQ)
+    mac = sign(KEYS.get(station, b"none"), station, op, seq, body)
+    future = node.call(station, op, json.loads(body), auth=(seq, mac, body))
     error = future.exception(timeout=5)
     if error is not None:
         raise exception_of(error_of(error))
@@ -43,7 +60,7 @@ def answer(node: RobotNode, op: str, args: dict | None = None, station: str = "a
 
 
 def test_nothing_but_an_e_stop_from_a_station_without_the_link(node: RobotNode) -> None:
-    for op in ("torque", "goal", "jog", "reset", "set_gains", "run_path", "hold", "pose"):
+    for op in ("torque", "goal", "jog", "reset", "set_gains", "run_path", "hold", "pose", "tap"):
         with pytest.raises(LinkRefused, match="does not hold the robot's link") as refused:
             answer(node, op, {}, station="b")
         assert refused.value.holder == "a"
@@ -92,7 +109,7 @@ def test_a_lost_station_stops_a_jog_and_the_node_holds(node: RobotNode) -> None:
     clock = [0.0]
     node.holder._clock = lambda: clock[0]  # the holder's clock, moved by the test
     node.holder.timeout_s = 0.06
-    answer(node, "link", {})
+    take(node, "a")
     answer(node, "torque", {"enabled": True})
     answer(node, "move", {"point_m": (HOME_M + [0.05, 0, 0]).tolist(), "duration_s": 2.0})
     assert node.controller.snapshot().mode == "move"
@@ -105,8 +122,9 @@ def test_a_lost_station_stops_a_jog_and_the_node_holds(node: RobotNode) -> None:
     assert snap.mode == "idle" and "station's link was lost" in snap.notice
     assert node.holder.view().losses == 1 and not snap.estopped
     with pytest.raises(LinkRefused):  # a's authority went with its heartbeat ...
-        node.holder.require("a")
-    answer(node, "link", {})  # ... until it takes the link again
+        answer(node, "torque", {"enabled": True})
+    take(node, "a")  # ... until it takes the link again
+    answer(node, "torque", {"enabled": True})
 
 
 def test_a_goal_the_gate_refuses_moves_nothing_at_the_node(node: RobotNode) -> None:
@@ -121,3 +139,70 @@ def test_a_goal_the_gate_refuses_moves_nothing_at_the_node(node: RobotNode) -> N
     after = node.controller.snapshot()
     assert after.mode == "idle" and np.allclose(after.goal_m, before.goal_m, equal_nan=True)
     np.testing.assert_allclose(after.point_commanded_m, before.point_commanded_m, atol=1e-12)
+
+
+def _run_args(node: RobotNode, change=None, **extra) -> dict:
+    """A planned sinusoid from where the robot rests, as the station sends it."""
+    from app.link.codec import plain
+    from app.runs.source import TrajectorySource
+    from app.runs.trajectories import SinusoidParams, plan_sinusoid
+
+    start = node.controller.snapshot().start_m
+    params = SinusoidParams(amplitude_m=(0.01, 0.01, 0.0), offset_m=tuple(start), duration_s=0.5)
+    source = TrajectorySource(plan_sinusoid(params, start), lead_s=0.01)
+    path = source.sampled(node.controller.period_s)
+    if change is not None:
+        path = change(path)
+    args = {
+        "source_id": "run-1",
+        "path": plain(path),
+        "expected_start_m": start.tolist(),
+        "tolerance_m": 0.002,
+        "model_version": 0,
+    }
+    return {**args, **extra}
+
+
+@pytest.mark.parametrize(
+    ("change", "extra", "words"),
+    [
+        (None, {"tolerance_m": None}, "tolerance_m: expected a finite number"),
+        (None, {"tolerance_m": 0.5}, "tolerance_m: a run starts within 10 mm"),
+        (
+            lambda p: dataclasses.replace(p, points_m=p.points_m + [0.05, 0, 0]),
+            {},
+            "path.points_m: the first sample is not the run's start point",
+        ),
+        (
+            lambda p: dataclasses.replace(
+                p,
+                commanded_m=p.commanded_m
+                + np.where(np.arange(len(p.points_m))[:, None] == 40, [0.1, 0, 0], 0),
+            ),
+            {},
+            "path.commanded_m: sample 40 is 100.0 mm from the goal",
+        ),
+        (
+            lambda p: dataclasses.replace(
+                p,
+                points_m=np.where(
+                    np.arange(len(p.points_m))[:, None] == 60, [0.0, 0.0, -0.9], p.points_m
+                ),
+                commanded_m=None,
+            ),
+            {},
+            "outside the workspace",
+        ),
+    ],
+)
+def test_a_run_is_checked_again_at_the_node_before_it_moves(node, change, extra, words) -> None:
+    answer(node, "torque", {"enabled": True})
+    with pytest.raises((ValueError, GoalRejected), match=words):
+        answer(node, "run_path", _run_args(node, change, **extra))
+    assert node.controller.snapshot().mode == "idle"
+
+
+def test_a_run_the_node_finds_sound_is_played(node: RobotNode) -> None:
+    answer(node, "torque", {"enabled": True})
+    assert answer(node, "run_path", _run_args(node)) == "test"
+    assert node.controller.snapshot().source_id == "run-1"

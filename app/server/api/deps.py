@@ -82,8 +82,14 @@ def get_scene(connection: HTTPConnection) -> Scene | None:
 
 
 def get_estop_port(connection: HTTPConnection) -> int | None:
-    """The robot node's e-stop listener's port (app/robot/estop.py), None when it runs none."""
-    return getattr(connection.app.state, "estop_port", None)
+    """The robot node's e-stop listener's port (app/robot/estop.py), None when it runs none:
+    a node in this process's own, else what the node said when its link was last taken
+    (a node started again may have another)."""
+    listener = getattr(connection.app.state, "estop_listener", None)
+    if listener is not None:
+        return listener.port
+    controller = getattr(connection.app.state, "controller", None)
+    return None if controller is None else controller.info.get("estop_port")
 
 
 def get_estop_receipts(connection: HTTPConnection) -> EstopReceipts:
