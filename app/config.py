@@ -523,6 +523,95 @@ class LinkSettings(_Section):
     tls_private_key: str | None = Field(None, description="TLS: this side's private key file")
 
 
+_ROS_NAME = r"^[A-Za-z_~/][A-Za-z0-9_/~]*$"
+
+
+class Ros2Settings(_Section):
+    """deltadash as a ROS 2 node on its robot node's Zenoh session (docs/ros2.md): what it
+    publishes (on by default), what it takes (each opt-in), names and frames."""
+
+    publish: bool = Field(
+        True, description="publish the robot's ROS 2 topics on the link's session"
+    )
+    domain_id: int = Field(0, ge=0, le=232, description="ROS_DOMAIN_ID")
+    distro: Literal["jazzy", "humble"] = Field(
+        "jazzy",
+        description="the ROS 2 distribution the graph runs: jazzy (and later) carries type "
+        "hashes (RIHS01); humble's rmw_zenoh writes TypeHashNotSupported",
+    )
+    form: Literal["rmw_zenoh", "bridge"] = Field(
+        "rmw_zenoh",
+        description="rmw_zenoh's keys and liveliness tokens, or zenoh-bridge-ros2dds's keys "
+        "(the topic's name)",
+    )
+    node_name: str = Field("deltadash", pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
+    namespace: str = Field("/", pattern=_ROS_NAME, description="the node's namespace")
+    rate_hz: float = Field(
+        100.0, gt=0, le=1000, description="joint states, tf and the tip's pose, this often"
+    )
+    joint_states_topic: str = Field("joint_states", pattern=_ROS_NAME)
+    tip_pose_topic: str = Field(
+        "delta/tip_pose", pattern=_ROS_NAME, description="the tip in the base frame"
+    )
+    tip_world_topic: str = Field(
+        "delta/tip_pose_world", pattern=_ROS_NAME, description="the tip in the world while holding"
+    )
+    diagnostics_topic: str = Field("diagnostics", pattern=_ROS_NAME)
+    tracked_goal_topic: str = Field(
+        "delta/goal",
+        pattern=_ROS_NAME,
+        description="the goal the loop tracks (the tip in the base frame, PoseStamped), in "
+        "run logs",
+    )
+    run_log: bool = Field(
+        True,
+        description="write each run's log as a ROS 2 bag too: runs/<id>/log.ros2.mcap "
+        "(docs/ros2.md, 'Run logs as ROS 2 data')",
+    )
+    world_frame: str = Field("map", description="the world's frame id (REP 105)")
+    drone_frame: str = Field("base_link", description="the drone body's frame id (FLU)")
+    base_frame: str = Field("delta_base", description="the Delta's base frame id")
+    platform_frame: str = Field("delta_platform")
+    tip_frame: str = Field("delta_tip", description="the tool tip's frame id")
+    joint_names: tuple[str, str, str] = Field(("delta_joint_1", "delta_joint_2", "delta_joint_3"))
+    wrist_joint_name: str = Field("delta_wrist")
+    # what it takes (each opt-in)
+    pose_input: Literal["off", "odometry", "pose", "px4"] = Field(
+        "off",
+        description="the drone's pose for hold-in-world from a ROS topic: nav_msgs/Odometry, "
+        "geometry_msgs/PoseStamped (mavros, vrpn) or px4_msgs/VehicleOdometry (NED/FRD)",
+    )
+    pose_topic: str | None = Field(
+        None,
+        pattern=_ROS_NAME,
+        description="its topic (None: odom, mavros/local_position/pose or "
+        "/fmu/out/vehicle_odometry by pose_input)",
+    )
+    input_world_frames: tuple[str, ...] = Field(
+        ("map", "odom", "world"),
+        description="the frame ids a world-frame input may carry (ENU, z up: REP 105)",
+    )
+    goal_input: Literal["off", "pose", "point"] = Field(
+        "off",
+        description="take tip goals from a ROS topic (PoseStamped or PointStamped, in the "
+        "base frame or, while holding in the world, in the world frame); they move the "
+        "robot only once the operator who holds control arms them (PUT /api/ros2/goals)",
+    )
+    goal_topic: str = Field("delta/tip_goal", pattern=_ROS_NAME)
+    stamp_future_s: float = Field(
+        0.05, ge=0, le=10, description="refuse an input stamped further ahead than this"
+    )
+    stamp_age_s: float = Field(
+        0.5, gt=0, le=60, description="refuse an input stamped longer ago than this"
+    )
+    input_silent_s: float = Field(
+        1.0, gt=0, le=60, description="an input with nothing for this long is named silent"
+    )
+    max_input_hz: float = Field(
+        1000.0, gt=0, le=100000, description="an input faster than this drops the excess"
+    )
+
+
 class RunSettings(_Section):
     """Recorded runs: where their logs go and how they are followed and scored."""
 
@@ -663,6 +752,7 @@ class Settings(BaseSettings):
     programs: ProgramSettings = ProgramSettings()
     wrist: WristSettings = WristSettings()
     link: LinkSettings = LinkSettings()
+    ros2: Ros2Settings = Ros2Settings()
 
     @model_validator(mode="after")
     def _wrist_id_free(self) -> Settings:

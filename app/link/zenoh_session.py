@@ -31,6 +31,9 @@ def zenoh_config(link: LinkSettings, listen: str | None = None, connect: str | N
     config = zenoh.Config()
     config.insert_json5("mode", '"peer"')
     config.insert_json5("scouting/multicast/enabled", "false")
+    # samples carry Zenoh's timestamps, as rmw_zenoh's sessions: a ROS publisher whose
+    # late joiners get its last sample (/tf_static, app/ros2/publisher.py) needs them
+    config.insert_json5("timestamping/enabled", "true")
     if listen is not None:
         config.insert_json5("listen/endpoints", json.dumps([listen]))
     if connect is not None:

@@ -128,6 +128,8 @@ class RobotNode:
         # the e-stop's own path into the node (app/robot/estop.py): start_estop_listener
         self.receipts = EstopReceipts(controller)
         self.estop_listener: EstopListener | None = None
+        # its ROS 2 side, where a transport gives it one (app/robot/ros.py sets it)
+        self.ros: Any = None
         controller.add_listener(self._after_tick)
 
     # ---- lifecycle ----
@@ -208,6 +210,7 @@ class RobotNode:
             "link": plain(self.holder.view()),
             "estop": plain(self.receipts.latest()),
             "pose": self.world.service.tracker.status(),
+            "ros2": None if self.ros is None else plain(self.ros.view()),
         }
 
     def authorize(self, station: str, op: str, seq: int, mac: str, body: bytes) -> None:
@@ -421,6 +424,17 @@ class RobotNode:
 
     def _op_pose_latest(self, station: str, args: dict[str, Any]) -> dict[str, Any]:
         return self.world.latest(args)
+
+    def _op_ros_goals(self, station: str, args: dict[str, Any]) -> dict[str, Any]:
+        """Arm (``enabled`` true) or disarm the ROS goal input for the link's holder."""
+        enabled = _flag(args, "enabled")
+        if self.ros is None:
+            raise ValueError("enabled: this robot node has no ROS 2 side (no Zenoh session)")
+        return self.ros.arm_goals(station, enabled)
+
+    def _op_ros_status(self, station: str, args: dict[str, Any]) -> dict[str, Any] | None:
+        """The ROS 2 side's status (None: none)."""
+        return None if self.ros is None else self.ros.view()
 
     def _op_restart_inputs(self, station: str, args: dict[str, Any]) -> None:
         self.world.restart(args)

@@ -24,6 +24,7 @@ from app.link.codec import encode, plain
 from app.link.protocol import MAX_COMMAND_BYTES, Keys, LinkRefused, reply_error
 from app.link.zenoh_session import zenoh_config
 from app.robot.node import RobotNode
+from app.robot.ros import RosNode
 
 log = logging.getLogger(__name__)
 PUBLISH_EVERY_S = 0.002  # the publisher thread's longest wait for a new snapshot
@@ -62,6 +63,8 @@ class NodeServer:
         self._token = self.session.liveliness().declare_token(self.keys.alive)
         node.add_tick_listener(self._on_tick)
         self._loop_tid = node.controller.thread_native_id() or 0
+        # the robot as a ROS 2 node on this session (docs/ros2.md)
+        self.ros = RosNode(node, self.session, self._below_loop)
         self._thread = threading.Thread(target=self._publish, name="link-publish", daemon=True)
         self._thread.start()
 
@@ -77,14 +80,17 @@ class NodeServer:
         elif tapped and len(self._ticks) == 1:
             self._wake.set()
 
-    def _publish(self) -> None:
-        # It holds the GIL while it encodes: preempted then by a process of the station's,
-        # it would keep the loop's real-time thread waiting for the GIL (priority
-        # inversion). Where the loop got SCHED_FIFO, this thread asks for it too, below it.
+    def _below_loop(self) -> None:
+        # A publishing thread holds the GIL while it encodes: preempted then by a process
+        # of the station's, it would keep the loop's real-time thread waiting for the GIL
+        # (priority inversion). Where the loop got SCHED_FIFO, it asks for it too, below.
         with contextlib.suppress(OSError, AttributeError):
             if os.sched_getscheduler(self._loop_tid) == os.SCHED_FIFO:
                 below = max(1, os.sched_getparam(self._loop_tid).sched_priority - 10)
                 os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(below))
+
+    def _publish(self) -> None:
+        self._below_loop()
         last_batch = last_status = time.monotonic()
         while not self._closed.is_set():
             self._wake.wait(PUBLISH_EVERY_S)
@@ -154,6 +160,7 @@ class NodeServer:
         self._closed.set()
         self._wake.set()
         self._thread.join(timeout=2.0)
+        self.ros.close()
         with contextlib.suppress(zenoh.ZError):
             self._token.undeclare()
         self.session.close()

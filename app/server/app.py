@@ -39,6 +39,7 @@ from app.server.api import (
     mav,
     programs,
     robot,
+    ros2,
     runs,
     servos,
     telemetry,
@@ -182,6 +183,7 @@ def create_app(
     app.include_router(calibration.router, prefix="/api", dependencies=reads)
     app.include_router(tuning.router, prefix="/api", dependencies=reads)
     app.include_router(servos.router, prefix="/api", dependencies=reads)
+    app.include_router(ros2.router, prefix="/api", dependencies=reads)
     # /api/info (the page asks it whether to prompt for the token), sinusoid check, /vendor
     app.include_router(dashboard.router)
     if (STATIC_DIR / "index.html").exists():

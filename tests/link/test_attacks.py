@@ -63,7 +63,7 @@ def _holder(session: Any) -> str:
 def test_a_peer_that_knows_the_holders_id_cannot_command_or_keep_it_alive(
     tmp_path: Path,
 ) -> None:
-    env = node_env(station_timeout_s=0.06)
+    env = node_env(station_timeout_s=0.5)  # a loaded machine's heartbeat gaps stay below
     with (
         robot_node(tmp_path, **env) as node,
         watch(node.endpoint) as seen,
@@ -81,18 +81,20 @@ def test_a_peer_that_knows_the_holders_id_cannot_command_or_keep_it_alive(
         said = ask(evil, forged, b'{"enabled":true}')
         assert said["error"]["kind"] == "link" and "not signed" in said["error"]["message"]
         assert not seen.latest.torque
-        # the holder goes silent; beats under its id keep nothing alive
-        beats = evil.declare_publisher(f"deltadash/robot/heartbeat/{holder}")
-        a.transport._closed.set()  # its heartbeat thread stops: the station falls silent
-        stop = time.monotonic() + 1.0
-        while time.monotonic() < stop:
-            beats.put(b"%d:%s" % (int(time.monotonic() * 1e3), b"f" * 64))
-            time.sleep(0.01)
+        # the holder goes silent; beats under its id keep nothing alive: the link is lost
+        # while they keep coming
         status: list[dict] = []
         evil.declare_subscriber(
             "deltadash/robot/node", lambda s: status.append(json.loads(s.payload.to_bytes()))
         )
-        wait_for(lambda: status and status[-1]["link"]["losses"] == 1, "the holder lost")
+        beats = evil.declare_publisher(f"deltadash/robot/heartbeat/{holder}")
+        a.transport._closed.set()  # its heartbeat thread stops: the station falls silent
+
+        def forging() -> bool:
+            beats.put(b"%d:%s" % (int(time.monotonic() * 1e3), b"f" * 64))
+            return bool(status) and status[-1]["link"]["losses"] == 1
+
+        wait_for(forging, "the holder lost under forged heartbeats")
 
 
 def test_a_forged_state_or_garbage_does_not_reach_the_stations_status(tmp_path: Path) -> None:

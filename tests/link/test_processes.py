@@ -130,7 +130,9 @@ def _rest_and_move(server, lease: str) -> None:
 
 @pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGSTOP])
 def test_a_lost_station_stops_the_move_it_commanded(tmp_path: Path, signum: int) -> None:
-    env = node_env(station_timeout_s=0.06)
+    # short enough to stop the motion early, long enough that a busy 2-core machine's
+    # heartbeat gaps do not lose the link while the test sets up
+    env = node_env(station_timeout_s=0.5)
     with (
         robot_node(tmp_path, **env) as node,
         watch(node.endpoint) as seen,
@@ -252,7 +254,9 @@ def test_a_station_killed_mid_run_leaves_the_robot_holding_where_the_run_was(
 ) -> None:
     """link.on_station_lost = stop (the default): the node stops the run it was playing
     and holds; the station's next start finds the run interrupted."""
-    env = node_env(station_timeout_s=0.06)
+    # short enough to stop the motion early, long enough that a busy 2-core machine's
+    # heartbeat gaps do not lose the link while the test sets up
+    env = node_env(station_timeout_s=0.5)
     with (
         robot_node(tmp_path, **env) as node,
         watch(node.endpoint) as seen,
