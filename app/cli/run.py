@@ -25,7 +25,7 @@ from app.runs.health import summary
 from app.runs.trajectories import SinusoidParams
 
 _D = SinusoidParams()
-FILES = ("log.mcap", "log.csv", "report.png", "report.pdf")
+FILES = ("log.mcap", "log.ros2.mcap", "log.csv", "report.png", "report.pdf")
 
 
 def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:

@@ -1,4 +1,5 @@
-"""Run logs written as the run goes: MCAP (JSON-schema messages) and CSV.
+"""Run logs written as the run goes: MCAP (JSON-schema messages) and CSV, and, given the
+settings, the same ticks as a ROS 2 bag (``log.ros2.mcap``, app/runs/ros2_log.py).
 
 Every control tick of a run becomes one row/message, written by a background thread so
 the control thread only appends to a queue. Both files grow by whole commits, every
@@ -19,6 +20,7 @@ whole messages and ``finish_cut_log`` makes a complete file.
 Log times (MCAP ``log_time`` and ``publish_time``) are UTC wall-clock nanoseconds: the
 wall clock at the run's first tick (``start_ns``) plus the loop's monotonic run time
 ``t_s`` of the tick, so they never go backwards if the system clock is stepped mid-run.
+The ROS 2 bag's messages carry the same times, and it grows by the same commits.
 """
 
 from __future__ import annotations
@@ -26,11 +28,12 @@ from __future__ import annotations
 import csv
 import io
 import json
+import logging
 import struct
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mcap.data_stream import RecordBuilder
 from mcap.exceptions import EndOfFile
@@ -39,10 +42,19 @@ from mcap.records import Channel, DataEnd, Footer, Header, Message, Metadata, Sc
 from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
+from app.runs.ros2_log import FILE as ROS2_FILE
+from app.runs.ros2_log import Ros2Log
+
+if TYPE_CHECKING:
+    from app.config import Settings
+    from app.control.state import Snapshot
+
 try:
     import fcntl
 except ImportError:  # not POSIX: no lock, a restart cannot tell a live writer
     fcntl = None  # type: ignore[assignment]
+
+log = logging.getLogger(__name__)
 
 TOPIC = "/deltadash/tick"
 MEDIA_TYPE = "application/vnd.mcap"  # IANA-registered media type of MCAP files
@@ -156,11 +168,14 @@ class _CommittedFile:
 
 
 class RunLog:
-    """The MCAP and CSV files of one run; ``write(row)`` per tick, ``close()`` at the end.
+    """The MCAP and CSV files of one run; ``write(row, snap)`` per tick, ``close()`` at the
+    end.
 
     ``on_flush(messages)`` is called (in the writer's thread) after each commit with the
-    number of messages then in the files. ``start_ns``: UTC wall clock [ns] at ``t_s`` = 0,
+    number of ticks then in the files. ``start_ns``: UTC wall clock [ns] at ``t_s`` = 0,
     set by the recorder at the run's first tick (else taken at the first write).
+    ``settings``: with ``[ros2] run_log`` on, the ticks' snapshots are also written as ROS 2
+    messages to ``log.ros2.mcap`` (``ros2_path``; None without).
 
     While it is open the MCAP file holds an exclusive ``flock``: another process can tell
     a live run from one whose writer has died (``is_being_written``).
@@ -173,6 +188,7 @@ class RunLog:
         folder: Path,
         metadata: dict[str, str],
         on_flush: Callable[[int], None] | None = None,
+        settings: Settings | None = None,
     ) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         self.mcap_path, self.csv_path = folder / "log.mcap", folder / "log.csv"
@@ -192,6 +208,14 @@ class RunLog:
             "deltadash.Tick", "jsonschema", json.dumps(SCHEMA).encode()
         )
         self._channel = self._writer.register_channel(TOPIC, "json", schema)
+        self.ros2_path: Path | None = None
+        self._ros2_file: _CommittedFile | None = None
+        self._ros2: Ros2Log | None = None
+        self._ros2_errors = 0
+        if settings is not None and settings.ros2.run_log:
+            self.ros2_path = folder / ROS2_FILE
+            self._ros2_file = _CommittedFile(self.ros2_path)
+            self._ros2 = Ros2Log(self._ros2_file, settings, metadata)  # type: ignore[arg-type]
         self._csv_file = _CommittedFile(self.csv_path)
         self._csv_text = io.StringIO()
         self._csv = csv.writer(self._csv_text)
@@ -200,8 +224,9 @@ class RunLog:
         self._commit(TRAILER)
         self._last_flush = time.monotonic()
 
-    def write(self, row: dict[str, Any]) -> None:
-        """One tick; keys are COLUMNS (None for unknown values)."""
+    def write(self, row: dict[str, Any], snap: Snapshot | None = None) -> None:
+        """One tick; keys are COLUMNS (None for unknown values). ``snap``: the tick's
+        snapshot, for the ROS 2 bag (none there without it)."""
         offset_ns = round(row["t_s"] * 1e9)
         if self.start_ns is None:
             self.start_ns = time.time_ns() - offset_ns
@@ -210,12 +235,25 @@ class RunLog:
             self._channel, stamp, json.dumps(row).encode(), stamp, self._sequence
         )
         self._sequence += 1
+        if self._ros2 is not None and snap is not None:
+            self._write_ros2(snap, stamp)
         self._csv.writerow(["" if row.get(c) is None else row[c] for c in COLUMNS])
         if time.monotonic() - self._last_flush > self.FLUSH_EVERY_S:
             self._flush()
 
+    def _write_ros2(self, snap: Snapshot, stamp_ns: int) -> None:
+        assert self._ros2 is not None
+        try:
+            self._ros2.write(snap, stamp_ns)
+        except Exception:  # the ROS 2 copy must not cost the run its own log
+            self._ros2_errors += 1
+            if self._ros2_errors == 1:
+                log.exception("run log: a tick could not be written as ROS 2 messages")
+
     def _commit(self, mcap_tail: bytes) -> None:
         self._mcap_file.commit(mcap_tail)
+        if self._ros2_file is not None:
+            self._ros2_file.commit(mcap_tail)
         self._csv_file.write(self._csv_text.getvalue().encode())
         self._csv_text.seek(0)
         self._csv_text.truncate()
@@ -228,11 +266,15 @@ class RunLog:
             self._on_flush(self._sequence)
 
     def close(self) -> None:
-        """Write the MCAP summary in place of the trailer and close both files."""
+        """Write the MCAP summaries in place of the trailers and close the files."""
         self._writer.finish()
+        if self._ros2 is not None:
+            self._ros2.finish()
         self._commit(b"")
         self._mcap_file.close()  # and the lock with it
         self._csv_file.close()
+        if self._ros2_file is not None:
+            self._ros2_file.close()
 
 
 def is_being_written(path: Path) -> bool:

@@ -237,7 +237,9 @@ class RunManager:
             "params": json.dumps(run.params),
             "started_at_utc": run.started_at_utc,
         }
-        run_log = RunLog(run.folder, metadata, on_flush=run.progress)
+        run_log = RunLog(
+            run.folder, metadata, on_flush=run.progress, settings=self.controller.settings
+        )
         skip = self.controller.settings.runs.stats_skip_s
         recorder = Recorder(run, self.controller, source, run_log, skip)
         self.controller.add_listener(recorder.on_tick)

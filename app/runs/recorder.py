@@ -191,7 +191,7 @@ class Recorder:
             self.log.start_ns = time.time_ns()  # log times: UTC wall clock of this tick
         row = row_of(snap, snap.time_s - self._t0)
         row["line"] = getattr(self.source, "program_line", None)  # a G-code program's line
-        self._queue.put(row)
+        self._queue.put((row, snap))  # the snapshot too: the ROS 2 log's messages
 
     def _why_stopped(self, snap: Snapshot) -> str:
         if snap.estopped:
@@ -216,8 +216,9 @@ class Recorder:
                 if isinstance(item, tuple) and item[0] is _END:
                     self._finish(item[1])
                     return
-                self.log.write(item)
-                self._rows.append(item)
+                row, snap = item
+                self.log.write(row, snap)
+                self._rows.append(row)
         finally:
             _LIVE.discard(self)
 

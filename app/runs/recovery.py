@@ -61,6 +61,9 @@ def recover(run: Run, skip_s: float, period_s: float) -> list[dict[str, Any]]:
         rows = logged_rows(run)
         if mcap.exists() or (run.folder / CUT_LOG).exists():
             finish_cut_log(mcap, run.folder / CUT_LOG)
+        ros2 = run.folder / "log.ros2.mcap"
+        if ros2.exists():  # the run as ROS 2 messages (app/runs/ros2_log.py)
+            finish_cut_log(ros2, run.folder / "log.ros2.cut.mcap")
     except Exception as exc:  # noqa: BLE001 - a damaged log must not stop the server
         log.warning("run %s: its logs could not be recovered: %s", run.run_id, exc)
         notes.append(f"its logs could not be read whole ({exc})")

@@ -35,6 +35,8 @@ router = APIRouter(tags=["runs"])
 FILES = {  # a run's files and their media types
     "log.mcap": MCAP_MEDIA_TYPE,
     "log.cut.mcap": MCAP_MEDIA_TYPE,  # an interrupted run's log as the crash left it
+    "log.ros2.mcap": MCAP_MEDIA_TYPE,  # the run as ROS 2 messages (docs/ros2.md)
+    "log.ros2.cut.mcap": MCAP_MEDIA_TYPE,
     "log.csv": "text/csv",
     "report.png": "image/png",
     "report.pdf": "application/pdf",

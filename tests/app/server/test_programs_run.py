@@ -12,6 +12,7 @@ import io
 
 import numpy as np
 import pytest
+from rosbags.highlevel import AnyReader
 
 from app.runs.stats import line_stats
 from tests.support.lease import take_lease
@@ -46,7 +47,7 @@ def _status(client):
 
 
 @pytest.mark.slow  # an end-to-end run of seconds
-def test_a_passing_program_runs_with_its_error_per_line(fresh):
+def test_a_passing_program_runs_with_its_error_per_line(fresh, tmp_path):
     ok_json(fresh.post("/api/torque", json={"enabled": True}))
     response = fresh.post("/api/programs/run", json={"gcode": PROGRAM})
     assert response.status_code == 200, response.text
@@ -108,6 +109,12 @@ def test_a_passing_program_runs_with_its_error_per_line(fresh):
         seen=lambda: _run(fresh, run_id),
     )
     assert fresh.get(f"/api/runs/{run_id}/report.png").content[:8] == b"\x89PNG\r\n\x1a\n"
+    # the same run as a ROS 2 bag (docs/ros2.md): one JointState per logged tick
+    bag = tmp_path / "log.ros2.mcap"
+    bag.write_bytes(fresh.get(f"/api/runs/{run_id}/log.ros2.mcap").content)
+    with AnyReader([bag]) as reader:
+        joints = [c for c in reader.connections if c.topic == "/joint_states"]
+        assert sum(1 for _ in reader.messages(connections=joints)) == run["samples"]
 
 
 @pytest.mark.slow
