@@ -612,6 +612,23 @@ class Ros2Settings(_Section):
     )
 
 
+class FoxgloveSettings(_Section):
+    """The station's Foxglove live server (docs/foxglove.md): the robot's joints, frames,
+    tracking error, loop health, faults and runs, for the Foxglove app (opt-in)."""
+
+    enabled: bool = Field(False, description="serve the robot to Foxglove on `port`")
+    host: str | None = Field(
+        None,
+        description="bind address (unset: [server] host); with server.token set, clients "
+        "send it (?token= or a Bearer header), and beyond loopback one must be set",
+    )
+    port: int = Field(8765, ge=0, le=65535, description="its WebSocket port (0: any free one)")
+    rate_hz: float = Field(
+        50.0, gt=0, le=200, description="joint states, frames and plots, at most this often"
+    )
+    goal_frame: str = Field("delta_goal", description="the tip's goal's frame id")
+
+
 class RunSettings(_Section):
     """Recorded runs: where their logs go and how they are followed and scored."""
 
@@ -753,6 +770,7 @@ class Settings(BaseSettings):
     wrist: WristSettings = WristSettings()
     link: LinkSettings = LinkSettings()
     ros2: Ros2Settings = Ros2Settings()
+    foxglove: FoxgloveSettings = FoxgloveSettings()
 
     @model_validator(mode="after")
     def _wrist_id_free(self) -> Settings:

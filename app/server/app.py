@@ -28,6 +28,7 @@ from app.calibration.probe import Touch, twin_probe
 from app.calibration.procedure import CalibrationManager, per_leg, pose_input
 from app.config import Settings
 from app.control.authority import Authority
+from app.foxglove import start_foxglove
 from app.origins import OriginPolicy
 from app.programs.workers import ProgramWorkers
 from app.runs.manager import RunManager
@@ -146,9 +147,13 @@ def create_app(
             app.state.scene = await asyncio.to_thread(
                 start_scene, live, controller, runs, app.state.authority
             )
+            app.state.foxglove = None  # the Foxglove live server, when enabled
             try:
+                app.state.foxglove = await asyncio.to_thread(start_foxglove, live, controller, runs)
                 yield
             finally:
+                if app.state.foxglove is not None:
+                    await asyncio.to_thread(app.state.foxglove.stop)
                 if app.state.scene is not None:
                     await asyncio.to_thread(app.state.scene.stop)
                 await asyncio.to_thread(app.state.program_workers.close)
