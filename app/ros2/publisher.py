@@ -7,9 +7,9 @@ frame and in the world while holding, and ``diagnostic_msgs/DiagnosticArray``
 (app/ros2/graph.py), or on zenoh-bridge-ros2dds's keys (``form`` bridge).
 
 The control thread only leaves each tick's snapshot and its wall time in a one-slot
-mailbox (:meth:`RosPublisher.offer`); a thread of this publisher encodes and sends the
-latest one ``rate_hz`` times a second (diagnostics once a second, and at once when their
-level changes), so ROS costs the tick one assignment.
+mailbox (:meth:`RosPublisher.offer`) and, ``rate_hz`` times a second, wakes a thread of
+this publisher that encodes and sends it (diagnostics once a second, and at once when
+their level changes): ROS costs the tick an assignment and, now and then, an event set.
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ from app.ros2.messages import (
 log = logging.getLogger(__name__)
 DIAGNOSTICS_EVERY_S = 1.0  # ROS's diagnostics convention: 1 Hz (and on a change of level)
 TF_STATIC_EVERY_S = 5.0  # /tf_static again for subscribers that joined without history
+IDLE_WAKE_S = 0.5  # with no ticks (a stopped loop), the thread still wakes this often
 
 
 @dataclass
@@ -79,6 +80,8 @@ class RosPublisher:
         self._setup = thread_setup
         self._extra = extra_diagnostics or dict
         self._latest: tuple[Snapshot, float] | None = None
+        self._period_s = 1.0 / settings.ros2.rate_hz
+        self._due_s = 0.0
         self._wake = threading.Event()
         self._closed = threading.Event()
         ros = self.ros
@@ -131,8 +134,12 @@ class RosPublisher:
 
     # the control thread: leave the snapshot, never wait
     def offer(self, snap: Snapshot, wall_s: float) -> None:
-        """The latest tick's snapshot and its wall time [s since the epoch]."""
+        """The latest tick's snapshot and its wall time [s since the epoch]; the publishing
+        thread wakes for it when ``1 / rate_hz`` has passed since the last it sent."""
         self._latest = (snap, wall_s)
+        if wall_s >= self._due_s:
+            self._due_s = wall_s + self._period_s - 0.5e-3  # a tick early is still due
+            self._wake.set()
 
     def _put(self, topic: Topic, message: Any, stamp_s: float) -> None:
         payload = self.messages.cdr(message, topic.typename)
@@ -148,14 +155,12 @@ class RosPublisher:
         if self._setup is not None:
             with contextlib.suppress(Exception):
                 self._setup()
-        period = 1.0 / self.ros.rate_hz
         messages = self.messages
-        next_at = time.monotonic()
         diagnostics_at = static_at = -float("inf")
         level = None
         while not self._closed.is_set():
-            self._closed.wait(max(0.0, next_at - time.monotonic()))
-            next_at = max(next_at + period, time.monotonic() - period)
+            self._wake.wait(IDLE_WAKE_S)  # a tick that is due, or /tf_static's turn
+            self._wake.clear()
             latest, self._latest = self._latest, None
             now = time.time()
             try:
@@ -197,6 +202,7 @@ class RosPublisher:
 
     def close(self) -> None:
         self._closed.set()
+        self._wake.set()
         self._thread.join(timeout=2.0)
         for item in [*self._tokens, *(t.publisher for t in self.topics)]:
             with contextlib.suppress(zenoh.ZError, AttributeError):
