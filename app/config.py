@@ -544,6 +544,13 @@ class Ros2Settings(_Section):
         description="rmw_zenoh's keys and liveliness tokens, or zenoh-bridge-ros2dds's keys "
         "(the topic's name)",
     )
+    connect: tuple[str, ...] = Field(
+        (),
+        description="the ROS 2 graph's Zenoh router (rmw_zenohd, e.g. tcp/127.0.0.1:7447): "
+        "the ROS side then has a Zenoh session of its own connected to it (the link's keys "
+        "and login stay off that network), tried until it answers; empty: ROS peers "
+        "connect to the robot node's own endpoint",
+    )
     node_name: str = Field("deltadash", pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
     namespace: str = Field("/", pattern=_ROS_NAME, description="the node's namespace")
     rate_hz: float = Field(

@@ -25,6 +25,7 @@ from app.link.protocol import MAX_COMMAND_BYTES, Keys, LinkRefused, reply_error
 from app.link.zenoh_session import zenoh_config
 from app.robot.node import RobotNode
 from app.robot.ros import RosNode
+from app.ros2 import graph
 
 log = logging.getLogger(__name__)
 PUBLISH_EVERY_S = 0.002  # the publisher thread's longest wait for a new snapshot
@@ -63,8 +64,13 @@ class NodeServer:
         self._token = self.session.liveliness().declare_token(self.keys.alive)
         node.add_tick_listener(self._on_tick)
         self._loop_tid = node.controller.thread_native_id() or 0
-        # the robot as a ROS 2 node on this session (docs/ros2.md)
-        self.ros = RosNode(node, self.session, self._below_loop)
+        # the robot as a ROS 2 node (docs/ros2.md): on this session, where ROS peers connect
+        # to the node's endpoint; on a session of its own connected to the ROS graph's
+        # router when [ros2] connect names it (the link's keys and login stay off that
+        # network)
+        endpoints = node.settings.ros2.connect
+        self._ros_session = zenoh.open(graph.session_config(endpoints)) if endpoints else None
+        self.ros = RosNode(node, self._ros_session or self.session, self._below_loop)
         self._thread = threading.Thread(target=self._publish, name="link-publish", daemon=True)
         self._thread.start()
 
@@ -161,6 +167,8 @@ class NodeServer:
         self._wake.set()
         self._thread.join(timeout=2.0)
         self.ros.close()
+        if self._ros_session is not None:
+            self._ros_session.close()
         with contextlib.suppress(zenoh.ZError):
             self._token.undeclare()
         self.session.close()

@@ -16,6 +16,7 @@ zenoh-bridge-ros2dds.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from dataclasses import dataclass
@@ -136,3 +137,19 @@ def read_attachment(data: bytes) -> tuple[int, int, bytes]:
     except (zenoh.ext.ZDeserializeError, TypeError) as exc:
         raise ValueError(f"attachment: not rmw_zenoh's ({exc})") from None
     return int(sequence), int(stamp), bytes(gid)
+
+
+def session_config(connect: tuple[str, ...]) -> zenoh.Config:
+    """A Zenoh session for the ROS 2 graph alone, as rmw_zenoh's: peer mode, connecting to
+    ``connect`` (the graph's router, rmw_zenohd) until it answers, multicast scouting off,
+    gossip on (ROS peers learn of each other through the router and connect directly),
+    timestamping on."""
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    config.insert_json5("connect/timeout_ms", "-1")
+    config.insert_json5("connect/exit_on_failure", "false")
+    config.insert_json5("listen/endpoints", '["tcp/localhost:0"]')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("timestamping/enabled", "true")
+    return config

@@ -29,8 +29,8 @@ from typing import Any
 
 HERE = Path(__file__).resolve().parent
 # no multicast or gossip: this peer talks to the node it is given and nothing else
-os.environ["ZENOH_CONFIG_OVERRIDE"] = (
-    "scouting/multicast/enabled=false;scouting/gossip/enabled=false"
+os.environ.setdefault(
+    "ZENOH_CONFIG_OVERRIDE", "scouting/multicast/enabled=false;scouting/gossip/enabled=false"
 )
 
 from zenoh_ros2_sdk import ROS2Publisher, ROS2Subscriber  # noqa: E402

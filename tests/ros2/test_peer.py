@@ -11,6 +11,7 @@ mcap-ros2-support and their attachments by the SDK. Waits are conditions with de
 from __future__ import annotations
 
 import json
+import os
 import random
 import subprocess
 import sys
@@ -34,7 +35,7 @@ from kinematics import THESIS_DELTA
 from kinematics.tool import Tool
 from tests.ros2.definitions import decoder
 from tests.support.robot_node import robot_node, station
-from tests.support.server import wait_for
+from tests.support.server import free_port, wait_for
 
 pytestmark = pytest.mark.slow  # real processes: a node on the twin in real time, a peer
 PEER = Path(__file__).resolve().parent / "peer.py"
@@ -44,10 +45,11 @@ START_M = [0.0, 0.0, -0.24]
 class Peer:
     """The independent peer's process: commands in, JSON lines out."""
 
-    def __init__(self, endpoint: str, domain: int) -> None:
+    def __init__(self, endpoint: str, domain: int, **env: str) -> None:
         host, port = endpoint.removeprefix("tcp/").rsplit(":", 1)
         self.process = subprocess.Popen(
             [sys.executable, str(PEER), host, port, str(domain)],
+            env={**os.environ, **env},
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
@@ -441,3 +443,49 @@ def test_bad_input_on_every_subscribed_topic_is_counted_and_moves_nothing(
         finally:
             session.close()
             cleanup()
+
+
+def test_through_a_ros_graphs_router_with_the_link_logged_in(tmp_path: Path) -> None:
+    """The lab's layout: a Zenoh router (rmw_zenohd's part) that the ROS nodes connect to,
+    the robot node's ROS side on a session of its own connected to it ([ros2] connect),
+    the link behind its login; the peer with rmw_zenoh's scouting (gossip on)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = subprocess.Popen(
+        [sys.executable, str(PEER.parent / "router.py"), endpoint],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert router.stdout is not None and router.stdout.readline().strip() == "router up"
+        domain = random.randint(1, 200)
+        env = {
+            "DELTADASH_ROS2__DOMAIN_ID": str(domain),
+            "DELTADASH_ROS2__CONNECT": json.dumps([endpoint]),
+            "DELTADASH_LINK__USER": "lab",
+            "DELTADASH_LINK__PASSWORD": "a-long-link-password",
+        }
+        with robot_node(tmp_path, **env):
+            peer = Peer(endpoint, domain, ZENOH_CONFIG_OVERRIDE="scouting/multicast/enabled=false")
+            try:
+                peer.ask(op="subscribe", topic="/joint_states", type=JOINT_STATE)
+                wait_for(lambda: len(peer.messages("/joint_states")) >= 10, "joint states")
+            finally:
+                peer.close()
+            # the link's keys are not on the ROS graph's network
+            seen: list[str] = []
+            config = zenoh.Config()
+            config.insert_json5("mode", '"peer"')
+            config.insert_json5("scouting/multicast/enabled", "false")
+            config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+            session = zenoh.open(config)
+            try:
+                session.declare_subscriber("deltadash/**", lambda s: seen.append(str(s.key_expr)))
+                ros: list[str] = []
+                session.declare_subscriber(f"{domain}/**", lambda s: ros.append(str(s.key_expr)))
+                wait_for(lambda: len(ros) >= 50, "the ROS topics at a plain peer of the router")
+                assert seen == []
+            finally:
+                session.close()
+    finally:
+        router.kill()
+        router.wait()
