@@ -168,6 +168,14 @@ class Authority:
             current = self._lease
             return current is not None and _same(lease_id, current.lease_id)
 
+    def active(self, lease_id: str | None) -> bool:
+        """True while ``lease_id`` is the current lease and has not lapsed (no renewal)."""
+        with self._lock:
+            current = self._lease
+            return (
+                current is not None and _same(lease_id, current.lease_id) and self._active(current)
+            )
+
     def release(self, lease_id: str | None) -> bool:
         """Give control back; True when ``lease_id`` was the current lease."""
         with self._lock:

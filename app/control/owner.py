@@ -51,6 +51,7 @@ class MotionOwner:
         self._lock = threading.RLock()
         self._local = threading.local()  # .claim: the claim the calling thread works for
         self._movers: list[Callable[[], str | None]] = []  # add_mover's, in order
+        self._on_claim: list[Callable[[Claim], object]] = []
 
     def add_mover(self, busy: Callable[[], str | None]) -> None:
         """A mover that holds no claim (the run manager) answers :meth:`busy` too, after
@@ -59,6 +60,13 @@ class MotionOwner:
         not wait, nor call back into the owner."""
         with self._lock:
             self._movers.append(busy)
+
+    def add_claim_listener(self, listener: Callable[[Claim], object]) -> None:
+        """``listener(claim)`` as each claim is taken, before the claimer may move (e.g.
+        to disarm another source of goals); it must not wait, nor call back into the
+        owner."""
+        with self._lock:
+            self._on_claim.append(listener)
 
     def busy(self) -> str | None:
         """Why another mover (a procedure, a test run) may not start now, or None: the
@@ -80,6 +88,8 @@ class MotionOwner:
             if (why := self.busy()) is not None:
                 raise MotionRefused(why)
             self._claim = Claim(what, stop)
+            for listener in self._on_claim:
+                listener(self._claim)
             return self._claim
 
     def bind(self, claim: Claim) -> None:

@@ -38,6 +38,8 @@ def zenoh_config(link: LinkSettings, listen: str | None = None, connect: str | N
         config.insert_json5("listen/endpoints", json.dumps([listen]))
     if connect is not None:
         config.insert_json5("connect/endpoints", json.dumps([connect]))
+        if listen is None:  # a station listens nowhere (Zenoh's peers default to tcp/[::]:0)
+            config.insert_json5("listen/endpoints", "[]")
         # keep trying to reach a node that is not up yet, or went away
         config.insert_json5("connect/timeout_ms", "-1")
         config.insert_json5("connect/exit_on_failure", "false")

@@ -265,9 +265,14 @@ class RobotNode:
     def _after_tick(self, snap: Snapshot) -> None:
         lost = self.holder.check_lost()
         if lost is not None:
+            self._disarm_ros()
             self.controller.submit(self._link_lost)
         for listener in tuple(self._tick_listeners):
             listener(snap)
+
+    def _disarm_ros(self) -> None:
+        if self.ros is not None:
+            self.ros.armed_by = None
 
     def _link_lost(self) -> str | None:
         state = self.controller.state
@@ -287,6 +292,7 @@ class RobotNode:
                 f"{protocol!r}: update one of them"
             )
         taken = self.holder.take(station, _flag(args, "take_over"))
+        self._disarm_ros()  # every take, even the same station's again: armed anew or not
         page_port = args.get("page_port")  # the station's pages may read the listener's answers
         if self.estop_listener is not None and isinstance(page_port, int) and page_port > 0:
             self.estop_listener.allow_page(page_port)
@@ -294,7 +300,10 @@ class RobotNode:
         return {"took_over_from": taken.took_over_from, "key": taken.key.hex(), **self.info()}
 
     def _op_release(self, station: str, args: dict[str, Any]) -> bool:
-        return self.holder.release(station)
+        released = self.holder.release(station)
+        if released:
+            self._disarm_ros()
+        return released
 
     def _op_info(self, station: str, args: dict[str, Any]) -> dict[str, Any]:
         return self.info()

@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 import zenoh
 
 from app.control.errors import GoalRejected, MotionRefused
@@ -41,7 +42,7 @@ from app.ros2.messages import ODOMETRY, POINT, POSE, PX4_ODOMETRY, typestore
 from app.ros2.publisher import RosPublisher
 from app.world.hold import HoldSource
 from app.world.poses import make_sample
-from kinematics import PoseError
+from kinematics import Pose, PoseError
 
 if TYPE_CHECKING:
     from app.robot.node import RobotNode
@@ -70,16 +71,21 @@ class Input:
         self._last_s: float | None = None
         self._lock = threading.Lock()
 
-    def arrive(self) -> bool:
-        """Count a message; False when it came too soon after the last (dropped)."""
-        now = time.monotonic()
+    def arrive(self) -> None:
+        """Count a message."""
         with self._lock:
             self.received += 1
+
+    def admit(self) -> None:
+        """A message that passed its checks: InputRefused ("too_fast", counted apart) when
+        it came sooner than ``1 / max_input_hz`` after the last one admitted. Only good
+        messages count against the rate: a flood of bad ones cannot crowd out good ones."""
+        now = time.monotonic()
+        with self._lock:
             if self._last_s is not None and now - self._last_s < self.min_gap_s:
                 self.flood += 1
-                return False
+                raise InputRefused("too_fast", "")
             self._last_s = now
-            return True
 
     def refuse(self, key: str, text: str) -> None:
         with self._lock:
@@ -132,6 +138,7 @@ class RosNode:
         self._tokens: list[Any] = []
         self._subscribers: list[Any] = []
         self.armed_by: str | None = None
+        self.pose_frame: str | None = None  # the ROS pose input's world frame, once seen
         self.pose: Input | None = None
         self.goal: Input | None = None
         active = ros.publish or ros.pose_input != "off" or ros.goal_input != "off"
@@ -146,6 +153,7 @@ class RosNode:
                 self._entities,
                 thread_setup,
                 self.diagnostics,
+                self.world_frame,
             )
             publisher = self.publisher
             node.add_tick_listener(lambda snap: publisher.offer(snap, time.time()))
@@ -160,24 +168,29 @@ class RosNode:
         node.ros = self
 
     def _subscribe(
-        self, name: str, typename: str, handle: Callable[[Any], None], best_effort: bool
+        self, name: str, typename: str, handle: Callable[[Any, Input], None], best_effort: bool
     ) -> Input:
         ros = self.ros
         topic = graph.qualified(ros.namespace, ros.node_name, name)
         counts = Input(topic, typename, ros.max_input_hz, ros.input_silent_s)
-        key = graph.topic_key(ros.form, ros.domain_id, topic, typename, "*")
+        hashed = graph.NO_HASH if ros.distro == "humble" else str(self.store.hash_rihs01(typename))
+        # rmw_zenoh matches on the type hash; PX4's messages change with its versions (the
+        # fields this reads stay): any hash for those, the decoding checks the bytes
+        key = graph.topic_key(
+            ros.form, ros.domain_id, topic, typename, "*" if typename == PX4_ODOMETRY else hashed
+        )
 
         def on_sample(sample: zenoh.Sample) -> None:
             try:  # nothing a sample carries may end the subscription
-                if not counts.arrive():
-                    return
+                counts.arrive()
                 size = len(sample.payload)
                 if size > MAX_MESSAGE_BYTES:
                     raise InputRefused("size", f"{size} bytes, more than {MAX_MESSAGE_BYTES}")
-                handle(decode(self.store, typename, sample.payload.to_bytes()))
+                handle(decode(self.store, typename, sample.payload.to_bytes()), counts)
                 counts.accept()
             except InputRefused as exc:
-                counts.refuse(exc.key, str(exc))
+                if exc.key != "too_fast":  # counted by admit
+                    counts.refuse(exc.key, str(exc))
             except (GoalRejected, MotionRefused, LinkRefused, PoseError, ValueError) as exc:
                 counts.refuse(type(exc).__name__, str(exc)[:300])
             except Exception as exc:  # a bug, not the sender's: counted, logged, kept alive
@@ -186,20 +199,19 @@ class RosNode:
 
         self._subscribers.append(self.session.declare_subscriber(key, on_sample))
         if ros.form == "rmw_zenoh":
-            hashed = graph.NO_HASH if ros.distro == "humble" else self.store.hash_rihs01(typename)
             qos = graph.encode_qos(reliable=not best_effort, depth=10)
             token = self.graph.endpoint_token(
-                next(self._entities), "subscription", topic, typename, str(hashed), qos
+                next(self._entities), "subscription", topic, typename, hashed, qos
             )
             self._tokens.append(self.session.liveliness().declare_token(token))
         return counts
 
     # Zenoh's threads
-    def _on_pose(self, msg: Any) -> None:
+    def _on_pose(self, msg: Any, counts: Input) -> None:
         ros = self.ros
         kind = ros.pose_input
         if kind == "odometry":
-            pose = pose_from_odometry(msg, ros.input_world_frames)
+            pose = pose_from_odometry(msg, ros.input_world_frames, ros.drone_frame)
         elif kind == "pose":
             pose = pose_from_pose_stamped(msg, ros.input_world_frames)
         else:
@@ -221,13 +233,29 @@ class RosNode:
             pose.velocity_m_s,
             pose.angular_velocity_rad_s,
         )
+        counts.admit()
         if not self.node.world.service.tracker_for("drone").push(sample):
             raise InputRefused("order", "older than, or jumping from, the latest pose")
+        # the world the poses are in: a world-frame goal must name it, the tip in the
+        # world is published in it (PX4's NED is turned into [ros2] world_frame's ENU)
+        self.pose_frame = ros.world_frame if kind == "px4" else msg.header.frame_id
 
-    def _on_goal(self, msg: Any) -> None:
+    def world_frame(self) -> str:
+        """The world's frame id: the ROS pose input's (its samples' frame), else ``[ros2]
+        world_frame`` (a hold on another pose source)."""
+        return self.pose_frame or self.ros.world_frame
+
+    def _on_goal(self, msg: Any, counts: Input) -> None:
         ros = self.ros
         goal = goal_from(msg, ros.goal_input == "pose", ros.base_frame, ros.input_world_frames)
         check_stamp(goal.t_s, time.time(), ros.stamp_future_s, ros.stamp_age_s)
+        if goal.frame == "world" and msg.header.frame_id != self.world_frame():
+            raise InputRefused(
+                "frame",
+                f"header.frame_id: {msg.header.frame_id!r} is not the world the drone's pose "
+                f"is in ({self.world_frame()!r}): no transform between them is known",
+            )
+        counts.admit()
         view = self.node.holder.view()
         if self.armed_by is None or view.holder != self.armed_by or view.lost:
             raise InputRefused(
@@ -246,6 +274,18 @@ class RosNode:
         source = self.node.controller.state.source
         if not isinstance(source, HoldSource):
             raise MotionRefused("a world-frame goal needs a hold in the world (none running)")
+        drone = source.drone_pose()
+        if drone is None:
+            raise MotionRefused("a world-frame goal needs the drone's pose (none yet)")
+        # checked as a base-frame goal is, at the drone's latest pose
+        base = Pose.from_arrays(drone[:3], drone[3:]) @ source.mount
+        goal_base = base.apply_inverse(goal.point_m)
+        phi = goal.phi_rad or 0.0
+        if not source.gate.inside(goal_base, phi):
+            raise GoalRejected(
+                f"point: the world goal is at {np.round(goal_base, 4).tolist()} m in the base "
+                "frame at the drone's pose: outside the workspace"
+            )
         source.goal_world = goal.point_m.copy()
         if goal.phi_rad is not None and source.wrist is not None:
             source.heading = goal.phi_rad

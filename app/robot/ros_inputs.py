@@ -113,10 +113,16 @@ def _world_frame(frame: str, world_frames: tuple[str, ...], field: str) -> None:
         )
 
 
-def pose_from_odometry(msg: Any, world_frames: tuple[str, ...]) -> PoseIn:
-    """nav_msgs/Odometry: the pose in a world frame, the twist in the body (FLU), turned
-    into the world for the velocity."""
+def pose_from_odometry(msg: Any, world_frames: tuple[str, ...], body_frame: str) -> PoseIn:
+    """nav_msgs/Odometry: the pose in a world frame, the twist in the body ``body_frame``
+    (FLU, its ``child_frame_id``), turned into the world for the velocity."""
     _world_frame(msg.header.frame_id, world_frames, "header.frame_id")
+    if msg.child_frame_id != body_frame:
+        raise InputRefused(
+            "frame",
+            f"child_frame_id: {msg.child_frame_id!r} is not the drone's body "
+            f"({body_frame!r}, [ros2] drone_frame): the twist would be in another frame",
+        )
     pose = msg.pose.pose
     q = _quaternion(pose.orientation, "pose.pose.orientation")
     twist = msg.twist.twist

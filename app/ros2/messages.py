@@ -21,6 +21,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from app.config import Settings
 from app.control.state import Snapshot
+from kinematics import Pose
 
 STORES = {"jazzy": Stores.ROS2_JAZZY, "humble": Stores.ROS2_HUMBLE}
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -80,6 +81,8 @@ class Messages:
         self.types = self.store.types
         self.wrist = settings.wrist.enabled
         self.tool_offset = np.asarray(settings.tool.offset_m, dtype=float)
+        world = settings.world
+        self.mount = Pose.from_arrays(world.mount_position_m, world.mount_quaternion)
 
     def cdr(self, message: Any, typename: str) -> bytes:
         """``message`` as CDR, little-endian, with its encapsulation header."""
@@ -180,18 +183,28 @@ class Messages:
             stamp_s, self.ros.base_frame, tip, (math.cos(phi / 2), 0, 0, math.sin(phi / 2))
         )
 
-    def tip_world(self, snap: Snapshot, stamp_s: float) -> Any | None:
-        """The measured tip in the world while holding in it (hold-in-world's own figure,
-        from the drone's pose); None otherwise."""
+    def tip_world(self, snap: Snapshot, stamp_s: float, frame: str | None = None) -> Any | None:
+        """The measured tip in the world while holding in it, in ``frame`` (None: ``[ros2]
+        world_frame``): hold-in-world's own figure where it has one (the simulated drone's
+        true pose), else the measured tip carried by the latest pose sample of the drone
+        and the mount; None when not holding or nothing is known yet."""
         extra = snap.extra or {}
         measured = extra.get("measured_world_m")
+        heading = extra.get("measured_heading_world_rad")
+        drone = extra.get("drone_pose")
+        tip = np.asarray(snap.point_measured_m, dtype=float)
+        if measured is None and drone is not None and np.isfinite(tip).all():
+            base = Pose.from_arrays(drone[:3], drone[3:]) @ self.mount
+            measured = base.apply(tip)
+            w, x, y, z = base.quaternion
+            yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+            heading = yaw + (snap.tool_phi_rad if math.isfinite(snap.tool_phi_rad) else 0.0)
         if measured is None or not np.isfinite(np.asarray(measured, dtype=float)).all():
             return None
-        heading = extra.get("measured_heading_world_rad")
         turn = (1.0, 0.0, 0.0, 0.0)
         if heading is not None and math.isfinite(heading):
             turn = (math.cos(heading / 2), 0.0, 0.0, math.sin(heading / 2))
-        return self._pose(stamp_s, self.ros.world_frame, measured, turn)
+        return self._pose(stamp_s, frame or self.ros.world_frame, measured, turn)
 
     def diagnostics(
         self, snap: Snapshot, stamp_s: float, extra: dict[str, str] | None = None

@@ -64,7 +64,8 @@ class RosPublisher:
 
     ``thread_setup``: called first in that thread (e.g. to give it a real-time priority
     below the loop's); ``extra_diagnostics``: more key-values for the diagnostics (the
-    ROS inputs' counters), called in that thread."""
+    ROS inputs' counters), called in that thread; ``world_frame``: the world's frame id
+    for the tip in the world (default ``[ros2] world_frame``)."""
 
     def __init__(
         self,
@@ -74,11 +75,13 @@ class RosPublisher:
         entity_ids: Iterator[int],
         thread_setup: Callable[[], None] | None = None,
         extra_diagnostics: Callable[[], dict[str, str]] | None = None,
+        world_frame: Callable[[], str] | None = None,
     ) -> None:
         self.session, self.settings, self.ros = session, settings, settings.ros2
         self.messages = Messages(settings)
         self._setup = thread_setup
         self._extra = extra_diagnostics or dict
+        self._world_frame = world_frame or (lambda: settings.ros2.world_frame)
         self._latest: tuple[Snapshot, float] | None = None
         self._period_s = 1.0 / settings.ros2.rate_hz
         self._due_s = 0.0
@@ -174,7 +177,7 @@ class RosPublisher:
                 for topic, message in (
                     (self.tf, messages.tf(snap, stamp)),
                     (self.tip_pose, messages.tip_pose(snap, stamp)),
-                    (self.tip_world, messages.tip_world(snap, stamp)),
+                    (self.tip_world, messages.tip_world(snap, stamp, self._world_frame())),
                 ):
                     if message is not None:
                         self._put(topic, message, stamp)

@@ -56,6 +56,7 @@ from app.server.limits import RequestLimits
 from app.server.origins import OriginCheck
 from app.server.queries import WorkspaceQueries
 from app.server.robot_link import open_robot
+from app.server.ros2_arming import RosGoalArming
 from app.server.world_client import WorldClient
 from app.static_files import static_dir
 from app.tuning.procedure import TuningManager
@@ -119,6 +120,8 @@ def create_app(
             app.state.estop_listener = node_listener  # (a node elsewhere: its info says)
             app.state.backend = backend
             app.state.runs = RunManager(controller, settings.runs.folder_path)
+            # the node's ROS goal input: armed for one operator's lease (app/server/ros2_arming.py)
+            app.state.ros2_arming = RosGoalArming(app.state.authority, controller)
             # hold-in-world: the pose inputs and the hold run beside the loop, in the node
             app.state.world = WorldClient(controller)
             # program checks and dry runs in worker processes (started on the first one)
@@ -161,6 +164,7 @@ def create_app(
                 await asyncio.to_thread(app.state.tuning.close)
                 await asyncio.to_thread(app.state.calibration.close)
                 await asyncio.to_thread(app.state.runs.close)
+                await asyncio.to_thread(app.state.ros2_arming.close)
                 app.state.world.close()
 
     app = FastAPIOffline(  # /docs and /redoc from local assets: they work with no internet

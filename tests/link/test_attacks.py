@@ -10,6 +10,7 @@ what the node did not say.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import time
 import urllib.error
@@ -171,3 +172,52 @@ def test_a_restarted_node_is_followed_not_its_predecessors_last_state(tmp_path: 
             wait_for(follows_the_new_one, "the station following the new node", seen=st.brief)
             first = st.get("/api/status")["loop"]["ticks"]
             wait_for(lambda: st.get("/api/status")["loop"]["ticks"] > first, "it moving on")
+
+
+def _listening_inodes() -> set[str]:
+    """The inodes of TCP sockets in LISTEN state on this machine (/proc/net/tcp, tcp6)."""
+    found = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        with open(table) as rows:
+            for row in list(rows)[1:]:
+                fields = row.split()
+                if fields[3] == "0A":  # LISTEN
+                    found.add(fields[9])
+    return found
+
+
+def _own_socket_inodes() -> set[str]:
+    inodes = set()
+    for fd in Path("/proc/self/fd").iterdir():
+        try:
+            target = os.readlink(fd)
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    return inodes
+
+
+def test_a_station_session_listens_on_no_port() -> None:
+    """A station only connects: Zenoh's peers would otherwise listen on every interface."""
+    import zenoh
+
+    from app.config import LinkSettings
+    from app.link.zenoh_session import zenoh_config
+
+    config, cleanup = zenoh_config(LinkSettings(), connect="tcp/127.0.0.1:9")
+    before = _own_socket_inodes() & _listening_inodes()
+    session = zenoh.open(config)
+    try:
+        assert (_own_socket_inodes() & _listening_inodes()) - before == set()
+    finally:
+        session.close()
+        cleanup()
+    # the check sees a listener where there is one: a node's session
+    config, cleanup = zenoh_config(LinkSettings(), listen="tcp/127.0.0.1:0")
+    session = zenoh.open(config)
+    try:
+        assert (_own_socket_inodes() & _listening_inodes()) - before != set()
+    finally:
+        session.close()
+        cleanup()

@@ -89,7 +89,9 @@ def test_px4_ned_frd_is_the_same_drone_as_enu_flu_by_hand() -> None:
     assert pose.velocity_m_s == pytest.approx([0.0, 1.0, 0.0])  # north is ENU's y
     assert pose.angular_velocity_rad_s == pytest.approx([0.0, 0.0, -0.2], abs=1e-7)
     # the same drone as an ENU odometry (FLU twist) gives the same pose
-    odometry = pose_from_odometry(_through_cdr(_odometry(v_body=(0, 1.0, 0)), ODOMETRY), WORLD)
+    odometry = pose_from_odometry(
+        _through_cdr(_odometry(v_body=(0, 1.0, 0)), ODOMETRY), WORLD, "base_link"
+    )
     assert odometry.position_m == pytest.approx(pose.position_m)
     assert odometry.velocity_m_s == pytest.approx(pose.velocity_m_s, abs=1e-6)
 
@@ -99,7 +101,7 @@ def test_a_body_velocity_is_turned_into_the_world() -> None:
     assert forward.velocity_m_s == pytest.approx([1.0, 0.0, 0.0], abs=1e-6)  # east
     north = (H, 0.0, 0.0, H)  # ENU: yaw 90 deg, facing north
     odometry = pose_from_odometry(
-        _through_cdr(_odometry(wxyz=north, v_body=(1.0, 0, 0)), ODOMETRY), WORLD
+        _through_cdr(_odometry(wxyz=north, v_body=(1.0, 0, 0)), ODOMETRY), WORLD, "base_link"
     )
     assert odometry.velocity_m_s == pytest.approx([0.0, 1.0, 0.0], abs=1e-9)
     unknown = pose_from_px4(_through_cdr(_px4(velocity=(np.nan,) * 3), PX4_ODOMETRY))
@@ -123,10 +125,12 @@ def test_px4_messages_it_cannot_use(message, key: str, words: str) -> None:
 
 def test_world_frames_and_values_are_checked() -> None:
     with pytest.raises(InputRefused, match="header.frame_id: 'base_link'") as refused:
-        pose_from_odometry(_odometry(frame="base_link"), WORLD)
+        pose_from_odometry(_odometry(frame="base_link"), WORLD, "base_link")
     assert refused.value.key == "frame"
     with pytest.raises(InputRefused, match="position") as refused:
-        pose_from_odometry(_odometry(xyz=(np.nan, 0, 0)), WORLD)
+        pose_from_odometry(_odometry(xyz=(np.nan, 0, 0)), WORLD, "base_link")
+    with pytest.raises(InputRefused, match="child_frame_id: 'base_link' is not the drone"):
+        pose_from_odometry(_odometry(), WORLD, "drone")
     assert refused.value.key == "value"
     stamped = T[POSE](header=_header("map"), pose=_pose((1, 2, 3), (1, 0, 0, 0)))
     pose = pose_from_pose_stamped(_through_cdr(stamped, POSE), WORLD)

@@ -17,6 +17,8 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.error
+import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
@@ -35,7 +37,7 @@ from kinematics import THESIS_DELTA
 from kinematics.tool import Tool
 from tests.ros2.definitions import decoder
 from tests.support.robot_node import robot_node, station
-from tests.support.server import free_port, wait_for
+from tests.support.server import free_port, serve, wait_for
 
 pytestmark = pytest.mark.slow  # real processes: a node on the twin in real time, a peer
 PEER = Path(__file__).resolve().parent / "peer.py"
@@ -337,6 +339,21 @@ def test_the_peers_odometry_holds_in_the_world_and_its_goals_need_authority(
             "the hold's world goal moved by the peer",
             seen=lambda: (a.snapshot().extra.get("goal_world_m"), _ros(a)["goal_input"]),
         )
+        # a world goal outside the workspace at the drone's pose, and one in a world the
+        # drone's pose is not in: refused, counted, the hold's goal unchanged
+        peer.ask(
+            op="publish", topic="/delta/tip_goal", type=POSE, message=_goal("odom", [0, 0, 5.0])
+        )
+        peer.ask(op="publish", topic="/delta/tip_goal", type=POSE, message=_goal("map", target))
+        wait_for(
+            lambda: (
+                _ros(a)["goal_input"]["refused"].get("GoalRejected") == 2
+                and _ros(a)["goal_input"]["refused"].get("frame") == 1
+            ),
+            "the far world goal and the one in another world refused",
+            seen=lambda: _ros(a)["goal_input"],
+        )
+        assert a.snapshot().extra["goal_world_m"] == pytest.approx(target)
         # the odometry stops: the hold stops on a lost pose (the input named silent)
         peer.ask(op="stop_streams")
         wait_for(
@@ -346,8 +363,12 @@ def test_the_peers_odometry_holds_in_the_world_and_its_goals_need_authority(
         )
         assert any("drone pose" in f.reason for f in a.snapshot().faults)
         wait_for(lambda: _ros(a)["pose_input"]["state"] == "silent", "the odometry input silent")
-        # the operator's station lets go of the link: the goal input is disarmed
+        # disarmed by the operator; armed again, then disarmed by any take of the link,
+        # the same station's too (a retake after a loss is not the operator's arming)
         a.request("ros_goals", {"enabled": False}).result(timeout=10)
+        assert _ros(a)["goal_input"]["armed"] is False
+        a.request("ros_goals", {"enabled": True}).result(timeout=10)
+        a.reconnect()
         assert _ros(a)["goal_input"]["armed"] is False
 
 
@@ -363,7 +384,10 @@ def test_bad_input_on_every_subscribed_topic_is_counted_and_moves_nothing(
         store = typestore("jazzy")
         types = store.types
         point_type = "geometry_msgs/msg/PointStamped"
-        goal_key = graph.topic_key("rmw_zenoh", domain, "/delta/tip_goal", point_type, "RIHS01_0")
+        goal_key = graph.topic_key(
+            "rmw_zenoh", domain, "/delta/tip_goal", point_type, store.hash_rihs01(point_type)
+        )
+        elsewhere = graph.topic_key("rmw_zenoh", domain, "/delta/tip_goal", point_type, "RIHS01_0")
         pose_key = graph.topic_key(
             "rmw_zenoh",
             domain,
@@ -411,6 +435,13 @@ def test_bad_input_on_every_subscribed_topic_is_counted_and_moves_nothing(
                     session.put(key, payload)
                     # each counted before the next: apart, not a flood
                     wait_for(lambda w=which, b=before: _ros(a)[w]["received"] > b, "counted")
+            # a goal under another type hash is another type to rmw_zenoh: never received
+            # (the next one, sent after it on the same session, arrives alone)
+            before = _ros(a)["goal_input"]["received"]
+            session.put(elsewhere, good)
+            session.put(goal_key, point("camera", [0.0, 0.0, -0.24]))
+            wait_for(lambda: _ros(a)["goal_input"]["received"] > before, "the next goal")
+            assert _ros(a)["goal_input"]["received"] == before + 1
             for _ in range(3000):  # a flood of good goals
                 session.put(
                     goal_key,
@@ -418,7 +449,7 @@ def test_bad_input_on_every_subscribed_topic_is_counted_and_moves_nothing(
                     congestion_control=zenoh.CongestionControl.BLOCK,
                 )
             wait_for(
-                lambda: _ros(a)["goal_input"]["received"] >= 3005,
+                lambda: _ros(a)["goal_input"]["received"] >= 3006,
                 "every goal counted",
                 seen=lambda: _ros(a)["goal_input"],
             )
@@ -426,7 +457,7 @@ def test_bad_input_on_every_subscribed_topic_is_counted_and_moves_nothing(
             goal, pose = ros["goal_input"], ros["pose_input"]
             assert goal["refused"]["cdr"] == 2
             assert goal["refused"]["value"] == 1
-            assert goal["refused"]["frame"] == 1
+            assert goal["refused"]["frame"] == 2
             assert goal["refused"]["size"] == 1
             assert goal["dropped_too_fast"] > 0
             wait_for(lambda: sum(_ros(a)["pose_input"]["refused"].values()) == 3, "pose refusals")
@@ -434,7 +465,7 @@ def test_bad_input_on_every_subscribed_topic_is_counted_and_moves_nothing(
             # the robot went nowhere but the flood's own goal (the start point)
             assert a.snapshot().goal_m == pytest.approx(START_M)
             # and the subscriptions are alive: a good goal still moves the robot
-            session.put(goal_key, good)
+            session.put(goal_key, point("delta_base", [0.0, 0.02, -0.24]))  # stamped now
             wait_for(
                 lambda: a.snapshot().goal_m == pytest.approx([0.0, 0.02, -0.24]),
                 "a good goal after the bad ones",
@@ -489,3 +520,84 @@ def test_through_a_ros_graphs_router_with_the_link_logged_in(tmp_path: Path) -> 
     finally:
         router.kill()
         router.wait()
+
+
+def _api(server, method: str, path: str, body: dict | None, lease: str | None) -> Any:
+    headers = {"Content-Type": "application/json", **({"X-Lease": lease} if lease else {})}
+    request = urllib.request.Request(
+        server.url + path,
+        data=None if body is None else json.dumps(body).encode(),
+        method=method,
+        headers=headers,
+    )
+    with urllib.request.urlopen(request, timeout=15) as response:
+        return json.load(response)
+
+
+def test_the_goal_input_is_armed_for_one_lease_and_a_procedure_disarms_it(
+    tmp_path: Path,
+) -> None:
+    """Through `deltadash serve --robot`: armed by the lease holder; disarmed when the lease
+    is given back (a goal then moves nothing), or a calibration claims the robot."""
+    env = {"DELTADASH_ROS2__GOAL_INPUT": "pose"}
+    with (
+        ros_robot(tmp_path, **env) as (node, peer, _),
+        serve(tmp_path, DELTADASH_LINK__ROBOT=node.endpoint) as server,
+    ):
+        lease = server.post("/api/lease", {"client": "ros test"})["lease_id"]
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            _api(server, "PUT", "/api/ros2/goals", {"enabled": True}, None)
+        assert refused.value.code == 409  # without the lease
+        armed = _api(server, "PUT", "/api/ros2/goals", {"enabled": True}, lease)
+        assert armed["goal_input"]["armed"] is True
+        wait_for(lambda: server.get("/api/ros2")["goal_input"]["armed"], "armed in the status")
+        # the lease given back: disarmed by the station, a ROS goal then moves nothing
+        _api(server, "DELETE", "/api/lease", None, lease)
+        wait_for(
+            lambda: (
+                "lease" in (server.get("/api/ros2")["disarmed_because"] or "")
+                and server.get("/api/ros2")["goal_input"]["armed"] is False
+            ),
+            "disarmed with the lease given back",
+            seen=lambda: server.get("/api/ros2"),
+        )
+        goal_before = server.get("/api/status")["goal"]
+        peer.ask(
+            op="publish",
+            topic="/delta/tip_goal",
+            type=POSE,
+            message=_goal("delta_base", [0.02, 0, -0.24]),
+        )
+        wait_for(
+            lambda: server.get("/api/ros2")["goal_input"]["refused"].get("unarmed") == 1,
+            "the goal refused, unarmed",
+            seen=lambda: server.get("/api/ros2")["goal_input"],
+        )
+        assert server.get("/api/status")["goal"] == goal_before
+        # armed again by a new lease; a calibration claims the robot: disarmed
+        lease = server.post("/api/lease", {"client": "ros test"})["lease_id"]
+        _rest(server, lease)
+        _api(server, "PUT", "/api/ros2/goals", {"enabled": True}, lease)
+        _api(server, "POST", "/api/calibration/run", {"poses": 12}, lease)
+        wait_for(
+            lambda: (
+                "calibration" in (server.get("/api/ros2")["disarmed_because"] or "")
+                and server.get("/api/ros2")["goal_input"]["armed"] is False
+            ),
+            "disarmed by the calibration",
+            seen=lambda: server.get("/api/ros2"),
+        )
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            _api(server, "PUT", "/api/ros2/goals", {"enabled": True}, lease)
+        assert refused.value.code == 409  # not while the calibration holds the robot
+
+
+def _rest(server, lease: str) -> None:
+    def torque() -> bool:
+        try:
+            _api(server, "POST", "/api/torque", {"enabled": True}, lease)
+            return True
+        except urllib.error.HTTPError:
+            return False
+
+    wait_for(torque, "torque on at rest")

@@ -19,6 +19,7 @@ from app.runs.manager import RunManager
 from app.scene import Scene
 from app.server.estop import EstopReceipts
 from app.server.queries import WorkspaceQueries
+from app.server.ros2_arming import RosGoalArming
 from app.server.world_client import WorldClient
 from app.tuning.procedure import TuningManager
 
@@ -52,6 +53,10 @@ def get_command_wait(connection: HTTPConnection) -> float:
 
 def get_runs(connection: HTTPConnection) -> RunManager:
     return connection.app.state.runs
+
+
+def get_ros2_arming(connection: HTTPConnection) -> RosGoalArming:
+    return connection.app.state.ros2_arming
 
 
 def get_queries(connection: HTTPConnection) -> WorkspaceQueries:
@@ -165,6 +170,7 @@ ControllerDep = Annotated[RobotClient, Depends(get_controller)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 CommandWait = Annotated[float, Depends(get_command_wait)]
 RunsDep = Annotated[RunManager, Depends(get_runs)]
+Ros2ArmingDep = Annotated[RosGoalArming, Depends(get_ros2_arming)]
 ProgramWorkersDep = Annotated[ProgramWorkers, Depends(get_program_workers)]
 QueriesDep = Annotated[WorkspaceQueries, Depends(get_queries)]
 CalibrationDep = Annotated[CalibrationManager, Depends(get_calibration)]
