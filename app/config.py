@@ -605,6 +605,12 @@ class Ros2Settings(_Section):
         "robot only once the operator who holds control arms them (PUT /api/ros2/goals)",
     )
     goal_topic: str = Field("delta/tip_goal", pattern=_ROS_NAME)
+    inputs_trusted: bool = Field(
+        False,
+        description="with server.token set, the ROS inputs are taken only with this: ROS "
+        "messages carry no credentials, the Zenoh network (its router's access control) "
+        "is the trust boundary",
+    )
     stamp_future_s: float = Field(
         0.05, ge=0, le=10, description="refuse an input stamped further ahead than this"
     )
@@ -785,6 +791,18 @@ class Settings(BaseSettings):
         if self.wrist.enabled and self.wrist.servo_id in legs:
             raise ValueError(
                 f"wrist.servo_id {self.wrist.servo_id} is a leg's servo id (legs: {legs})"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _ros_inputs_trusted(self) -> Settings:
+        ros = self.ros2
+        takes = [n for n in ("pose_input", "goal_input") if getattr(ros, n) != "off"]
+        if self.server.token is not None and takes and not ros.inputs_trusted:
+            raise ValueError(
+                f"ros2.{takes[0]}: ROS messages carry no credentials and server.token is set; "
+                "take them only on a Zenoh network you trust (its router's access control): "
+                "set ros2.inputs_trusted = true"
             )
         return self
 

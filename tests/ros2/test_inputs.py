@@ -182,3 +182,17 @@ def test_bytes_that_are_not_the_type_are_refused() -> None:
     wrong = bytes(STORE.serialize_cdr(joints, JOINT_STATE))
     with pytest.raises(InputRefused):  # too short for an odometry
         decode(STORE, ODOMETRY, wrong)
+
+
+def test_with_a_token_ros_inputs_need_a_trusted_network() -> None:
+    from pydantic import ValidationError
+
+    from app.config import Settings
+
+    token = {"token": "a-token-of-twenty-chars"}
+    for inputs in ({"pose_input": "odometry"}, {"goal_input": "pose"}):
+        with pytest.raises(ValidationError, match="carry no credentials"):
+            Settings(server=token, ros2=inputs)
+        Settings(server=token, ros2={**inputs, "inputs_trusted": True})
+        Settings(ros2=inputs)  # no token: loopback by default, as the other pose inputs
+    Settings(server=token)  # publishing needs no trust
