@@ -48,7 +48,8 @@ if TYPE_CHECKING:
     from app.robot.node import RobotNode
 
 log = logging.getLogger(__name__)
-MAX_MESSAGE_BYTES = 64 * 1024  # an odometry is ~700 bytes: anything this big is refused
+MAX_MESSAGE_BYTES = 8 * 1024  # an odometry is ~700 bytes: anything this big is refused
+DECODE_BUDGET = 2.0  # an input decodes at most this many times max_input_hz per second
 POSE_TYPES = {"odometry": ODOMETRY, "pose": POSE, "px4": PX4_ODOMETRY}
 POSE_TOPICS = {
     "odometry": "odom",
@@ -65,16 +66,29 @@ class Input:
     def __init__(self, topic: str, typename: str, max_hz: float, silent_s: float) -> None:
         self.topic, self.typename = topic, typename
         self.min_gap_s, self.silent_s = 1.0 / max_hz, silent_s
-        self.received = self.accepted = self.flood = 0
+        self.received = self.accepted = self.flood = self.undecoded = 0
+        # a token bucket of decodes: a flood beyond it is dropped before its bytes are read
+        self._budget = self._tokens = DECODE_BUDGET * max_hz
+        self._filled_s = time.monotonic()
         self.refused: dict[str, int] = {}
         self.last_refusal: str | None = None
         self._last_s: float | None = None
         self._lock = threading.Lock()
 
-    def arrive(self) -> None:
-        """Count a message."""
+    def arrive(self) -> bool:
+        """Count a message; False (counted in ``undecoded``) when the input has decoded
+        ``DECODE_BUDGET`` times ``max_input_hz`` messages in the last second: a flood
+        costs the node (and its loop, which shares the interpreter) no more than that."""
+        now = time.monotonic()
         with self._lock:
             self.received += 1
+            self._tokens = min(self._budget, self._tokens + (now - self._filled_s) * self._budget)
+            self._filled_s = now
+            if self._tokens < 1.0:
+                self.undecoded += 1
+                return False
+            self._tokens -= 1.0
+            return True
 
     def admit(self) -> None:
         """A message that passed its checks: InputRefused ("too_fast", counted apart) when
@@ -113,6 +127,7 @@ class Input:
             "accepted": self.accepted,
             "refused": dict(self.refused),
             "dropped_too_fast": self.flood,
+            "dropped_undecoded": self.undecoded,
             "last_refusal": self.last_refusal,
         }
 
@@ -182,7 +197,8 @@ class RosNode:
 
         def on_sample(sample: zenoh.Sample) -> None:
             try:  # nothing a sample carries may end the subscription
-                counts.arrive()
+                if not counts.arrive():
+                    return
                 size = len(sample.payload)
                 if size > MAX_MESSAGE_BYTES:
                     raise InputRefused("size", f"{size} bytes, more than {MAX_MESSAGE_BYTES}")
@@ -323,7 +339,8 @@ class RosNode:
             refused = sum(view["refused"].values())
             values[f"{label}"] = f"{view['state']} ({view['topic']})"
             values[f"{label} accepted"] = str(view["accepted"])
-            values[f"{label} refused"] = str(refused + view["dropped_too_fast"])
+            dropped = view["dropped_too_fast"] + view["dropped_undecoded"]
+            values[f"{label} refused"] = str(refused + dropped)
             if view["last_refusal"]:
                 values[f"{label} last refusal"] = view["last_refusal"]
         if self.goal is not None:
