@@ -20,6 +20,7 @@ import numpy as np
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from app.config import Settings
+from app.control.loop_health import classify
 from app.control.state import Snapshot
 from kinematics import Pose
 
@@ -224,6 +225,7 @@ class Messages:
             "loop_rate_hz": f"{window.measured_hz:.1f}",
             "lateness_p99_ms": f"{window.jitter_p99_ms:.3f}",
             "overruns_last_10s": str(window.overruns),
+            "loop_health": classify(window).level,
             "tick": str(snap.tick),
             **(extra or {}),
         }
@@ -243,10 +245,13 @@ OK, WARN, ERROR = 0, 1, 2  # diagnostic_msgs/DiagnosticStatus's levels
 
 def diagnostic_level(snap: Snapshot) -> tuple[int, str]:
     """The robot's diagnostic level and its message: ERROR (e-stop, a fault), WARN (a
-    warning, a loop that missed ticks) or OK (the mode)."""
-    window = snap.loop_window
+    warning; the loop's health light amber or red, as the page shows it:
+    app/control/loop_health.py) or OK (the mode)."""
     if snap.estopped or snap.faults:
         return ERROR, "e-stop" if snap.estopped else snap.faults[0].reason
-    if snap.warning or (window.ticks and window.overruns):
-        return WARN, snap.warning or "the loop missed ticks"
+    if snap.warning:
+        return WARN, snap.warning
+    health = classify(snap.loop_window)
+    if health.level in ("amber", "red"):
+        return WARN, f"the loop ({health.level}): {'; '.join(health.reasons)}"
     return OK, snap.mode

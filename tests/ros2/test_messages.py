@@ -199,3 +199,16 @@ def test_keys_and_tokens_by_hand() -> None:
         "sensor_msgs::msg::dds_::JointState_/RIHS01_ab/::,10:,:,:,,"
     )
     assert graph.GraphNode(0, "z", 0, "/", "n").token() == "@ros2_lv/0/z/0/0/NN/%/%/n"
+
+
+def test_diagnostics_warn_on_the_loops_light_not_on_one_overrun(messages: Messages) -> None:
+    from app.control.timing import TimingStats
+
+    one = Snapshot(mode="idle", loop_window=TimingStats(200, 200, 5, 0.01, 0.02, 0.5, 1, 2000, 5.2))
+    (status,) = _decode(messages, messages.diagnostics(one, 1.0), DIAGNOSTICS).status
+    assert status.level == 0  # one overrun in 2000 ticks: the light is green
+    bad = Snapshot(mode="jog", loop_window=TimingStats(200, 150, 5, 0.01, 8, 30, 400, 2000, 40))
+    (status,) = _decode(messages, messages.diagnostics(bad, 1.0), DIAGNOSTICS).status
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == 1 and status.message.startswith("the loop (red): 400 of 2000")
+    assert values["loop_health"] == "red"
