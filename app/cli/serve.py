@@ -26,6 +26,12 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser.add_argument("--host", help="bind address (default 127.0.0.1)")
     parser.add_argument("--http-port", type=int, help="HTTP port (default 8000)")
     parser.add_argument(
+        "--foxglove",
+        action="store_true",
+        default=None,
+        help="serve the robot live to Foxglove ([foxglove]: ws://127.0.0.1:8765; docs/foxglove.md)",
+    )
+    parser.add_argument(
         "--robot",
         help="where the control loop runs: embedded (default: a robot node started here as "
         "a child process), the Zenoh endpoint of a robot node elsewhere (e.g. "
@@ -61,7 +67,8 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
     link = {
         k: v for k, v in (("robot", args.robot), ("take_over", args.take_over)) if v is not None
     }
-    sections = (("hardware", hardware), ("server", server), ("link", link))
+    foxglove = {"enabled": True} if getattr(args, "foxglove", None) else {}
+    sections = (("hardware", hardware), ("server", server), ("link", link), ("foxglove", foxglove))
     return {key: value for key, value in sections if value}
 
 
