@@ -8,7 +8,8 @@ It reads one JSON command per line on stdin and answers one JSON line on stdout:
 - ``{"op": "topics"}``: the graph's topics and types (its liveliness query, as
   ``ros2 topic list -t``).
 - ``{"op": "subscribe", "topic": T, "type": pkg/msg/Name}``: from then on every message
-  is decoded by the SDK and printed as ``{"topic": T, "message": {...}, "received_s": ..}``.
+  is decoded by the SDK and printed as ``{"topic": T, "message": {...}, "received_s": ..}``
+  (``"type_hash"``: the key's hash instead of the SDK's, e.g. Humble's).
 - ``{"op": "publish", "topic": T, "type": ..., "message": {...}}``: one message, built
   from nested fields by the SDK's own types (type hash computed by the SDK from the
   definitions in tests/ros2/msg/, written from ROS 2's interface files).
@@ -138,6 +139,7 @@ def main() -> None:
                         router_ip=host,
                         router_port=port,
                         node_name="peer_listener",
+                        type_hash=command.get("type_hash"),  # Humble: TypeHashNotSupported
                     )
                 )
                 say({"op": op, "topic": topic, "key": subscribers[-1].keyexpr})

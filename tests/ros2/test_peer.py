@@ -601,3 +601,40 @@ def _rest(server, lease: str) -> None:
             return False
 
     wait_for(torque, "torque on at rest")
+
+
+@pytest.mark.parametrize("form", ["humble", "bridge"])
+def test_humbles_keys_and_the_bridges(tmp_path: Path, form: str) -> None:
+    """Humble's rmw_zenoh (TypeHashNotSupported in the keys): the SDK subscribes with it;
+    zenoh-bridge-ros2dds's keys (the topic's name): a plain Zenoh subscriber reads them and
+    mcap-ros2-support decodes the CDR."""
+    env = (
+        {"DELTADASH_ROS2__DISTRO": "humble"}
+        if form == "humble"
+        else {"DELTADASH_ROS2__FORM": "bridge"}
+    )
+    with ros_robot(tmp_path, **env) as (node, peer, domain):
+        if form == "humble":
+            found = peer.ask(
+                op="subscribe",
+                topic="/joint_states",
+                type=JOINT_STATE,
+                type_hash=graph.NO_HASH,
+            )
+            assert found["key"].endswith(
+                "/sensor_msgs::msg::dds_::JointState_/TypeHashNotSupported"
+            )
+            wait_for(lambda: len(peer.messages("/joint_states")) >= 5, "Humble's joint states")
+            return
+        raw: list[zenoh.Sample] = []
+        config, cleanup = zenoh_config(LinkSettings(), connect=node.endpoint)
+        session = zenoh.open(config)
+        try:
+            session.declare_subscriber("joint_states", raw.append)
+            wait_for(lambda: len(raw) >= 5, "the bridge's joint_states")
+        finally:
+            session.close()
+            cleanup()
+        message = decoder(JOINT_STATE)(raw[-1].payload.to_bytes())
+        assert message.name == ["delta_joint_1", "delta_joint_2", "delta_joint_3"]
+        assert raw[-1].attachment is None  # the bridge's form carries none
