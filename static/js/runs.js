@@ -173,7 +173,7 @@ function runRow(run) {
   const t = run.stats && (run.stats.world || run.stats.tracking);
   const under = t ? ["x", "y", "z"].map((a) => `${fixed(100 * t[a].share_under_1mm, 0)}%`).join(" / ") : "–";
   const base = `/api/runs/${encodeURIComponent(run.run_id)}`;
-  const links = [["report.png", "report"], ["report.pdf", "PDF"], ["log.mcap", "MCAP"], ["log.ros2.mcap", "ROS 2"], ["log.csv", "CSV"]]
+  const links = [["report.png", "report"], ["report.pdf", "PDF"], ["log.mcap", "MCAP"], ["log.csv", "CSV"]]
     .filter(([name]) => !name.startsWith("report") || run.has_report)
     .map(([name, label]) => `<a href="${base}/${name}" target="_blank" rel="noopener"` +
       `${name === "report.png" ? ` class="report" data-run="${escape(run.run_id)}"` : ""}>${label}</a>`)

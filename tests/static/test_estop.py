@@ -86,8 +86,11 @@ def press_estop(page: Any, server: Server, how: str) -> float:
         ),
         f"the press by {how} through both paths",
     )
-    assert server.get("/api/status")["estop_received_unix_s"] == min(arrivals.values()) == received
-    return received * 1e3 - record["event_unix_ms"]
+    # the status names the earliest arrival: the listener's (in the robot node) may be seen
+    # a node status (0.1 s) after the middleware's, though it came first
+    first = server.get("/api/status")["estop_received_unix_s"]
+    assert first == min(arrivals.values()) <= received
+    return first * 1e3 - record["event_unix_ms"]
 
 
 def plots_running(page: Any) -> Any:
