@@ -28,13 +28,15 @@ from app.cli import (
     serve,
     tune,
 )
+from app.cli.numbers import allow_negative_numbers
 from kinematics import DeltaError
 
 DESCRIPTION = """\
 Teleoperate and test a Delta robot: the control server and its dashboard page, test
 runs, design tools, a servo emulator and the kinematics. ik and fk speak mm and degrees
 (--si for metres and radians); the other commands give each option's unit in their
-help; the API and every --json output are SI (m, rad, s)."""
+help; the API and every --json output are SI (m, rad, s). A decimal comma is read as a
+decimal point everywhere (10,5 is 10.5), as on the page."""
 
 EPILOG = """\
 examples:
@@ -69,6 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate.add_parser(commands)
     tune.add_parser(commands)
     kinematics.add_parsers(commands)
+    allow_negative_numbers(parser)  # -0,5 and -2e-3 are values, as -5 is
     return parser
 
 

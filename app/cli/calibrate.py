@@ -34,6 +34,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from app.cli.numbers import number
+
 _EPILOG = (
     "Exit 0: fitted (and written when asked); 1: the run failed or the fit was refused; "
     "2: bad input or the server refused; 130: Ctrl-C (the run is aborted: the arm holds)."
@@ -72,7 +74,7 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--plate-z",
-        type=float,
+        type=number,
         metavar="MM",
         help="the plate's height in the base frame [mm] (negative), with --probe",
     )

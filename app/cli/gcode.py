@@ -32,6 +32,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from app.cli.numbers import number
+
 _EPILOG = (
     "Exit 0: the program passes every check; 1: it has violations; 2: it cannot be read "
     "(the line and word are named) or bad input. The subset and the frames: docs/gcode.md."
@@ -60,7 +62,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     check.add_argument(
         "--start",
         nargs=3,
-        type=float,
+        type=number,
         metavar=("X_MM", "Y_MM", "Z_MM"),
         help="where the tool starts, in millimetres in the base frame (z < 0 below the "
         "base), e.g. --start 0 0 -240 (default programs.start_m, which is in metres)",
@@ -68,7 +70,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     check.add_argument(
         "--work-offset",
         nargs=3,
-        type=float,
+        type=number,
         metavar=("X_MM", "Y_MM", "Z_MM"),
         help="G54: the program origin in the base frame, in millimetres "
         "(default programs.work_offset_m)",
@@ -106,7 +108,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     run.add_argument(
         "--work-offset",
         nargs=3,
-        type=float,
+        type=number,
         metavar=("X", "Y", "Z"),
         help="G54: the program origin in the base frame [mm] (default programs.work_offset_m)",
     )

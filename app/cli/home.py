@@ -16,6 +16,8 @@ import argparse
 import math
 import sys
 
+from app.cli.numbers import number
+
 
 def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = commands.add_parser(
@@ -26,7 +28,7 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser.add_argument("--baud", type=int, help="baud rate (default from the config)")
     parser.add_argument(
         "--angles-deg",
-        type=float,
+        type=number,
         nargs=3,
         default=[0.0, 0.0, 0.0],
         metavar=("J1", "J2", "J3"),

@@ -19,9 +19,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import re
 import sys
 from typing import Any
+
+from app.cli.numbers import parse_number
 
 # unit word -> (kind, factor to SI)
 _UNITS = {
@@ -33,7 +34,8 @@ _UNITS = {
 _MARGIN_M = 1e-5  # the nearest point printed to 0.001 mm must itself be reachable
 _EPILOG = (
     "Numbers are mm (ik) and degrees (fk) unless --si; a unit after a number (mm, m, deg, "
-    "rad) wins, so ik's output pastes into fk and back. Exit 0: answered; 1: no answer "
+    "rad) wins, so ik's output pastes into fk and back. A decimal comma is read as a "
+    "decimal point (10,5 is 10.5, as on the page). Exit 0: answered; 1: no answer "
     "(outside the workspace or the joint limits); 2: refused or bad input."
 )
 
@@ -76,19 +78,16 @@ def _common(parser: argparse.ArgumentParser) -> None:
 def parse_values(tokens: list[str], kind: str, default_unit: str) -> list[float]:
     """Three SI values from command-line tokens: numbers, each optionally followed by a unit.
 
-    ``["0", "0", "-240", "mm"]``, ``["30.1deg,", "30.1", "deg"]`` and ``["(1,", "2,", "3)"]``
-    are read; commas ending a word and parentheses are ignored (pasted tuples). A comma
-    between digits (``12,5``) is refused: a decimal comma must never become two numbers.
-    ``kind``: "length" or "angle"; ``default_unit`` applies to a number with no unit after it.
+    ``["0", "0", "-240", "mm"]``, ``["30.1deg,", "30.1", "deg"]``, ``["(1,", "2,", "3)"]``
+    and ``["10,5", "0", "-240"]`` are read: commas ending a word and parentheses are ignored
+    (pasted tuples), and a comma between digits is a decimal comma (``10,5`` is 10.5, as on
+    the page; app/cli/numbers.py); a word with two separators (``1,2,3``, ``1,234.5``) is
+    refused, never read as several numbers. ``kind``: "length" or "angle"; ``default_unit``
+    applies to a number with no unit after it.
 
     Raises:
-        UnitError: a decimal comma, a word that is neither a number nor a unit of ``kind``,
-            or not 3 numbers.
+        UnitError: a word that is neither a number nor a unit of ``kind``, or not 3 numbers.
     """
-    for token in tokens:
-        if re.search(r"\d,\d", token):
-            fixed = re.sub(r"(\d),(\d)", r"\1.\2", token)
-            raise UnitError(f"{token!r}: write a decimal point ({fixed}), not a comma")
     words = [w.strip("(),") for t in tokens for w in t.split()]
     numbers: list[list[Any]] = []  # [value, unit or None]
     for word in filter(None, words):
@@ -97,8 +96,13 @@ def parse_values(tokens: list[str], kind: str, default_unit: str) -> list[float]
             numbers.append([number, unit])
         elif unit is not None and numbers and numbers[-1][1] is None:
             numbers[-1][1] = unit
+        elif unit is not None:
+            raise UnitError(f"{word!r} follows no number")
         else:
-            raise UnitError(f"cannot read {word!r} as a number or a unit")
+            try:
+                parse_number(word)
+            except ValueError as exc:  # its reason: not a number, or two separators
+                raise UnitError(f"{exc}; a unit is mm, m, deg or rad") from None
     if len(numbers) != 3:
         raise UnitError(f"expected 3 numbers, got {len(numbers)}")
     values = []
@@ -117,16 +121,14 @@ def _split(word: str) -> tuple[float | None, str | None]:
         if word == unit:
             return None, unit
         if word.endswith(unit):
-            head = word[: -len(unit)]
             try:
-                return float(head), unit
+                return parse_number(word[: -len(unit)]), unit
             except ValueError:
                 pass
     try:
-        value = float(word)
+        return parse_number(word), None
     except ValueError:
         return None, None
-    return (value, None) if math.isfinite(value) else (None, None)
 
 
 def _length(value_m: float, si: bool) -> str:

@@ -1,5 +1,9 @@
 """``deltadash run sinusoid``: the thesis's tracking test from the command line.
 
+Its options speak mm, degrees and Hz, as ik, fk, gcode and the page do (``--si``: metres and
+radians); a decimal comma is a decimal point (app/cli/numbers.py). What it sends to the
+server and what it runs are SI, as the API.
+
 Against a running server (``--url``), or headless: an in-process controller on the
 simulated robot, no server needed. Prints the per-axis statistics and where the log and
 report are.
@@ -16,10 +20,12 @@ import time
 import urllib.error
 import urllib.request
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from app.cli.numbers import number
 from app.cli.progress import Progress
 from app.runs.health import summary
 from app.runs.trajectories import SinusoidParams
@@ -28,37 +34,71 @@ _D = SinusoidParams()
 FILES = ("log.mcap", "log.ros2.mcap", "log.csv", "report.png", "report.pdf")
 
 
+# The run options speak mm and degrees as ik, fk, gcode and the page do; --si: metres, radians
+# (option -> (the SinusoidParams field, "length" / "angle" / its fixed unit)).
+_OPTIONS = {
+    "amplitude": ("amplitude_m", "length"),
+    "frequency": ("frequency_hz", "Hz"),
+    "phase": ("phase_rad", "angle"),
+    "offset": ("offset_m", "length"),
+}
+_SCALE = {"length": (1e-3, "mm", "m"), "angle": (math.pi / 180, "deg", "rad")}
+# A length option whose every non-zero value is under this [mm] reads as metres typed where
+# mm are expected (--amplitude 0.05 0.05 0.08): refused, with the mm to give and --si named.
+# Below an encoder count at the tip (0.3-0.45 mm on the twin) a run measures nothing anyway;
+# with --si such a value is taken as given.
+METRES_LIKELY_MM = 0.5
+_EPILOG = (
+    "Lengths are mm and angles degrees, as for ik, fk and gcode (--si: metres and radians; "
+    "frequencies are Hz, durations s either way); a decimal comma is read as a decimal point "
+    f"(12,5 is 12.5). A length option whose non-zero values are all under {METRES_LIKELY_MM:g} "
+    "mm looks like metres and is refused (give mm, or add --si). --json prints SI, as the API."
+)
+
+
 def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     run = commands.add_parser("run", help="run a test trajectory and print its error stats")
     kinds = run.add_subparsers(dest="kind", required=True)
-    sine = kinds.add_parser("sinusoid", help="per-axis sinusoid (thesis ch. 6.1 defaults)")
-    options = [
-        ("amplitude", _D.amplitude_m, "m"),
-        ("frequency", _D.frequency_hz, "Hz"),
-        ("phase", _D.phase_rad, "rad"),
-        ("offset", _D.offset_m, "m"),
-    ]
-    for name, default, unit in options:
+    sine = kinds.add_parser(
+        "sinusoid",
+        help="per-axis sinusoid (thesis ch. 6.1 defaults), in mm, deg and Hz",
+        description="p(t) = offset + amplitude sin(2 pi frequency t + phase), per axis "
+        "(x, y, z in the base frame), for --duration s; then the error statistics.",
+        epilog=_EPILOG,
+    )
+    for name, (field, kind) in _OPTIONS.items():
         sine.add_argument(
             f"--{name}",
-            type=float,
+            type=number,
             nargs=3,
-            default=list(default),
             metavar=("X", "Y", "Z"),
-            help=f"per axis [{unit}] (default {default})",
+            help=f"per axis {_unit_help(kind)} (default {_default(field, kind)})",
         )
-    sine.add_argument("--duration", type=float, default=_D.duration_s, help="timed part [s]")
+    sine.add_argument(
+        "--duration",
+        type=number,
+        default=_D.duration_s,
+        metavar="S",
+        help="the timed part [s] (default %(default)g)",
+    )
     sine.add_argument(
         "--phi-amplitude",
-        type=float,
-        default=_D.phi_amplitude_rad,
-        help="with a [wrist]: the wrist's sinusoid amplitude [rad] (default 0: left alone)",
+        type=number,
+        metavar="A",
+        help="with a [wrist]: the wrist's sinusoid amplitude [deg; rad with --si] (default 0: "
+        "left alone)",
     )
     sine.add_argument(
         "--phi-frequency",
-        type=float,
+        type=number,
         default=_D.phi_frequency_hz,
-        help="the wrist's sinusoid frequency [Hz]",
+        metavar="F",
+        help="the wrist's sinusoid frequency [Hz] (default %(default)g)",
+    )
+    sine.add_argument(
+        "--si",
+        action="store_true",
+        help="lengths in metres and angles in radians instead of mm and deg",
     )
     sine.add_argument("--feedforward", action="store_true", help="command the path ahead")
     sine.add_argument("--url", help="a running server, e.g. http://127.0.0.1:8000")
@@ -73,16 +113,60 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return run
 
 
+def _unit_help(kind: str) -> str:
+    if kind in _SCALE:
+        _, shown, si = _SCALE[kind]
+        return f"[{shown}; {si} with --si]"
+    return f"[{kind}]"
+
+
+def _default(field: str, kind: str) -> str:
+    """SinusoidParams' default of ``field`` as the help shows it (in mm or deg)."""
+    values = getattr(_D, field)
+    if kind in _SCALE:
+        factor, shown, _ = _SCALE[kind]
+        return " ".join(f"{v / factor:g}" for v in values) + f" {shown}"
+    return " ".join(f"{v:g}" for v in values) + f" {kind}"
+
+
+def _si(option: str, values: list[float] | None, kind: str, si: bool) -> tuple[float, ...] | None:
+    """An option's values in SI (None: not given). Refuses (ValueError) a length in mm whose
+    every non-zero value is under METRES_LIKELY_MM: metres given where mm are expected."""
+    if values is None:
+        return None
+    if kind not in _SCALE or si:
+        return tuple(values)
+    factor, shown, _ = _SCALE[kind]
+    moving = [abs(v) for v in values if v != 0.0]
+    if kind == "length" and moving and max(moving) < METRES_LIKELY_MM:
+        given = " ".join(f"{v:g}" for v in values)
+        as_mm = " ".join(f"{v * 1e3:g}" for v in values)
+        raise ValueError(
+            f"--{option} {given}: every non-zero value under {METRES_LIKELY_MM:g} mm looks like "
+            "metres; "
+            f"the run options are in mm: for {given} m give --{option} {as_mm}, or add --si"
+        )
+    return tuple(v * factor for v in values)
+
+
 def _params(args: argparse.Namespace) -> SinusoidParams:
-    return SinusoidParams(
-        tuple(args.amplitude),
-        tuple(args.frequency),
-        tuple(args.phase),
-        tuple(args.offset),
-        args.duration,
-        args.feedforward,
-        args.phi_amplitude,
-        args.phi_frequency,
+    """The run's parameters in SI from the options (mm and deg, or SI with ``--si``);
+    an option not given is SinusoidParams' default. Raises ValueError (see ``_si``)."""
+    given = {}
+    for name, (field, kind) in _OPTIONS.items():
+        value = _si(name, getattr(args, name), kind, args.si)
+        if value is not None:
+            given[field] = value
+    phi = None if args.phi_amplitude is None else [args.phi_amplitude]
+    phi_rad = _si("phi-amplitude", phi, "angle", args.si)
+    if phi_rad is not None:
+        given["phi_amplitude_rad"] = phi_rad[0]
+    return replace(
+        _D,
+        duration_s=args.duration,
+        feedforward=args.feedforward,
+        phi_frequency_hz=args.phi_frequency,
+        **given,
     )
 
 

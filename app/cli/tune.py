@@ -19,6 +19,7 @@ import sys
 import time
 from typing import Any
 
+from app.cli.numbers import number
 from app.procedures.states import TUNING_RUNNING
 
 _EPILOG = (
@@ -43,10 +44,10 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "--joints", type=int, nargs="+", default=[1, 2, 3], help="joints to tune (default 1 2 3)"
     )
     parser.add_argument(
-        "--bandwidth", type=float, default=20.0, help="target bandwidth [Hz] (default 20)"
+        "--bandwidth", type=number, default=20.0, help="target bandwidth [Hz] (default 20)"
     )
     parser.add_argument(
-        "--overshoot", type=float, default=5.0, help="largest step overshoot [%%] (default 5)"
+        "--overshoot", type=number, default=5.0, help="largest step overshoot [%%] (default 5)"
     )
     parser.add_argument("--apply", action="store_true", help="apply the suggested gains")
     parser.add_argument(

@@ -13,6 +13,7 @@ import math
 
 from app.cli.design import synth, workspace
 from app.cli.design.arguments import common, emit, mass_args, mass_from, robot_from
+from app.cli.numbers import number
 
 # The maths (numpy, scipy, the report) is imported by each handler, not here: building the
 # parser must stay cheap so that ``deltadash --help``, ``ik`` and ``fk`` start fast.
@@ -44,12 +45,12 @@ def _dynamics_parser(commands: argparse._SubParsersAction) -> None:
         description="Inverse dynamics (thesis eq. 3.89-3.125): the three "
         "torques, positive towards positive theta (link down).",
     )
-    p.add_argument("--point", type=float, nargs=3, default=[0.0, 0.0, -0.25], help="P [m]")
-    p.add_argument("--velocity", type=float, nargs=3, default=[0.0, 0.0, 0.0], help="[m/s]")
-    p.add_argument("--acceleration", type=float, nargs=3, default=[0.0, 0.0, 0.0], help="[m/s^2]")
+    p.add_argument("--point", type=number, nargs=3, default=[0.0, 0.0, -0.25], help="P [m]")
+    p.add_argument("--velocity", type=number, nargs=3, default=[0.0, 0.0, 0.0], help="[m/s]")
+    p.add_argument("--acceleration", type=number, nargs=3, default=[0.0, 0.0, 0.0], help="[m/s^2]")
     p.add_argument(
         "--gravity",
-        type=float,
+        type=number,
         nargs=3,
         default=[0.0, 0.0, -9.81],
         help="gravity in the base frame [m/s^2] (a tilted drone rotates it)",
@@ -95,7 +96,7 @@ def _size_parser(commands: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--region",
-        type=float,
+        type=number,
         nargs=6,
         metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
         default=[*_THESIS_CUBE[0], *_THESIS_CUBE[1]],
@@ -104,13 +105,13 @@ def _size_parser(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--grid", type=int, default=9, help="grid points per axis (9)")
     p.add_argument(
         "--margin",
-        type=float,
+        type=number,
         default=0.0,
         help="skip points nearer than this to the boundary [m] (0)",
     )
-    p.add_argument("--acceleration", type=float, default=4.0, help="[m/s^2] (4)")
-    p.add_argument("--speed", type=float, default=0.5, help="[m/s] (0.5)")
-    p.add_argument("--tilt", type=float, default=90.0, help="drone tilt limit [deg] (90)")
+    p.add_argument("--acceleration", type=number, default=4.0, help="[m/s^2] (4)")
+    p.add_argument("--speed", type=number, default=0.5, help="[m/s] (0.5)")
+    p.add_argument("--tilt", type=number, default=90.0, help="drone tilt limit [deg] (90)")
     p.add_argument(
         "--servo",
         choices=sorted(SERVOS),
@@ -118,8 +119,8 @@ def _size_parser(commands: argparse._SubParsersAction) -> None:
         help="XM430-W210 datasheet line at 12 V (3.0 N m, 77 rpm), 11.1 V "
         "(2.7 N m, 70 rpm) or the thesis's (2 N m, 72 rpm)",
     )
-    p.add_argument("--stall", type=float, help="custom servo stall torque [N m]")
-    p.add_argument("--no-load", type=float, help="custom servo no-load speed [rpm]")
+    p.add_argument("--stall", type=number, help="custom servo stall torque [N m]")
+    p.add_argument("--no-load", type=number, help="custom servo no-load speed [rpm]")
     common(p)
     mass_args(p)
     p.set_defaults(handler=_size)

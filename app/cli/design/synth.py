@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 from app.cli.design.arguments import common, emit
+from app.cli.numbers import number
 from app.cli.progress import Progress
 from kinematics.synthesis import (
     THESIS_PLATFORM_RADIUS_M,
@@ -28,14 +29,14 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--size",
-        type=float,
+        type=number,
         nargs=3,
         default=[0.22, 0.22, 0.22],
         help="box edges [m] (20 cm + 1 cm margin each side)",
     )
     p.add_argument(
         "--extra",
-        type=float,
+        type=number,
         nargs=3,
         action="append",
         help="extra point [m], repeatable (default 0 0 -0.075)",
@@ -44,14 +45,14 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     for name in ("L", "l", "Rbar", "H"):
         p.add_argument(
             f"--bounds-{name}",
-            type=float,
+            type=number,
             nargs=2,
             default=list(getattr(b, name)),
             help=f"search interval of {name} [m] (Table 4.2: {getattr(b, name)})",
         )
     p.add_argument(
         "--r",
-        type=float,
+        type=number,
         default=THESIS_PLATFORM_RADIUS_M,
         help="platform radius for the config, R = Rbar + r [m] (0.038)",
     )

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from app.cli.design.arguments import common, emit, robot_from
+from app.cli.numbers import number
 from kinematics import RotaryDelta
 from kinematics.analysis import largest_region, workspace_volume
 
@@ -21,14 +22,14 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--z",
-        type=float,
+        type=number,
         default=-0.1903,
         help="height of the region's centre (or top, --anchor top) [m] (-0.1903)",
     )
     p.add_argument("--anchor", choices=["centre", "top"], default="centre")
     p.add_argument(
         "--proportions",
-        type=float,
+        type=number,
         nargs=3,
         default=[1.0, 1.0, 1.0],
         help="box edges x:y:z; the cylinder uses diameter x : height z (1 1 1)",
@@ -36,7 +37,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--cells", type=int, default=120, help="grid cells per axis for the volume")
     p.add_argument(
         "--sections",
-        type=float,
+        type=number,
         nargs="*",
         default=[-0.15, -0.25, -0.35],
         help="z of the x-y sections [m]",

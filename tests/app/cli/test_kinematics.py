@@ -93,13 +93,40 @@ def test_ik_says_which_joint_limit_a_reachable_point_needs_to_break(capsys):
         (["fk", "30", "30", "30", "mm"], "expected deg or rad"),
         (["ik", "0", "-240"], "expected 3 numbers, got 2"),
         (["fk", "30", "x", "30"], "'x'"),
-        (["ik", "12,5", "-240"], "write a decimal point (12.5)"),  # never 12 and 5
-        (["ik", "0", "0,5", "-240"], "(0.5)"),
+        (["ik", "12,5", "-240"], "expected 3 numbers, got 2"),  # 12.5, never 12 and 5
+        (["ik", "1,2,3"], "'1,2,3' is not one number"),  # never three numbers
+        (["ik", "0", "1,234.5", "-240"], "'1,234.5' is not one number"),
+        (["fk", "30", "30", "mm30"], "'mm30' is not a number"),
+        (["ik", "0", "mm", "mm", "-240"], "'mm' follows no number"),
     ],
 )
 def test_bad_input_is_refused_with_its_reason(capsys, argv, words):
     assert main(argv) == 2
     assert words in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["ik", "10,5", "0", "-240", "--json"],
+        ["ik", "10.5", "0", "-240", "--json"],
+        ["ik", "(10,5,", "0,", "-240)", "--json"],  # a pasted tuple with a decimal comma
+        ["ik", "10,5mm", "0", "-240,0", "mm", "--json"],
+        ["ik", "0,0105", "0", "-0,24", "--si", "--json"],
+    ],
+)
+def test_a_decimal_comma_is_a_decimal_point_as_on_the_page(capsys, argv):
+    # issue 32 item 7: `deltadash ik 10,5 0 -240` was refused while the page took it
+    assert main(argv) == 0
+    assert json.loads(capsys.readouterr().out)["point_m"] == pytest.approx([0.0105, 0, -0.24])
+
+
+def test_a_negative_decimal_comma_is_a_number_not_an_option(capsys):
+    assert main(["ik", "-10,5", "0", "-240", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["point_m"] == pytest.approx([-0.0105, 0, -0.24])
+    assert main(["fk", "-2,5", "10", "20,25", "--json"]) == 0
+    joints = json.loads(capsys.readouterr().out)["joints_rad"]
+    assert joints == pytest.approx([math.radians(v) for v in (-2.5, 10, 20.25)])
 
 
 def test_the_fast_path_uses_the_configs_defaults():
