@@ -20,7 +20,7 @@ from app.programs.errors import ProgramError
 from app.programs.modal import interpret
 from app.programs.planner import PlanLimits, ProgramPath, plan_program
 from app.programs.tokens import iter_lines, program_lines
-from app.programs.verify import Verification, VerifyLimits, Violation, verify_path
+from app.programs.verify import Verification, VerifyLimits, Violation, fold, verify_path
 from kinematics.dynamics import THESIS_MASS, MassModel
 from kinematics.sizing import XM430_W210_12V
 
@@ -28,12 +28,14 @@ from kinematics.sizing import XM430_W210_12V
 @dataclass(frozen=True)
 class ProgramReport:
     """The check's answer. ok: no violation; duration_s [s] and length_m [m] of the
-    planned path; violations (by time); path_m: the path decimated for drawing (M, 3) [m];
-    path_lines: the program line of each path_m point (M,) (None where nothing moves);
-    peaks over the samples: joint speed [rad/s] and acceleration [rad/s^2], lowest
-    1/cond(J), highest torque ratio (None: no torque model for this robot); lines,
-    segments, samples, period_s [s], chord_tolerance_m [m]; start_m and work_offset_m
-    (G54) [m] as used; notes: what the operator should know (M0 pauses, G64)."""
+    planned path; violations by move (app/programs/verify.py fold: each program line's
+    first cause, then the line's others with folded_under its index); path_m: the path
+    decimated for drawing (M, 3) [m]; path_lines: the program line of each path_m point
+    (M,) (None where nothing moves); peaks over the samples: joint speed [rad/s] and
+    acceleration [rad/s^2], lowest 1/cond(J), highest torque ratio (None: no torque model
+    for this robot); lines, segments, samples, period_s [s], chord_tolerance_m [m];
+    start_m and work_offset_m (G54) [m] as used; notes: what the operator should know
+    (M0 pauses, G64)."""
 
     ok: bool
     duration_s: float
@@ -241,6 +243,7 @@ def check_program(
     violations = list(result.violations)
     if beyond_run is not None:
         violations = sorted([*violations, beyond_run], key=lambda v: v.t_s)
+    violations = fold(violations)  # by move: its first cause, the others folded under it
     drawn = _decimated(len(points), programs.path_points)
     report = ProgramReport(
         ok=not violations,

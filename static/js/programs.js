@@ -1,6 +1,7 @@
 // The program panel: paste or open a G-code program, Check it (POST /api/programs/check: the
 // whole path verified in joint space on the virtual robot, nothing moves), see its violations
-// by line (a click marks the line in the text), Run it once a check of this very text passed
+// by line, each line's first cause with the others folded under it (a click marks the line in
+// the text), Run it once a check of this very text passed
 // (POST /api/programs/run), Abort it (POST /api/runs/{id}/abort). While a program runs, the
 // line being executed (its progress "program_line" in GET /api/runs) is highlighted.
 //
@@ -124,12 +125,35 @@ function figures(report) {
   return [...rows, ...notes].map(([k, v]) => `<dt>${escape(k)}</dt><dd>${escape(v)}</dd>`).join("");
 }
 
+// The violations by move, as the server lists them (each line's first cause, then the others
+// with folded_under its index): one row per first cause, with a "+N more" button that unfolds
+// the others (rows hidden until then). A violation without folded_under is a first cause.
+const isFolded = (v) => Number.isInteger(v.folded_under);
+
 function violationRows(violations) {
-  return violations.map((v) =>
-    `<tr data-line="${v.line}" tabindex="0" title="click: mark line ${v.line} in the program">` +
-    `<td>${v.line}</td><td>${escape(v.kind)}</td>` +
-    `<td>${escape(metresToMm(v.message))}${Array.isArray(v.point_m) ? ` <span class="muted">at ${mmPoint(v.point_m)}</span>` : ""}</td>` +
-    `<td class="num">${fixed(v.t_s, 3)}</td></tr>`).join("");
+  const more = new Map(); // index of a first cause -> how many are folded under it
+  for (const v of violations) if (isFolded(v)) more.set(v.folded_under, (more.get(v.folded_under) || 0) + 1);
+  return violations.map((v, k) => {
+    const folded = isFolded(v);
+    const count = more.get(k) || 0;
+    const fold = count ? ` <button type="button" class="prog-more" data-more="${k}" aria-expanded="false"` +
+      ` title="the ${count} other finding${count === 1 ? "" : "s"} of line ${v.line} (after its first cause)">+${count} more</button>` : "";
+    return `<tr data-line="${v.line}" data-index="${k}"${folded ? ` data-folded-under="${v.folded_under}" class="folded" hidden` : ""}` +
+      ` tabindex="0" title="click: mark line ${v.line} in the program">` +
+      `<td>${v.line}</td><td>${escape(v.kind)}</td>` +
+      `<td>${folded ? "↳ " : ""}${escape(metresToMm(v.message))}${Array.isArray(v.point_m) ? ` <span class="muted">at ${mmPoint(v.point_m)}</span>` : ""}${fold}</td>` +
+      `<td class="num">${fixed(v.t_s, 3)}</td></tr>`;
+  }).join("");
+}
+
+// Show or hide the violations folded under the first cause of ``button`` (its "+N more").
+function toggleFold(button) {
+  const open = button.getAttribute("aria-expanded") !== "true";
+  document.querySelectorAll(`#prog-violation-rows tr[data-folded-under="${button.dataset.more}"]`)
+    .forEach((tr) => { tr.hidden = !open; });
+  button.setAttribute("aria-expanded", String(open));
+  const count = button.textContent.match(/\d+/)[0];
+  button.textContent = open ? `fold ${count}` : `+${count} more`;
 }
 
 function showViolations(violations) {
@@ -143,8 +167,10 @@ function showReport(report, text) {
   checked = { text, report };
   const n = report.violations.length;
   const lines = new Set(report.violations.map((v) => v.line)).size;
+  const folded = report.violations.filter(isFolded).length;
   setResult(report.ok ? `passes: ${fixed(report.duration_s, 2)} s, path ${fixed(report.length_m * 1000, 1)} mm` :
-    `fails: ${n} violation${n === 1 ? "" : "s"} on ${lines} line${lines === 1 ? "" : "s"}`, report.ok ? "ok" : "bad", true);
+    `fails: ${n} violation${n === 1 ? "" : "s"} on ${lines} line${lines === 1 ? "" : "s"}` +
+    (folded ? ` (the first cause of each shown, ${folded} more folded under them)` : ""), report.ok ? "ok" : "bad", true);
   document.getElementById("prog-figures").innerHTML = figures(report);
   showViolations(report.violations);
   markLine(null);
@@ -289,6 +315,8 @@ async function openFile(event) {
 }
 
 function onViolationClick(event) {
+  const button = event.target.closest("button[data-more]");
+  if (button) toggleFold(button); // and the line is marked, as a click on its row does
   const row = event.target.closest("tr[data-line]");
   if (row) markLine(Number(row.dataset.line));
 }
@@ -304,7 +332,8 @@ export function startPrograms() {
   document.getElementById("prog-file").addEventListener("change", openFile);
   const rows = document.getElementById("prog-violation-rows");
   rows.addEventListener("click", onViolationClick);
-  rows.addEventListener("keydown", (event) => { if (event.key === "Enter") onViolationClick(event); });
+  // (Enter on a "+N more" button is its own click)
+  rows.addEventListener("keydown", (event) => { if (event.key === "Enter" && !event.target.closest("button")) onViolationClick(event); });
   renderGutter();
   updateButtons();
   pollRuns();

@@ -75,7 +75,11 @@ def test_a_move_too_fast_for_the_joints_is_refused_at_its_line(settings):
     report = check_program(text, slow).report
     assert {v.line for v in report.violations} == {2}
     (speed,) = [v for v in report.violations if v.kind == "joint_speed"]
-    assert "above the limit 1.00 rad/s" in speed.message
+    assert "over the speed limit 1.00 rad/s" in speed.message
+    # the value reached and by how much: the peak (the line's worst), less the limit
+    reached = f"turns at {report.peak_joint_speed_rad_s:.2f} rad/s, "
+    assert reached in speed.message
+    assert f"{report.peak_joint_speed_rad_s - 1.0:.2f} rad/s over" in speed.message
     assert report.peak_joint_speed_rad_s > 1.0
     # the same program at the default limit passes: the speed is what failed
     assert check_program(text, settings).report.ok
@@ -86,8 +90,14 @@ def test_every_failing_check_is_reported_not_only_the_first(settings):
     report = check_program("G90 G1 F1200 Z-220\nX10", heavy).report
     assert {"torque", "joint_acceleration"} <= {v.kind for v in report.violations}
     assert {v.line for v in report.violations} == {1, 2}
-    times = [v.t_s for v in report.violations]
-    assert times == sorted(times)
+    # by move: line by line, each line's first cause first, the others folded under it
+    lines = [v.line for v in report.violations]
+    assert lines == sorted(lines)
+    for k, v in enumerate(report.violations):
+        if v.folded_under is None:
+            assert k == 0 or report.violations[k - 1].line != v.line
+        else:
+            assert report.violations[v.folded_under].line == v.line
 
 
 def test_a_work_offset_and_start_are_used(settings):

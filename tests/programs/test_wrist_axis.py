@@ -203,4 +203,19 @@ def test_the_check_names_a_wrist_sample_too_fast_or_beyond_its_limits(settings) 
     assert {(2, "wrist_speed"), (3, "wrist_speed"), (3, "wrist_limit")} <= found
     assert not any(v.line == 1 for v in result.violations)
     (limit,) = [v for v in result.violations if v.kind == "wrist_limit"]
-    assert "11.46 deg outside its limits" in limit.message  # 0.2 rad past 2.0
+    # 2.2 rad (126.05 deg), 0.2 rad (11.46 deg) past the upper limit 2.0 rad (114.59 deg)
+    assert limit.message == (
+        "the wrist reaches 126.1 deg, 11.5 deg beyond its upper limit 114.6 deg"
+    )
+    (jump,) = [v for v in result.violations if (v.line, v.kind) == (2, "wrist_speed")]
+    most = gate.wrist_max_step_rad / dt  # 0.5 rad in one 5 ms sample: 100 rad/s
+    assert jump.message == (
+        f"the wrist turns at 100.00 rad/s, {100.0 - most:.2f} rad/s over its limit {most:.2f} rad/s"
+    )
+    # on line 3 the angle is the first cause, the jump that took it there (and the joints'
+    # step: the tool turns about the platform) folded under it
+    folded = verify.fold(result.violations)
+    line3 = [(k, v) for k, v in enumerate(folded) if v.line == 3]
+    (k, first), *rest = line3
+    assert (first.kind, first.folded_under) == ("wrist_limit", None)
+    assert ("wrist_speed", k) in {(v.kind, v.folded_under) for _, v in rest}

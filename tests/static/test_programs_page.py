@@ -1,6 +1,7 @@
 """The dashboard's program panel in Debian's chromium against `deltadash serve` (issue 18).
 
-One page: a failing program checked (violations by line, a click marks the line), a passing
+One page: a failing program checked (violations by line: each line's first cause, the others
+folded under a "+N more" button; a click marks the line), a passing
 circle (Run enabled; an edit disables it until checked again), an unreadable program (its
 line and word), the running line of a program run (GET /api/runs answered by the test:
 the server side of runs is its own branch), and the keys: Space typed in the program text
@@ -12,6 +13,7 @@ examples start.
 from __future__ import annotations
 
 import json
+import re
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -164,6 +166,34 @@ def test_a_failing_program_shows_its_violations_by_line(page: Any, server: Serve
     assert lines == {5, 6}  # the climb through the ceiling and the way back (docs/gcode.md)
     assert "mm" in page.locator("#prog-violation-rows").inner_text()  # operator units
     assert page.locator("#prog-run").is_disabled()  # a failing program never runs
+
+    # one row per move's first cause (docs/gcode.md), the other five of each folded under it
+    shown = page.locator("#prog-violation-rows tr:not([hidden])")
+    first = "rs => rs.map(r => [r.dataset.line, r.cells[1].textContent])"
+    assert shown.evaluate_all(first) == [["5", "joint_limit"], ["6", "workspace"]]
+    # from where the robot holds (within 0.1 mm of the CLI's start): -76.6 deg, 42.2 beyond
+    said = shown.first.inner_text()
+    assert re.search(
+        r"joint 1 reaches -7\d\.\d deg, 4\d\.\d deg beyond its lower limit -34\.4 deg", said
+    )
+    assert "10 more folded" in answer
+    more = page.locator("#prog-violation-rows tr[data-line='5'] button[data-more]")
+    assert more.inner_text() == "+5 more"
+    more.click()  # unfolds line 5's others under its first cause (and marks line 5)
+    until(lambda: shown.count() == 7, "line 5 unfolded", lambda: shown.evaluate_all(first))
+    unfolded = shown.evaluate_all(first)
+    assert unfolded[0] == ["5", "joint_limit"] and unfolded[-1] == ["6", "workspace"]
+    assert {line for line, _ in unfolded[1:-1]} == {"5"}
+    assert {kind for _, kind in unfolded[1:-1]} == {
+        "workspace",
+        "joint_acceleration",
+        "torque",
+        "ik",
+        "ceiling",
+    }
+    assert more.get_attribute("aria-expanded") == "true" and more.inner_text() == "fold 5"
+    more.click()  # and folds them again
+    until(lambda: shown.count() == 2, "line 5 folded", lambda: shown.evaluate_all(first))
 
     page.locator("#prog-violation-rows tr[data-line='6']").first.click()
     until(lambda: marked_line(page) == "6", "line 6 marked", lambda: marked_line(page))

@@ -93,8 +93,13 @@ ViolationOut = model_of(
         "kind": "workspace, ceiling, ik, joint_limit, joint_speed, ...; wrist_limit and "
         "wrist_speed with a wrist; run_duration (longer than a run may be: runs.max_samples; "
         "/run refuses it in the same words)",
+        "message": "what, in words: the line's worst value, the limit and by how much "
+        "(lengths in mm, angles in deg, rates in rad/s and rad/s^2)",
         "t_s": "first offending sample, from the program's start [s]",
         "point_m": "its point in the base frame [m]",
+        "folded_under": "the index in this list of its move's first cause, under which it "
+        "is folded (a consequence, or more on the same line); null: a first cause (the "
+        "list is by move, each line's first cause first: docs/gcode.md)",
     },
     types={"point_m": list[float]},
 )
@@ -297,7 +302,7 @@ def _require_motion(controller) -> None:
 
 def _refused(checked: CheckedProgram) -> JSONResponse:
     violations = checked.report.to_dict()["violations"]
-    first = violations[0]
+    first = violations[0]  # by move (fold): the first bad line's first cause
     detail = (
         f"line {first['line']}: {first['kind']}: {first['message']} "
         f"({len(violations)} violation(s); the program was not run)"

@@ -40,8 +40,12 @@ def test_a_failing_program_is_a_200_naming_line_kind_time_and_point(client):
     body = ok_json(check(client, "G90 G1 F1200 Z-220\nZ-40\nZ-220", start_m=START))
     assert body["ok"] is False
     first = body["violations"][0]
-    assert set(first) == {"line", "kind", "message", "t_s", "point_m"}
+    assert set(first) == {"line", "kind", "message", "t_s", "point_m", "folded_under"}
     assert first["line"] == 2
+    # line 2 climbs through joint 1's lower limit first (link up), the rest folded under it
+    assert (first["kind"], first["folded_under"]) == ("joint_limit", None)
+    assert "deg beyond its lower limit" in first["message"]
+    assert all(v["folded_under"] == 0 for v in body["violations"][1:] if v["line"] == 2)
     assert {v["line"] for v in body["violations"]} <= {2, 3}
     ceiling = [v for v in body["violations"] if v["kind"] == "ceiling"]
     assert ceiling and ceiling[0]["point_m"][2] > -0.06
