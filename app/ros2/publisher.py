@@ -154,6 +154,12 @@ class RosPublisher:
         topic.sequence += 1
         topic.sent += 1
 
+    @staticmethod
+    def _wanted(topic: Topic) -> bool:
+        """Whether a subscriber matches ``topic`` now (a cached one, /tf_static: always)."""
+        status = getattr(topic.publisher, "matching_status", None)
+        return status is None or bool(status.matching)
+
     def _run(self) -> None:
         if self._setup is not None:
             with contextlib.suppress(Exception):
@@ -173,18 +179,27 @@ class RosPublisher:
                 if latest is None:
                     continue
                 snap, stamp = latest
-                self._put(self.joint_states, messages.joint_state(snap, stamp), stamp)
-                for topic, message in (
-                    (self.tf, messages.tf(snap, stamp)),
-                    (self.tip_pose, messages.tip_pose(snap, stamp)),
-                    (self.tip_world, messages.tip_world(snap, stamp, self._world_frame())),
+                # a message nobody subscribes to is not built (Zenoh knows who matches)
+                if self._wanted(self.joint_states):
+                    self._put(self.joint_states, messages.joint_state(snap, stamp), stamp)
+                if self._wanted(self.tf) and (tf := messages.tf(snap, stamp)) is not None:
+                    self._put(self.tf, tf, stamp)
+                if (
+                    self._wanted(self.tip_pose)
+                    and (tip := messages.tip_pose(snap, stamp)) is not None
                 ):
-                    if message is not None:
-                        self._put(topic, message, stamp)
+                    self._put(self.tip_pose, tip, stamp)
+                if (
+                    self._wanted(self.tip_world)
+                    and (world := messages.tip_world(snap, stamp, self._world_frame())) is not None
+                ):
+                    self._put(self.tip_world, world, stamp)
                 now_level = diagnostic_level(snap)[0]
-                if now - diagnostics_at >= DIAGNOSTICS_EVERY_S or now_level != level:
+                due = now - diagnostics_at >= DIAGNOSTICS_EVERY_S or now_level != level
+                if due and self._wanted(self.diagnostics):
                     diagnostics = messages.diagnostics(snap, stamp, self._extra())
                     self._put(self.diagnostics, diagnostics, stamp)
+                if due:
                     diagnostics_at, level = now, now_level
             except zenoh.ZError as exc:  # the session is closing
                 log.debug("ros2 publish: %s", exc)

@@ -23,6 +23,8 @@ pytestmark = [
 def _banner(page) -> str | None:
     shown = page.evaluate(
         "(() => { const b = document.getElementById('banner');"
+        # a page still loading on a busy machine has no banner yet: not connected either
+        " if (!b) return 'the page is loading';"
         " return b.hidden ? null : b.textContent; })()"
     )
     return shown
