@@ -112,10 +112,18 @@ def test_a_forged_state_or_garbage_does_not_reach_the_stations_status(tmp_path: 
                 b"\xff",
             ):
                 state.put(payload)
-            time.sleep(0.5)  # the forged states had their chance to arrive
-            after = st.get("/api/status")
-        assert after["notice"] != "forged" and not after["estopped"]
-        assert after["loop"]["ticks"] > before["loop"]["ticks"]  # the real node's, still moving
+            sent_at = st.get("/api/status")["loop"]["ticks"]
+            seen: list[dict] = []
+
+            def moved_on() -> bool:
+                """Every status the station gives while the real node ticks 100 more times
+                (the forged states had their chance to arrive) is the real node's."""
+                seen.append(st.get("/api/status"))
+                return seen[-1]["loop"]["ticks"] > sent_at + 100
+
+            wait_for(moved_on, "the real node's next 100 ticks at the station")
+        assert all(s["notice"] != "forged" and not s["estopped"] for s in seen)
+        assert seen[-1]["loop"]["ticks"] > before["loop"]["ticks"]  # the real node's, moving
 
 
 def test_a_huge_command_from_a_peer_is_refused_unread_and_holds_nothing(tmp_path: Path) -> None:
