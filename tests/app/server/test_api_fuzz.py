@@ -83,11 +83,15 @@ def at_rest(client) -> bool:
     return still and np.allclose(first, REST_M, rtol=0, atol=1e-6)
 
 
-def to_rest(client) -> None:
-    """Back to the standard state: control taken, e-stop cleared, torque on, the goal at
-    REST_M and the setpoint still there. Each step is retried: on a loaded machine the
-    loop may answer a command late (503) just after an e-stop stopped a run."""
+def to_rest(client, procedures: tuple[str, ...] = ()) -> None:
+    """Back to the standard state: control taken, the ``procedures`` a generated request
+    started (``/api/tuning/<id>``, ...) aborted (a tuning's twin check may compute for
+    minutes after an e-stop), e-stop cleared, torque on, the goal at REST_M and the
+    setpoint still there. Each step is retried: on a loaded machine the loop may answer a
+    command late (503) just after an e-stop stopped a run."""
     take_lease(client, "fuzz")  # again: a generated request may have taken it over
+    for procedure in procedures:
+        client.post(f"{procedure}/abort")  # 409 once it has ended: nothing to abort
     steps = [
         ("/api/estop", None),
         ("/api/reset", None),
@@ -143,6 +147,7 @@ def test_no_generated_body_gives_a_5xx_or_moves_the_robot_when_refused(sim):
             assert np.allclose(before, after, rtol=0, atol=1e-9), (after - before, mode, history)
         elif not at_rest(sim):
             event("brought back to rest")
-            to_rest(sim)
+            run_id = response.json().get("run_id") if path.endswith("/run") else None
+            to_rest(sim, (f"{path.removesuffix('/run')}/{run_id}",) if run_id else ())
 
     check()
