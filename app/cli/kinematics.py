@@ -7,8 +7,11 @@ carries its unit; ``--json`` prints SI only (``point_m``, ``joints_rad``), as th
 
 Refusals: ``fk`` refuses a joint angle outside the configured joint limits
 (``hardware.joints[i].min_angle_rad`` / ``max_angle_rad``, exit 2); ``ik`` says when a
-point is outside the workspace or needs a joint outside its limits, and gives the nearest
-reachable point (``robot.project``; exit 1). Bad input exits 2.
+point is outside the workspace, needs a joint outside its limits or is one the gate refuses
+(above the ceiling, within the margin of the boundary, too near a singularity), and gives
+the nearest point the gate accepts as a goal (``app.server.sections.nearest``, the same
+function as the page's ``GET /api/workspace/nearest`` and a refused goal's ``nearest_m``;
+exit 1). ``ik`` speaks platform points, so its gate has no tool. Bad input exits 2.
 
 Only the standard library is imported at module level: the maths and the settings are
 imported when a command runs, so that ``deltadash --help`` stays fast.
@@ -31,7 +34,6 @@ _UNITS = {
     "deg": ("angle", math.pi / 180),
     "rad": ("angle", 1.0),
 }
-_MARGIN_M = 1e-5  # the nearest point printed to 0.001 mm must itself be reachable
 _EPILOG = (
     "Numbers are mm (ik) and degrees (fk) unless --si; a unit after a number (mm, m, deg, "
     "rad) wins, so ik's output pastes into fk and back. A decimal comma is read as a "
@@ -145,13 +147,16 @@ def _point(point: Any, si: bool) -> str:
     return ", ".join(_length(float(v), si) for v in point)
 
 
-# app.config's defaults (the thesis robot, JointSettings' limits), for the fast path below;
-# tests/app/cli/test_kinematics.py checks they are the same.
+# app.config's defaults (the thesis robot, JointSettings' limits, the gate's limits: margin
+# [m], ceiling [m], lowest 1/cond(J)), for the fast path below; tests/app/cli/
+# test_kinematics.py checks they are the same.
 DEFAULT_JOINT_LIMITS_RAD = (-0.6, 1.65)
+DEFAULT_GATE_LIMITS = (0.002, -0.06, 0.02)
 
 
-def _setup(args: argparse.Namespace) -> tuple[Any, list[tuple[float, float]]]:
-    """The robot and the joint limits [rad] of the config (defaults: the thesis robot).
+def _setup(args: argparse.Namespace) -> tuple[Any, list[tuple[float, float]], tuple[float, ...]]:
+    """The robot, the joint limits [rad] and the gate's (margin [m], ceiling [m], lowest
+    1/cond(J)) of the config (defaults: the thesis robot).
 
     Without --config and without DELTADASH_ environment variables these are app.config's
     defaults, taken without importing pydantic (a third of ik's start-up time)."""
@@ -160,12 +165,39 @@ def _setup(args: argparse.Namespace) -> tuple[Any, list[tuple[float, float]]]:
     if args.config is None and not any(k.startswith("DELTADASH_") for k in os.environ):
         from kinematics import THESIS_DELTA
 
-        return THESIS_DELTA, [DEFAULT_JOINT_LIMITS_RAD] * 3
+        return THESIS_DELTA, [DEFAULT_JOINT_LIMITS_RAD] * 3, DEFAULT_GATE_LIMITS
     from app.config import load_settings
 
     settings = load_settings(args.config)
     limits = [(j.min_angle_rad, j.max_angle_rad) for j in settings.hardware.joints]
-    return settings.robot.build(), limits
+    gate = settings.limits
+    return (
+        settings.robot.build(),
+        limits,
+        (gate.workspace_margin_m, gate.z_max_m, gate.min_dexterity),
+    )
+
+
+def _gate_refuses(robot: Any, point: list[float], joints: list[float], gate: Any) -> list[str]:
+    """Why the gate (app/control/gate.py) would refuse a platform goal whose IK and joint
+    limits pass: its ceiling, its margin from the workspace's boundary, its singularity
+    margin (``gate``: margin [m], ceiling [m], lowest 1/cond(J)). Empty when it accepts."""
+    margin, ceiling, lowest = gate
+    problems = []
+    if point[2] > ceiling:
+        problems.append(f"it is above the ceiling z = {ceiling * 1e3:.3f} mm (limits.z_max_m)")
+    if not bool(robot.reachable(point, margin=margin)):
+        problems.append(
+            f"it is within {margin * 1e3:.3f} mm of the workspace's boundary "
+            "(limits.workspace_margin_m)"
+        )
+    dexterity = float(robot.dexterity(joints))
+    if not dexterity >= lowest:
+        problems.append(
+            f"it is too close to a singularity (1/cond(J) = {dexterity:.3f} < {lowest}, "
+            "limits.min_dexterity)"
+        )
+    return problems
 
 
 def _outside(joints: list[float], limits: list[tuple[float, float]]) -> list[str]:
@@ -187,25 +219,50 @@ def _refuse(message: str, code: int) -> int:
     return code
 
 
+def _gate(args: argparse.Namespace) -> Any:
+    """The gate of the config (app/control/commands.py, as the server builds it), without a
+    tool: ``ik`` points are platform centres."""
+    from dataclasses import replace
+
+    from app.config import load_settings
+    from app.control.commands import CommandContext
+    from kinematics import Tool
+
+    gate = CommandContext.from_settings(load_settings(args.config)).gate
+    return replace(gate, tool=Tool())
+
+
+def nearest_accepted(args: argparse.Namespace, point: list[float]) -> list[float]:
+    """The point (3,) [m] nearest ``point`` (3,) [m] that the config's gate accepts as a
+    goal: ``app.server.sections.nearest``, the one the page and the API offer."""
+    import numpy as np
+
+    from app.server import sections
+
+    found = sections.nearest(_gate(args), np.asarray(point, dtype=np.float64))
+    return [float(v) for v in found]
+
+
 def _ik(args: argparse.Namespace) -> int:
     try:
         point = parse_values(args.values, "length", "m" if args.si else "mm")
     except UnitError as exc:
         return _refuse(f"ik X Y Z: {exc}", 2)
-    robot, limits = _setup(args)
+    robot, limits, gate = _setup(args)
     result = robot.ik(point)
     joints = [float(v) for v in result.joints]
     ok = bool(result.ok)
     problems = _outside(joints, limits) if ok else []
+    refused = _gate_refuses(robot, point, joints, gate) if ok and not problems else []
     payload: dict[str, Any] = {
         "point_m": point,
-        "ok": ok and not problems,
+        "ok": ok and not problems and not refused,
         "joints_rad": [None if math.isnan(v) else v for v in joints],
     }
-    if not ok:  # robot.project knows the workspace, not the joint limits
-        payload["nearest_m"] = [float(v) for v in robot.project(point, margin=_MARGIN_M).point]
-    if problems:
-        payload["problems"] = problems
+    if not payload["ok"]:  # the whole gate's nearest point, as the page offers it
+        payload["nearest_m"] = nearest_accepted(args, point)
+    if problems or refused:
+        payload["problems"] = problems + refused
     if args.json:
         print(json.dumps(payload))
         return 0 if payload["ok"] else 1
@@ -215,13 +272,14 @@ def _ik(args: argparse.Namespace) -> int:
         return 0
     if problems:
         print(f"unreachable: ({_point(point, args.si)}) needs " + "; ".join(problems))
-        return 1
-    print(f"unreachable: ({_point(point, args.si)}) is outside the workspace (IK has no solution)")
-    print(f"nearest reachable point: ({_point(payload['nearest_m'], args.si)})")
-    there = robot.ik(payload["nearest_m"])
-    beyond = _outside([float(v) for v in there.joints], limits) if there.ok else []
-    if beyond:  # robot.project knows the geometric workspace only
-        print("  note: that point is outside the joint limits too: " + "; ".join(beyond))
+    elif refused:
+        angles = ", ".join(_angle(v, args.si) for v in joints)
+        print(f"IK ({_point(point, args.si)}) -> joints {angles}")
+        print("refused as a goal: " + "; ".join(refused))
+    else:
+        where = _point(point, args.si)
+        print(f"unreachable: ({where}) is outside the workspace (IK has no solution)")
+    print(f"nearest point the gate accepts: ({_point(payload['nearest_m'], args.si)})")
     return 1
 
 
@@ -231,7 +289,7 @@ def _fk(args: argparse.Namespace) -> int:
         joints = parse_values(args.values, "angle", default)
     except UnitError as exc:
         return _refuse(f"fk J1 J2 J3: {exc}", 2)
-    robot, limits = _setup(args)
+    robot, limits, _ = _setup(args)
     problems = _outside(joints, limits)
     if problems:
         return _refuse("refused: " + "; ".join(problems), 2)

@@ -118,14 +118,23 @@ const heldByAnother = (err) => err.status === 409 && err.message.includes("contr
 // A command that moves the robot or changes its power: takes the lease on first use, and once
 // more when the server no longer knows ours (restarted, lapsed and released). When another
 // client holds control it throws the 409 "control is held by ..." (see control.js's command).
+// Commands sent together before the tab holds control (a double click) wait for one take:
+// a second take would be refused as control held by this very tab.
+let taking = null;
+
+function takeOnce() {
+  if (!taking) taking = takeLease(false).finally(() => { taking = null; });
+  return taking;
+}
+
 export async function postControl(path, body) {
-  if (!leaseId) await takeLease(false);
+  if (!leaseId) await takeOnce();
   try {
     return await post(path, body);
   } catch (err) {
     if (err.status !== 409 || heldByAnother(err) || !err.message.includes("/api/lease")) throw err;
     leaseId = null;
-    await takeLease(false);
+    await takeOnce();
     return post(path, body);
   }
 }

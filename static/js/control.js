@@ -1,7 +1,8 @@
 // Operator commands: e-stop (Space / Esc), torque, reset, go-to, and hold-to-move jogs from
-// the pad, the arrow keys and a gamepad (they move only while held: see startHold).
+// the pad, the arrow keys and a gamepad (they move only while held: see startHold), or step
+// jogs of 0.1 / 1 / 10 mm (one press, one step: see stepJog).
 
-import { postControl, takeLease } from "./api.js";
+import { get, postControl, takeLease } from "./api.js";
 import { isEstopKey, newPressId, postEstop, postListener, typing } from "./estopkey.js";
 import { operatorText, parseDecimal, showError, showMessage, setText } from "./ui.js";
 import { PHI_STEP_DEG, clampPhi, currentPhiRad, wrist } from "./wrist.js";
@@ -21,6 +22,10 @@ const DEADMAN_BUTTON = 4; // LB on standard-mapping pads
 let maxSpeed = 0.5; // [m/s], /api/info's jog limit
 let confirmMoveM = 0.05; // [m], /api/info's confirm_move_m: longer typed moves ask first
 let homeM = [0, 0, -0.24]; // [m], /api/info's home_m
+const CONFIRM_TURN_KEY = "deltadash.confirmTurnDeg";
+const CONFIRM_TURN_DEG = 30; // a goal turning the wrist more than this asks first (page setting)
+// the operator typed in the Go-to form since its last Go: its fields stop following the robot
+let goalTyped = false;
 let latest = null; // the last GET /api/status (status.js hands each one here)
 // always moving (a goal's or jog's "jog" source stays on at its target: moving only on the way)
 const MOVING_MODES = new Set(["move", "move-joints", "test", "hold-world"]);
@@ -86,10 +91,12 @@ export function estop(event = null, forwarded = null) {
       showError(new Error(`E-stop not confirmed: ${first.message}`));
     });
   answerConfirm(false); // a pending move is not wanted after an e-stop
+  estopCount += 1; // nor one whose check was on its way (goTo)
 }
 
 // ---- an in-page confirmation (not window.confirm: that would block the e-stop keys) ----
 let pendingConfirm = null;
+let estopCount = 0; // e-stops pressed in this tab
 
 function answerConfirm(yes) {
   const resolve = pendingConfirm;
@@ -135,6 +142,20 @@ function distanceMm(targetMm) {
   return Math.hypot(...targetMm.map((v, i) => v - here[i] * 1000));
 }
 
+// The page's setting: a goal that turns the wrist more than this [deg] asks first.
+export function confirmTurnDeg() {
+  const field = document.getElementById("confirm-turn-deg");
+  const parsed = field ? parseDecimal(field.value) : { error: "none" };
+  return parsed.error || parsed.value < 0 ? CONFIRM_TURN_DEG : parsed.value;
+}
+
+// How far a goal at ``phiDeg`` turns the wrist from the angle a new goal starts at (its
+// goal, else where it is) [deg]; null without a wrist or a status.
+function wristTurnDeg(phiDeg) {
+  if (!wrist.enabled || phiDeg === null || !latest) return null;
+  return Math.abs(phiDeg - currentPhiRad(latest) * 180 / Math.PI);
+}
+
 // The form's target in mm (and, with a wrist, phiDeg: its phi [deg] to 0.1 deg), or the
 // first field's error; marks bad fields.
 function formTarget() {
@@ -159,36 +180,112 @@ function formTarget() {
   return error ? { error } : { target, phiDeg };
 }
 
+// "target (x, y, z) mm at φ 60.0°, distance 12.00 mm, wrist turn 60.0°"
 function describeMove(targetMm, phiDeg = null) {
   const d = distanceMm(targetMm);
+  const turn = wristTurnDeg(phiDeg);
   const phi = phiDeg === null ? "" : ` at φ ${phiDeg.toFixed(1)}°`;
-  return `target ${tripleMm(targetMm)}${phi}` + (d === null ? "" : `, distance ${d.toFixed(2)} mm`);
+  return `target ${tripleMm(targetMm)}${phi}` + (d === null ? "" : `, distance ${d.toFixed(2)} mm`) +
+    (turn === null ? "" : `, wrist turn ${turn.toFixed(1)}°`);
 }
 
 function updateGoalPreview() {
   const out = document.getElementById("goal-preview");
   const { target, phiDeg, error } = formTarget();
-  out.textContent = error ? `Not sent: ${error}` : `Go will send: ${describeMove(target, phiDeg)}`;
+  const text = error ? `Not sent: ${error}` : `Go will send: ${describeMove(target, phiDeg)}`;
+  if (out.textContent !== text) out.textContent = text;
   out.className = error ? "goal-preview bad" : "goal-preview muted";
 }
 
+// Until the operator types, the Go-to fields show where a new goal starts (the goal while
+// torque holds the arm, else the measured point; the wrist's goal, else its angle): a tab
+// opened after another moved the arm shows where it is now, not its own last value. A field
+// with the keyboard focus is left alone. workspace2d.js hears "follow" (nothing typed).
+function followRobot() {
+  if (goalTyped) return;
+  const form = document.getElementById("goal-form");
+  const here = robotPointM();
+  const values = here ? { x: here[0], y: here[1], z: here[2] } : {};
+  let changed = false;
+  const put = (name, text) => {
+    const input = form.elements[name];
+    if (!input || input === document.activeElement || input.value === text) return;
+    input.value = text;
+    input.setAttribute("aria-invalid", "false");
+    changed = true;
+  };
+  for (const [k, v] of Object.entries(values)) put(k, (v * 1000).toFixed(2));
+  if (wrist.enabled && latest) put("phi", (currentPhiRad(latest) * 180 / Math.PI).toFixed(1));
+  if (changed) form.dispatchEvent(new CustomEvent("follow"));
+}
+
+// Whether the gate accepts ``targetMm`` at ``phiRad`` (GET /api/workspace/nearest): {inside,
+// nearestM [m]}; null when it could not be asked (busy, offline: the goal's own check decides).
+// Throws the 422 of a bad field (a wrist angle outside its limits).
+async function nearestFor(targetMm, phiRad) {
+  const [x, y, z] = targetMm.map((v) => String(v / 1000));
+  const query = new URLSearchParams({ x_m: x, y_m: y, z_m: z });
+  if (wrist.enabled && phiRad !== null) query.set("phi_rad", phiRad.toFixed(6));
+  try {
+    const answer = await get(`/api/workspace/nearest?${query}`);
+    return { inside: answer.inside, nearestM: answer.nearest_m };
+  } catch (err) {
+    if (err.status === 422) throw err;
+    return null;
+  }
+}
+
 // Go to ``targetMm`` (3 numbers, mm), with a wrist at ``phiDeg`` [deg] (null: the wrist
-// keeps its goal): a move longer than confirm_move_m asks first, naming the target and the
-// distance; nothing is sent on cancel. Resolves true if the goal was accepted.
+// keeps its goal). A target the gate refuses offers the nearest point it accepts (the same
+// one ``deltadash ik`` gives) before anything is asked or sent; a move longer than
+// confirm_move_m, or one turning the wrist more than the page's setting, asks first, naming
+// the target, the distance and the turn. Nothing is sent on cancel. Resolves true if the
+// goal was accepted.
 export async function goTo(targetMm, what = "Go to", phiDeg = null) {
-  const d = distanceMm(targetMm);
   if (!wrist.enabled) phiDeg = null;
-  if (d === null || d > confirmMoveM * 1000) {
-    const why = d === null ? "the robot's position is not known yet" : `longer than ${(confirmMoveM * 1000).toFixed(0)} mm`;
-    const ok = await askConfirm(`${what}: ${describeMove(targetMm, phiDeg)} (${why}). Move?`, "Move");
+  const phiRad = !wrist.enabled ? null : phiDeg === null ? currentPhiRad(latest) : phiDeg * Math.PI / 180;
+  let sendM = targetMm.map((v) => v / 1000);
+  let asked = false;
+  let check = null;
+  const estopsBefore = estopCount;
+  try {
+    check = await nearestFor(targetMm, phiRad);
+  } catch (err) {
+    showError(err);
+    return false;
+  }
+  if (estopCount !== estopsBefore) return false; // e-stopped while it was checked
+  if (check && !check.inside) {
+    const nearMm = check.nearestM.map((v) => v * 1000);
+    const away = Math.hypot(...nearMm.map((v, i) => v - targetMm[i]));
+    const ok = await askConfirm(`${what}: ${tripleMm(targetMm)} is outside where the arm may go. ` +
+      `The nearest point it may go to is ${away.toFixed(1)} mm from it: ${describeMove(nearMm, phiDeg)}. ` +
+      "Go there instead?", "Go to nearest");
+    if (!ok) {
+      showMessage("Move cancelled: nothing was sent");
+      return false;
+    }
+    sendM = check.nearestM;
+    targetMm = nearMm;
+    asked = true;
+  }
+  const d = distanceMm(targetMm);
+  const turn = wristTurnDeg(phiDeg);
+  const limitDeg = confirmTurnDeg();
+  const why = [];
+  if (d === null) why.push("the robot's position is not known yet");
+  else if (d > confirmMoveM * 1000) why.push(`longer than ${(confirmMoveM * 1000).toFixed(0)} mm`);
+  if (turn !== null && turn > limitDeg) why.push(`turns the wrist ${turn.toFixed(1)}°, more than ${limitDeg}°`);
+  if (why.length && !asked) {
+    const ok = await askConfirm(`${what}: ${describeMove(targetMm, phiDeg)} (${why.join("; ")}). Move?`, "Move");
     if (!ok) {
       showMessage("Move cancelled: nothing was sent");
       return false;
     }
   }
-  const body = { position_m: targetMm.map((v) => v / 1000) };
+  const body = { position_m: sendM };
   // the API's phi_rad defaults to 0: with a wrist it is always sent, so no goal turns it back
-  if (wrist.enabled) body.phi_rad = phiDeg === null ? currentPhiRad(latest) : phiDeg * Math.PI / 180;
+  if (wrist.enabled) body.phi_rad = phiRad;
   try {
     await command("/api/goal", body);
     showMessage(`Going to ${tripleMm(targetMm)}${phiDeg === null ? "" : ` at φ ${phiDeg.toFixed(1)}°`}`);
@@ -232,8 +329,28 @@ async function torqueOff() {
 export function controlStatus(s) {
   previousCommandM = latest ? latest.ee.commanded_m : null;
   latest = s;
-  if (document.activeElement?.closest?.("#goal-form") || !document.getElementById("goal-preview").textContent) {
-    updateGoalPreview(); // the distance follows the robot while the operator types
+  followRobot();
+  updateGoalPreview(); // the distance and the wrist turn follow the robot as it moves
+}
+
+// The step of a step jog [mm] (the pad's and the arrow keys' mode), or null: hold to move.
+function jogStepMm() {
+  const value = document.getElementById("jog-step")?.value;
+  return !value || value === "hold" ? null : Number(value);
+}
+
+// One step jog: ``stepMm`` [mm] along axis (0..2) by sign, from where the loop commands,
+// through the gate as every jog (POST /api/jog delta_m: a target outside is clamped onto
+// the workspace). Resolves true if accepted.
+export async function stepJog(axis, sign, stepMm = jogStepMm()) {
+  const delta = [0, 0, 0];
+  delta[axis] = sign * stepMm / 1000;
+  try {
+    await command("/api/jog", { delta_m: delta });
+    return true;
+  } catch (err) {
+    showError(err);
+    return false;
   }
 }
 
@@ -338,7 +455,11 @@ function onKey(event) {
   // Keys jog only while this page has focus and the operator has switched keyboard jog on.
   if (!document.getElementById("jog-keys").checked || !document.hasFocus()) return;
   event.preventDefault();
-  if (event.repeat) return; // the hold's own heartbeat keeps it going
+  if (event.repeat) return; // the hold's own heartbeat keeps it going (a step: one per press)
+  if (jogStepMm() !== null) {
+    stepJog(axis[0], axis[1]);
+    return;
+  }
   startHold(`key:${event.key}`, axisVelocity(axis[0], axis[1]));
 }
 
@@ -363,10 +484,12 @@ function bindButtons() {
   pad.addEventListener("click", (event) => {
     const sign = Number(event.target.closest("[data-phi]")?.dataset.phi);
     if (sign) stepPhi(sign);
+    const spec = event.target.closest("[data-jog]")?.dataset.jog;
+    if (spec && jogStepMm() !== null) stepJog("xyz".indexOf(spec[0]), spec[1] === "+" ? 1 : -1);
   });
   pad.addEventListener("pointerdown", (event) => {
     const spec = event.target.closest("[data-jog]")?.dataset.jog;
-    if (!spec) return;
+    if (!spec || jogStepMm() !== null) return; // a step jog goes on click: one press, one step
     event.target.setPointerCapture?.(event.pointerId); // the release comes here, wherever it is
     startHold("pad", axisVelocity("xyz".indexOf(spec[0]), spec[1] === "+" ? 1 : -1));
   });
@@ -374,8 +497,11 @@ function bindButtons() {
     pad.addEventListener(type, () => releaseHold("pad"));
   }
   const goalForm = document.getElementById("goal-form");
-  goalForm.addEventListener("input", updateGoalPreview);
-  goalForm.addEventListener("submit", (event) => {
+  goalForm.addEventListener("input", () => {
+    goalTyped = true; // from now on the fields are the operator's, until a Go is accepted
+    updateGoalPreview();
+  });
+  goalForm.addEventListener("submit", async (event) => {
     event.preventDefault();
     const { target, phiDeg, error } = formTarget();
     updateGoalPreview();
@@ -383,8 +509,17 @@ function bindButtons() {
       showMessage(`Not sent: ${error}`, "error");
       return;
     }
-    goTo(target, "Go to", phiDeg);
+    if (await goTo(target, "Go to", phiDeg)) goalTyped = false; // they follow the goal again
   });
+  const turnField = document.getElementById("confirm-turn-deg");
+  if (turnField) {
+    turnField.value = localStorage.getItem(CONFIRM_TURN_KEY) || String(CONFIRM_TURN_DEG);
+    turnField.addEventListener("change", () => {
+      const parsed = parseDecimal(turnField.value);
+      turnField.setAttribute("aria-invalid", parsed.error || parsed.value < 0 ? "true" : "false");
+      if (!parsed.error && parsed.value >= 0) localStorage.setItem(CONFIRM_TURN_KEY, String(parsed.value));
+    });
+  }
 }
 
 // Sticks = velocity, held only while the deadman button is: each poll renews the hold.

@@ -61,6 +61,12 @@ export function parseDecimal(text) {
 }
 
 const METRE_FIELDS = /\b(position|delta|amplitude|offset)_m\b/g;
+// other API field names as the page names them: no "phi_rad" or "velocity_m_s" on the page
+const FIELD_WORDS = {
+  phi_rad: "wrist angle φ", velocity_m_s: "jog velocity", speed_m_s: "speed", joints_rad: "joints",
+  duration_s: "duration", lease_id: "control", take_over: "take control",
+};
+const OTHER_FIELDS = new RegExp(`\\b(${Object.keys(FIELD_WORDS).join("|")})\\b`, "g");
 
 // A servo's gains as the page names them (the API's p, i, d, ff1, ff2: register units).
 export const GAIN_NAMES = {
@@ -92,6 +98,14 @@ export function operatorText(err) {
   if (fault) {
     return { text: `Fault: ${metresToMm(fault[1])}. Press Reset first.`, clearsWhen: (s) => !s.faults.length && !s.estopped };
   }
+  // control (the lease): the API says how to take it over by the API; the page has a button
+  const held = raw.match(/^control is held by '?([^';]+?)'? since ([^;]+?)(;.*)?$/);
+  if (held) {
+    return { text: `Control is held by ${held[1]} (another tab or program) since ${held[2]}.`, clearsWhen: null };
+  }
+  if (/take control first/.test(raw)) {
+    return { text: "This tab does not have control (it lapsed or was taken): try again to take it.", clearsWhen: null };
+  }
   if (raw.startsWith("position_m: outside the workspace")) {
     return { text: "That point is outside the workspace: choose a point inside it.", clearsWhen: null };
   }
@@ -119,7 +133,9 @@ export function operatorText(err) {
     .replace(/POST \/api\/reset first/g, "press Reset first")
     .replace(/POST \/api\/torque \{"enabled": true\} first/g, "press Torque on first")
     .replace(/\(a goal or jog\)/g, "(Go to or jog)");
-  text = metresToMm(text).replace(METRE_FIELDS, (_, what) => what === "position" ? "goal" : what);
+  text = metresToMm(text).replace(METRE_FIELDS, (_, what) => what === "position" ? "goal" : what)
+    .replace(OTHER_FIELDS, (_, field) => FIELD_WORDS[field])
+    .replace(/(\d) deg\b/g, "$1°").replace(/\] deg\b/g, "]°");
   text = text.replace(/^infeasible: /, "Not possible: ");
   return { text: text.charAt(0).toUpperCase() + text.slice(1), clearsWhen: null };
 }

@@ -2,15 +2,16 @@
 // and a side section (x-z through the platform's y) of the region the gate accepts
 // (GET /api/workspace/section), with the robot's measured point, the goal the loop uses,
 // the goal typed in the Go-to form and, when that is outside, the nearest reachable point
-// (GET /api/workspace/nearest) with a button that sends it as the goal.
+// (GET /api/workspace/nearest) with a button that sends it as the goal, and a scale bar in
+// mm.
 //
 // Light by design, so the e-stop stays fast: canvas 2D only, sections fetched when the cut
 // moved a few mm (cached by the server), and a redraw only when something drawn changed,
 // at most every MIN_FRAME_MS.
 
 import { get } from "./api.js";
-import { command } from "./control.js";
-import { setText, showError, showMessage } from "./ui.js";
+import { goTo } from "./control.js";
+import { setText } from "./ui.js";
 import { currentPhiRad, hasTool, wrist } from "./wrist.js";
 
 const MIN_FRAME_MS = 100; // at most ~10 redraws a second
@@ -112,6 +113,7 @@ function transform(canvas, section) {
   const left = (canvas.width - scale * (u1 - u0)) / 2, top = (canvas.height - scale * (v1 - v0)) / 2;
   return {
     box: [left, top, scale * (u1 - u0), scale * (v1 - v0)],
+    scale, // [px/m]
     at: (p, view) => {
       const [iu, iv] = view.section.axes.map((a) => XYZ[a]);
       return [left + (p[iu] - u0) * scale, top + (v1 - p[iv]) * scale];
@@ -160,6 +162,7 @@ function drawView(name) {
   ctx.fillStyle = COLOURS.text;
   ctx.font = "12px system-ui, sans-serif";
   ctx.fillText(`${u} →   ${v} ↑   cut at ${level} = ${(view.section.at_m * 1000).toFixed(0)} mm`, 6, 13);
+  drawScale(ctx, t, canvas);
   if (!view.section.reachable.some((row) => row.includes("1"))) {
     ctx.fillText("nothing reachable at this height: move the platform into the workspace",
       6, canvas.height - 6);
@@ -196,6 +199,29 @@ function drawView(name) {
   } else {
     delete canvas.dataset.robotPx;
   }
+}
+
+// A scale bar (bottom right): a round length (10, 20, 50, 100 mm...) about a quarter of
+// the drawn width, with its length in mm; the canvas records it (data-scale-mm, -px).
+function drawScale(ctx, t, canvas) {
+  const pxPerMm = t.scale / 1000;
+  const wanted = (t.box[2] / 4) / pxPerMm; // [mm]
+  const power = 10 ** Math.floor(Math.log10(wanted));
+  const lengthMm = [1, 2, 5, 10].map((k) => k * power).filter((v) => v <= wanted).pop() || power;
+  const px = lengthMm * pxPerMm;
+  const right = t.box[0] + t.box[2] - 8, y = t.box[1] + t.box[3] - 8;
+  ctx.save();
+  ctx.strokeStyle = ctx.fillStyle = COLOURS.text;
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.moveTo(right - px, y - 4); ctx.lineTo(right - px, y); ctx.lineTo(right, y); ctx.lineTo(right, y - 4);
+  ctx.stroke();
+  ctx.font = "11px system-ui, sans-serif";
+  ctx.textAlign = "center";
+  ctx.fillText(`${lengthMm} mm`, right - px / 2, y - 6);
+  ctx.restore();
+  canvas.dataset.scaleMm = String(lengthMm);
+  canvas.dataset.scalePx = px.toFixed(2);
 }
 
 // The checked program's path projected on the view's plane, its violations as red crosses.
@@ -330,19 +356,27 @@ function typedChanged() {
   typedTimer = setTimeout(checkTyped, TYPED_DEBOUNCE_MS);
 }
 
-function goNearest() {
+// The nearest point, at the typed goal's angle (it was found for the tip at that angle),
+// through Go to's checks: a long move or a large wrist turn asks first.
+async function goNearest() {
   const nearest = JSON.parse(document.getElementById("ws-go-nearest").dataset.nearest || "null");
   if (!nearest) return;
-  // at the typed goal's angle: the point was found for the tip at that angle
-  const body = wrist.enabled ? { position_m: nearest, phi_rad: seen.typedPhi } : { position_m: nearest };
-  command("/api/goal", body)
-    .then(() => {
-      showMessage(`Going to the nearest reachable point ${mmText(nearest)} mm`);
-      const form = document.getElementById("goal-form"); // the form now shows the goal sent
-      ["x", "y", "z"].forEach((k, i) => { form.elements[k].value = (nearest[i] * 1000).toFixed(2); });
-      checkTyped();
-    })
-    .catch(showError);
+  const phiDeg = wrist.enabled ? Math.round(seen.typedPhi * 1800 / Math.PI) / 10 : null;
+  if (await goTo(nearest.map((v) => v * 1000), "Go to the nearest point", phiDeg)) {
+    const form = document.getElementById("goal-form"); // the form now shows the goal sent
+    ["x", "y", "z"].forEach((k, i) => { form.elements[k].value = (nearest[i] * 1000).toFixed(2); });
+    checkTyped();
+  }
+}
+
+// The Go-to form follows the robot (nothing typed): no typed goal to draw or check.
+function typedFollows() {
+  clearTimeout(typedTimer);
+  typedAsked += 1; // an answer on its way is for an old value
+  Object.assign(seen, { typed: null, inside: true, nearest: null });
+  document.getElementById("ws-go-nearest").hidden = true;
+  setText("ws-typed", "Go to shows where the robot is: type a goal to check it here");
+  schedule();
 }
 
 export function startWorkspace2d() {
@@ -350,6 +384,7 @@ export function startWorkspace2d() {
   if (!form || !document.getElementById("ws-top")) return;
   form.addEventListener("input", typedChanged);
   form.addEventListener("change", typedChanged);
+  form.addEventListener("follow", typedFollows);
   document.getElementById("ws-go-nearest").addEventListener("click", goNearest);
   document.addEventListener("visibilitychange", () => { if (!document.hidden) schedule(); });
   checkTyped();

@@ -269,7 +269,7 @@ def test_after_torque_off_no_error_and_the_preview_is_about_the_arm_now(
 
     # the relaxed arm falls below the workspace; the test preview names where it is now
     def preview_names_the_arm() -> bool:
-        shown = text(page, "#sine-preview")
+        shown = text(page, "#run-preview")
         found = TRIPLE_MM.search(shown) if "there now" in shown else None
         if found is None:
             return False
@@ -277,7 +277,7 @@ def test_after_torque_off_no_error_and_the_preview_is_about_the_arm_now(
         return all(abs(float(v) - h) < 5 for v, h in zip(found.groups(), here, strict=True))
 
     wait_for(preview_names_the_arm, "the preview to name the measured point, in mm", 60)
-    shown = text(page, "#sine-preview")
+    shown = text(page, "#run-preview")
     assert "] m" not in shown and "POST" not in shown, shown
     assert text(page, "#pos-err") == "–"
 
@@ -335,6 +335,40 @@ def test_messages_speak_mm_degrees_and_buttons(page: Any) -> None:
     assert said[2] == "Fault: following error 30.0° on joint 2. Press Reset first."
 
 
+def test_control_and_field_messages_carry_no_api_words(page: Any) -> None:
+    """Issue 32 point 7: the server's own refusals (the lease's, a wrist angle's) in the
+    page's words: no take_over, no POST, no lease id, no phi_rad."""
+    from app.config import Settings
+    from app.control.authority import Authority, ControlRefused
+    from app.control.commands import CommandContext
+    from app.control.errors import GoalRejected
+
+    authority = Authority(None, 30.0)
+    authority.take("bench laptop")
+    messages = []
+    for call in (lambda: authority.take("dashboard-x"), lambda: authority.check("wrong")):
+        with pytest.raises(ControlRefused) as refused:
+            call()
+        messages.append(str(refused.value))
+    with pytest.raises(GoalRejected) as rejected:  # no wrist: only phi = 0
+        CommandContext.from_settings(Settings()).gate.check_phi(0.5)
+    messages.append(str(rejected.value))
+    assert "take_over" in messages[0] and "phi_rad" in messages[2]  # the API's words
+    said = page.evaluate(
+        """async (messages) => {
+        const { operatorText } = await import("/js/ui.js");
+        return messages.map((m) => operatorText({ message: m, status: 409 }).text);
+    }""",
+        messages,
+    )
+    assert said[0].startswith("Control is held by bench laptop (another tab or program)")
+    assert said[1].startswith("Control is held by bench laptop")
+    assert said[2].startswith("Wrist angle φ: no wrist axis")
+    for text in said:
+        for api_word in ("take_over", "POST", "/api/", "lease_id", "X-Lease", "phi_rad"):
+            assert api_word not in text, (api_word, text)
+
+
 def test_values_are_marked_stale_when_the_status_stops(page: Any) -> None:
     page_condition(page, "() => !document.body.classList.contains('stale')", "fresh values")
     page.route("**/api/status", lambda route: route.abort())
@@ -361,10 +395,10 @@ def test_sinusoid_fields_read_a_decimal_comma_and_refuse_what_is_not_a_number(
             starts.append(json.loads(request.post_data))
 
     def asked(amplitude_m: float) -> bool:
-        text(page, "#sine-preview")  # a call into Playwright: it delivers the page's events
+        text(page, "#run-preview")  # a call into Playwright: it delivers the page's events
         return any(c["amplitude_m"][0] == pytest.approx(amplitude_m) for c in checks)
 
-    amp_x = page.locator("#sine-form input[name=amp0]")
+    amp_x = page.locator("#run-form input[name=amplitude0]")
     page.on("request", listen)
     try:
         amp_x.fill("12,5")  # a decimal comma: 12.5 mm, never 125 mm nor 0
@@ -372,13 +406,13 @@ def test_sinusoid_fields_read_a_decimal_comma_and_refuse_what_is_not_a_number(
         assert amp_x.get_attribute("aria-invalid") == "false"
         amp_x.fill("1,2,5")  # not a number in any reading: refused, named, not sent
         wait_for(
-            lambda: "amplitude x mm" in text(page, "#sine-preview"),
+            lambda: "amplitude x mm" in text(page, "#run-preview"),
             "the preview to name the bad field",
-            seen=lambda: text(page, "#sine-preview"),
+            seen=lambda: text(page, "#run-preview"),
         )
-        assert "not a number" in text(page, "#sine-preview")
+        assert "not a number" in text(page, "#run-preview")
         assert amp_x.get_attribute("aria-invalid") == "true"
-        page.click("#sine-start")
+        page.click("#run-start")
         wait_for(lambda: "Not started: amplitude x mm" in text(page, "#toast"), "the refusal")
         amp_x.fill("50")  # a later, harmless preview: what was asked before it has arrived
         wait_for(lambda: asked(0.05), "a preview of 50 mm", seen=lambda: checks[-1:])
@@ -396,6 +430,8 @@ def test_taking_control_from_another_client_is_asked_in_the_page(page: Any, serv
     wait_for(lambda: visible(page, "#confirm"), "the take-control question in the page")
     assert "bench laptop" in text(page, "#confirm-text")
     assert text(page, "#confirm-yes") == "Take control"
+    # the page's own words: the API's "take it with take_over=true" stays in the API
+    assert "take_over" not in text(page, "#confirm-text")
     page.click("#confirm-yes")
     wait_for(
         lambda: (server.get("/api/lease")["holder"] or "").startswith("dashboard-"),

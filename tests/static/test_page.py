@@ -102,7 +102,10 @@ def test_go_to_then_jog_by_key_and_by_pad(page: Any, server: Server) -> None:
     until(
         server, lambda: server.get("/api/status")["torque"] or page.click("#torque-on"), "torque on"
     )
-    page.click("#goal-form button[type=submit]")  # the form's default goal: (0, 0, -240) mm
+    # the form follows the robot until typed in (issue 32): type the goal (0, 0, -240) mm
+    for name, value in zip("xyz", ("0", "0", "-240"), strict=True):
+        page.fill(f"#goal-form input[name={name}]", value)
+    page.click("#goal-form button[type=submit]")
 
     def arrived_or_confirmed() -> bool:  # from the hanging arm it is a long move: confirm it
         if page.locator("#confirm").is_visible():
@@ -228,7 +231,7 @@ def start_from_page(page: Any, server: Server) -> dict:
     """Click "Start run" until the server has the run (a starved machine may drop the
     request: 'Failed to fetch'; the server starts no run for a client that has gone)."""
     runs_before = len(server.get("/api/runs"))
-    page.click("#sine-start")
+    page.click("#run-start")
     toast = page.locator("#toast")
 
     def started() -> bool:
@@ -237,7 +240,7 @@ def start_from_page(page: Any, server: Server) -> dict:
             return True
         if "Failed to fetch" in text:
             page.evaluate("document.getElementById('toast').textContent = ''")
-            page.click("#sine-start")
+            page.click("#run-start")
         return False
 
     until(
@@ -251,7 +254,7 @@ def start_from_page(page: Any, server: Server) -> dict:
 
 
 def feasible(page: Any) -> None:
-    preview = "#sine-preview"
+    preview = "#run-preview"
     waiting.wait_for(
         lambda: text(page, preview).rsplit(": ", 1)[-1] == "feasible",
         "the preview to say feasible",
@@ -262,9 +265,9 @@ def feasible(page: Any) -> None:
 
 def test_sinusoid_runs_plots_and_lands_in_the_table(page: Any, server: Server) -> None:
     ready_to_run(page, server)
-    page.fill("input[name=duration]", "2")
+    page.fill("#run-form input[name=duration]", "2")
     feasible(page)
-    assert "peak joint speed" in text(page, "#sine-preview")
+    assert "peak joint speed" in text(page, "#run-preview")
     plots = plots_frame(page)
     before = plots.evaluate("window.deltadashPlot.samples")
     start_from_page(page, server)
@@ -292,8 +295,8 @@ def test_a_page_reloaded_mid_run_shows_its_real_progress_and_parameters(
     page: Any, server: Server
 ) -> None:
     ready_to_run(page, server)
-    page.fill("input[name=duration]", "30")
-    page.fill("input[name=amp0]", "30")
+    page.fill("#run-form input[name=duration]", "30")
+    page.fill("#run-form input[name=amplitude0]", "30")
     feasible(page)
     run_id = start_from_page(page, server)["run_id"]
 
@@ -331,8 +334,8 @@ def test_a_page_reloaded_mid_run_shows_its_real_progress_and_parameters(
         poll_s=0.2,
         seen=lambda: seen,
     )
-    assert page.locator("input[name=duration]").input_value() == "30"
-    assert page.locator("input[name=amp0]").input_value() == "30"
+    assert page.locator("#run-form input[name=duration]").input_value() == "30"
+    assert page.locator("#run-form input[name=amplitude0]").input_value() == "30"
     assert "amplitude 30 / 50 / 80 mm" in text(page, "#run-params")
     shot(page, "reloaded-mid-run")
     wait_for(

@@ -70,13 +70,63 @@ def test_fk_limits_come_from_the_config(capsys, tmp_path):
     assert f"limit {math.degrees(0.4):.3f} deg" in err
 
 
-def test_unreachable_point_names_the_nearest_reachable_one(capsys):
+def test_unreachable_point_names_the_nearest_one_the_gate_accepts(capsys):
     assert main(["ik", "400", "0", "-200"]) == 1
     out = capsys.readouterr().out
-    assert "outside the workspace" in out and "nearest reachable point" in out
+    assert "outside the workspace" in out and "nearest point the gate accepts" in out
     nearest = [float(v) for v in re.findall(r"(-?\d+\.\d+) mm", out.split("nearest")[1])]
-    main(["ik", *map(str, nearest)])  # printed to 0.001 mm, still inside the workspace
-    assert "outside the workspace" not in capsys.readouterr().out
+    assert main(["ik", *map(str, nearest)]) == 0  # printed to 0.001 mm: IK and joint limits
+    assert "joints" in capsys.readouterr().out
+
+
+def test_the_nearest_point_respects_the_joint_limits_as_the_page_does(capsys):
+    """Issue 32 point 6: for (250, 0, -240) mm the page offered (211.2, 0, -233.3) and ik
+    (236.973, 0, -233.567), the workspace's nearest point, which needs joint 2 and 3 past
+    their 94.5 deg limit. Now ik gives the page's point, and the gate takes it."""
+    import numpy as np
+
+    from app.config import Settings
+    from app.control.commands import CommandContext
+
+    assert main(["ik", "250", "0", "-240", "--json"]) == 1
+    nearest = json.loads(capsys.readouterr().out)["nearest_m"]
+    assert nearest == pytest.approx([0.2112, 0.0, -0.2333], abs=1e-4)
+    gate = CommandContext.from_settings(Settings()).gate
+    home = gate.robot.ik([0.0, 0.0, -0.24]).joints
+    gate.solve(gate.check_point(np.array(nearest)), home)  # raises if refused
+    assert main(["ik", *(f"{v * 1e3:.3f}" for v in nearest)]) == 0  # as printed
+
+
+def test_a_point_the_gate_refuses_within_the_limits_is_refused_with_its_reason(capsys):
+    """A point IK solves within the joint limits but within the gate's 2 mm margin of the
+    workspace's boundary: refused as a goal (exit 1), with the reason and the nearest point."""
+    import numpy as np
+
+    from app.cli.kinematics import DEFAULT_JOINT_LIMITS_RAD
+    from kinematics import THESIS_DELTA
+
+    rng = np.random.default_rng(7)
+    points = rng.uniform([-0.3, -0.3, -0.45], [0.3, 0.3, -0.08], (20000, 3))
+    band = THESIS_DELTA.reachable(points, margin=0.0) & ~THESIS_DELTA.reachable(
+        points, margin=0.002
+    )
+    solution = THESIS_DELTA.ik(points[band])
+    low, high = DEFAULT_JOINT_LIMITS_RAD
+    within = solution.ok & ((solution.joints >= low) & (solution.joints <= high)).all(-1)
+    within &= np.asarray(THESIS_DELTA.dexterity(solution.joints)) >= 0.05
+    assert within.any()  # the band within the joint limits is sampled
+    point = points[band][within][0]
+    assert main(["ik", *map(repr, point.tolist()), "--si"]) == 1
+    out = capsys.readouterr().out
+    assert "refused as a goal" in out and "limits.workspace_margin_m" in out, out
+    assert "nearest point the gate accepts" in out
+
+
+def test_a_point_beyond_a_joint_limit_gets_the_nearest_point_too(capsys):
+    assert main(["ik", "50", "0", "-90", "--json"]) == 1
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["problems"] and len(payload["nearest_m"]) == 3
+    assert main(["ik", *map(str, payload["nearest_m"]), "--si", "--json"]) == 0
 
 
 def test_ik_says_which_joint_limit_a_reachable_point_needs_to_break(capsys):
@@ -130,13 +180,15 @@ def test_a_negative_decimal_comma_is_a_number_not_an_option(capsys):
 
 
 def test_the_fast_path_uses_the_configs_defaults():
-    from app.cli.kinematics import DEFAULT_JOINT_LIMITS_RAD
+    from app.cli.kinematics import DEFAULT_GATE_LIMITS, DEFAULT_JOINT_LIMITS_RAD
     from app.config import Settings
     from kinematics import THESIS_DELTA
 
     settings = Settings()
     for joint in settings.hardware.joints:
         assert (joint.min_angle_rad, joint.max_angle_rad) == DEFAULT_JOINT_LIMITS_RAD
+    gate = settings.limits
+    assert (gate.workspace_margin_m, gate.z_max_m, gate.min_dexterity) == DEFAULT_GATE_LIMITS
     robot = settings.robot.build()
     assert type(robot) is type(THESIS_DELTA)
     for name in ("L", "l", "R", "r"):

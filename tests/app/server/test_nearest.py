@@ -108,3 +108,34 @@ def test_the_422_offers_the_same_point_for_a_goal_beyond_a_joint_limit(client):
     assert "nearest reachable point" in body["detail"]
     assert gate_takes(gate, np.array(body["nearest_m"])) is None
     np.testing.assert_allclose(body["nearest_m"], sections.nearest(gate, goal))
+
+
+@pytest.mark.slow  # a nearest-point search per goal, twice
+def test_the_cli_and_the_api_offer_the_same_point_and_the_gate_takes_it(client, capsys):
+    """Issue 32 point 6, a property over seeded random goals the gate refuses (outside the
+    workspace, beyond a joint limit, above the ceiling): ``deltadash ik``'s ``nearest_m``
+    and GET /api/workspace/nearest's are the same point, and the gate takes it as a goal."""
+    import json
+
+    from app.cli import main
+
+    gate = client.app.state.controller.gate
+    rng = np.random.default_rng(32)
+    candidates = rng.uniform([-0.35, -0.35, -0.5], [0.35, 0.35, 0.0], (300, 3))
+    accepted = sections.accepted(gate, candidates)
+    for goal in candidates[accepted][:5]:  # what the gate takes, ik answers (exit 0)
+        assert main(["ik", *map(repr, goal.tolist()), "--si", "--json"]) == 0
+        assert "nearest_m" not in json.loads(capsys.readouterr().out)
+    refused = candidates[~accepted]
+    inside = sections.inside(gate, refused)
+    # beyond a joint limit or the singularity margin inside the workspace, and outside it
+    goals = [*refused[inside][:6], *refused[~inside][:6]]
+    assert len(goals) == 12
+    for goal in goals:
+        assert main(["ik", *map(repr, goal.tolist()), "--si", "--json"]) == 1
+        cli = json.loads(capsys.readouterr().out)["nearest_m"]
+        params = dict(zip(("x_m", "y_m", "z_m"), goal.tolist(), strict=True))
+        api = client.get("/api/workspace/nearest", params=params).json()
+        assert api["inside"] is False
+        np.testing.assert_allclose(cli, api["nearest_m"], atol=1e-9)
+        assert gate_takes(gate, np.array(cli)) is None, (goal, cli, gate_takes(gate, cli))
