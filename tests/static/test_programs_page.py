@@ -325,7 +325,11 @@ def test_run_sends_the_checked_text_and_shows_a_refusal_by_line(page: Any, serve
     is the checked text and the feed-forward choice; a 422 with violations shows them."""
     known_state(page, server)
     text = (EXAMPLES / "circle.ngc").read_text()
-    answer = check(page, server, text)
+    page.fill("#prog-text", "")
+    page.set_input_files("#prog-file", str(EXAMPLES / "circle.ngc"))  # opened as a file
+    box = page.locator("#prog-text")
+    until(lambda: box.input_value() == text, "the file in the text box", box.input_value)
+    answer = check(page, server, None)
     assert answer.startswith("passes"), answer
     sent: list[dict[str, Any]] = []
     refusal = {
@@ -356,7 +360,10 @@ def test_run_sends_the_checked_text_and_shows_a_refusal_by_line(page: Any, serve
     try:
         page.check("#prog-ff", timeout=PAGE_WAIT_S * 1e3)
         click_until(page, "#prog-run", lambda: sent, "the run posted", seen(server, page))
-        assert sent[0] == {"gcode": text, "feedforward": True}
+        # the checked text, the feed-forward choice, the work offset it was checked with
+        # (the config's: 0; the file states none) and its name for the library (the file's)
+        assert (sent[0]["gcode"], sent[0]["feedforward"]) == (text, True)
+        assert (sent[0]["work_offset_m"], sent[0]["name"]) == ([0, 0, 0], "circle.ngc")
         state = page.locator("#prog-state")
         until(
             lambda: "20261201-000001-prog" in state.inner_text(),

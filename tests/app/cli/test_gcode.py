@@ -37,7 +37,19 @@ def test_the_failing_example_fails_at_its_lines_as_documented(capsys):
     assert {"ceiling", "workspace"} <= {v["kind"] for v in report["violations"]}
     assert main(["gcode", "check", str(EXAMPLES / "fails.ngc")]) == 1
     text = capsys.readouterr().out
-    assert "FAILS" in text and "line 5: ceiling" in text and "-60.000) mm" in text
+    assert "FAILS" in text and "-60.000) mm" in text
+    # folded as the page folds: in the report's order, a first cause (folded_under null)
+    # as 'line N: ...', each other indented under the first cause of its own line
+    rows = text.splitlines()[4:]
+    for k, (row, v) in enumerate(zip(rows, report["violations"], strict=True)):
+        if v["folded_under"] is None:
+            assert row.startswith(f"  line {v['line']}: {v['kind']} at "), row
+        else:
+            assert row.startswith(f"      |_ {v['kind']} at "), row
+            assert v["folded_under"] < k
+            under = report["violations"][v["folded_under"]]
+            assert under["folded_under"] is None and under["line"] == v["line"]
+    assert "FAILS: 12 violations on 2 line(s): 2 first cause(s), 10 folded under them" in text
     documented = (EXAMPLES.parent / "docs" / "gcode.md").read_text()
     for line in text.splitlines()[3:]:  # the per-line violations, as docs/gcode.md shows
         assert line.strip() in documented, line
