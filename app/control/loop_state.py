@@ -172,6 +172,7 @@ class LoopState:
             phi_measured_rad=_or_nan(self.wrist.position_rad if self.wrist else None),
             phi_commanded_rad=_or_nan(self.phi_commanded_rad),
             phi_goal_rad=_or_nan(self.phi_goal_rad),
+            wrist_servo=self.wrist,
             info=self.info,
             gains=self.gains,
             loop_total=self.recorder.since_start(),
@@ -180,6 +181,7 @@ class LoopState:
             source_id=getattr(self.source, "source_id", None),
             source_t_s=getattr(self.source, "t_s", None),
             source_line=getattr(self.source, "program_line", None),
+            source_feed=getattr(self.source, "feed_state", None),
             finished_source_id=self.finished_source_id,
         )
 

@@ -31,6 +31,7 @@ class RobotInfo:
     backend_description: str = ""
     servo_ids: tuple[int, ...] = (1, 2, 3)
     boot: str = ""
+    wrist_servo_id: int | None = None  # the wrist's servo on the legs' bus (None: no wrist)
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,24 @@ class WristReading:
     temperature_c: float
     hardware_errors: tuple[str, ...]
     torque_enabled: bool | None = None
+    voltage_v: float = float("nan")  # input voltage [V]
+    pwm: float = float("nan")  # PWM duty cycle, signed (1 = full)
+
+
+@dataclass(frozen=True)
+class FeedState:
+    """How a path plays (app/link/paths.py ``Playback``): ``rate`` its time's rate now
+    (0: standing, 1: as planned), ``override`` the feed override set (0.1 to 1.0: the
+    program was checked at 100 % feed), ``paused`` why it stands or is stopping (None:
+    running), ``time_left_s`` the path time left at the override [s], ``optional_stop``
+    whether M1 stops, ``stop_line`` the program line it stops at (None: none)."""
+
+    rate: float = 1.0
+    override: float = 1.0
+    paused: str | None = None
+    time_left_s: float = 0.0
+    optional_stop: bool = False
+    stop_line: int | None = None
 
 
 @dataclass(frozen=True)
@@ -147,6 +166,9 @@ class Snapshot:
     phi_measured_rad: float = float("nan")
     phi_commanded_rad: float = float("nan")
     phi_goal_rad: float = float("nan")
+    # the wrist's servo at the last read (its current, temperature, errors): None without
+    # a wrist or before its first read
+    wrist_servo: WristReading | None = None
     # what GET /api/status reports beside the tick's own figures, as of this tick: the
     # robot (static), the legs' position gains in use (joint order), the loop's timing
     # since start and over its last 10 s (app/control/timing.py; the figures of the
@@ -162,6 +184,8 @@ class Snapshot:
     source_id: str | None = None
     source_t_s: float | None = None
     source_line: int | None = None
+    # a path's playback (app/link/paths.py Playback): feed override, pause, time left
+    source_feed: FeedState | None = None
     finished_source_id: str | None = None
 
     @property

@@ -395,6 +395,8 @@ class RobotClient:
             if snap.source_t_s is not None:
                 active.t_s = snap.source_t_s
             active.program_line = snap.source_line
+            if snap.source_feed is not None:  # the node's feed override, pause, time left
+                active.feed_state = snap.source_feed
 
     # ---- commands ----
     def _call(self, op: str, args: dict[str, Any]) -> Future:
@@ -524,8 +526,22 @@ class RobotClient:
             "expected_start_m": np.asarray(expected_start_m, float),
             "tolerance_m": tolerance,
             "model_version": used.version,
+            # the feed override and optional stop it starts with (its page's settings)
+            "play": dict(getattr(source, "start_play", None) or {}),
         }
         return self._motion("run_path", args)
+
+    def steer_source(self, source: Any, action: str, **values: Any) -> Future:
+        """Steer a playing run's time (app/link/paths.py ``Playback.steer``: pause, resume,
+        step, feed with ``override``, optional_stop with ``on``): a Future of the node's
+        FeedState as plain data; MotionRefused when that run no longer plays."""
+        source_id = getattr(source, "source_id", None)
+        if source_id is None:
+            raise MotionRefused("the run is not playing on the robot")
+        args = {"source_id": source_id, "action": action, **values}
+        if action in ("resume", "step"):  # these move the robot: not while a procedure holds it
+            return self._motion("steer", args)
+        return self._call("steer", args)
 
     def stop_source(self, source: Any) -> Future:
         source_id = getattr(source, "source_id", None)
@@ -550,7 +566,9 @@ class RobotClient:
         return self._motion("turn_wrist", {"phi_rad": phi})
 
     def set_gains(self, gains: dict[int, PositionGains]) -> Future:
-        ordered_gains(gains, tuple(self.servo_ids))  # refused here naming the ids
+        wrist = self.settings.wrist.servo_id if self.settings.wrist.enabled else None
+        legs = {sid: g for sid, g in gains.items() if sid != wrist}  # the wrist's: the node's
+        ordered_gains(legs, tuple(self.servo_ids))  # refused here naming the ids
         wire = {str(sid): g for sid, g in gains.items()}
         return then(self._motion("set_gains", {"gains": wire}), _gains_in)
 

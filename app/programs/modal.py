@@ -3,7 +3,7 @@
 State (LinuxCNC's defaults): G17, G21 (mm), G90, G91.1 (arc centres relative to the
 start), G54 (the one work offset), G61 (exact stop), no motion mode and no feed until the
 program gives them. Within a line, words act in LinuxCNC's order: feed (F), plane, units,
-work offset, path control, distance modes, then dwell (G4) or the motion, then M0/M2/M30.
+work offset, path control, distance modes, then dwell (G4) or the motion, then M0/M1/M2/M30.
 F is kept as written and read in the units in force when a move uses it.
 
 Programs are in millimetres (inches under G20) in the base frame shifted by the work
@@ -49,7 +49,7 @@ _SUPPORTED_G = {
     900: "distance", 910: "distance",
     901: "arc_distance", 911: "arc_distance",
 }  # fmt: skip
-_SUPPORTED_M = {0, 2, 30}
+_SUPPORTED_M = {0, 1, 2, 30}
 _VALUE_LETTERS = set("XYZIJKRFP")
 _WRIST = "the wrist axis is not configured (A needs [wrist] enabled = true)"
 
@@ -385,12 +385,17 @@ def step(state: ModalState, line: Line, program: Program) -> None:
                 program.segments.append(segment)
             state.position_m, state.phi_rad = end, phi_end
     if m_word is not None:
-        if m_word.value == 0:
+        if m_word.value in (0, 1):
             pos, phi = _vec(state.position_m), state.phi_rad
+            optional = m_word.value == 1
             program.segments.append(
-                Segment(n, "pause", pos, pos, phi_start_rad=phi, phi_end_rad=phi)
+                Segment(n, "pause", pos, pos, phi_start_rad=phi, phi_end_rad=phi, optional=optional)
             )
-            program.notes.append(f"line {n}: M0 pauses the program (the check goes on)")
+            program.notes.append(
+                f"line {n}: M1 pauses the program when the optional stop is on (the check goes on)"
+                if optional
+                else f"line {n}: M0 pauses the program until Resume (the check goes on)"
+            )
         else:
             state.ended = True
 

@@ -37,7 +37,7 @@ Limits per segment:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -130,6 +130,25 @@ class ProgramPath:
     profiles: tuple[Profile, ...]
     overlaps_s: tuple[float, ...] = ()
     feedforward: bool = False
+    # how a run of it starts to play (app/link/paths.py Playback): the feed override
+    # (0.1 to 1.0) and whether M1 stops
+    feed_override: float = 1.0
+    optional_stop: bool = False
+
+    def from_line(self, line: int) -> ProgramPath:
+        """The program from line ``line`` (1-based) on: its segments from the first one on
+        that line or after, timed as planned (each move runs from rest, a blend into the
+        first one is left out); its start is that segment's start point. ValueError
+        naming ``start_line`` when no move, dwell or pause is on that line or after."""
+        first = next((i for i, s in enumerate(self.segments) if s.line >= line), None)
+        if first is None:
+            raise ValueError(f"start_line: no move, dwell or pause on line {line} or after it")
+        return replace(
+            self,
+            segments=self.segments[first:],
+            profiles=self.profiles[first:],
+            overlaps_s=self.overlaps_s[first:],
+        )
 
     @cached_property
     def start_s(self) -> np.ndarray:

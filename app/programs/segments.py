@@ -36,7 +36,7 @@ class Segment:
 
     line: the program line (1-based); kind: rapid (G0, at the jog limits), linear (G1),
     arc (G2/G3, helix when it also moves along the plane's normal), dwell (G4) or pause
-    (M0: the path stops there). start_m / end_m: base-frame points [m]. centre_m: the arc's
+    (M0, M1: the path stops there). start_m / end_m: base-frame points [m]. centre_m: the arc's
     centre in the start's plane [m]; plane: "G17", "G18" or "G19"; direction: "cw" (G2)
     or "ccw" (G3); sweep_rad: the turn, signed about the plane's normal [rad]. feed_m_s:
     the programmed feed [m/s] (None for rapids: the jog speed); dwell_s [s]; blend_m:
@@ -45,6 +45,8 @@ class Segment:
     linear in the arc length between them; a move of the wrist alone (no xyz travel)
     runs along its turn [rad] instead, at ``feed_rad_s`` [rad/s] (G1: F read as deg/min,
     as LinuxCNC reads it for a rotary axis alone; None: the wrist's speed limit).
+    optional: a pause that is M1, an optional stop (it stops only with the optional stop
+    switched on when it runs).
     """
 
     line: int
@@ -61,6 +63,7 @@ class Segment:
     phi_start_rad: float = 0.0
     phi_end_rad: float = 0.0
     feed_rad_s: float | None = None
+    optional: bool = False
 
     @property
     def moves(self) -> bool:

@@ -399,7 +399,34 @@ class RobotNode:
                 f"robot, got {tolerance_m}"
             )
         check_sampled(model.gate, path, start, self.controller.snapshot().joints_measured_rad)
-        return self.controller.run_source(PathSource(path, source_id), start, tolerance_m, model)
+        source = PathSource(path, source_id)
+        play = args.get("play") or {}
+        if not isinstance(play, dict):
+            raise ValueError("play: expected an object (override, optional_stop)")
+        if "override" in play:
+            source.playback.steer("feed", override=play["override"])
+        if "optional_stop" in play:
+            source.playback.steer("optional_stop", on=play["optional_stop"])
+        return self.controller.run_source(source, start, tolerance_m, model)
+
+    def _op_steer(self, station: str, args: dict[str, Any]) -> Future:
+        """Steer the playing run ``source_id``'s time (app/link/paths.py Playback): pause,
+        resume, step, feed (``override`` 0.1 to 1.0), optional_stop (``on``). In the
+        control thread, between ticks; the answer is its FeedState. MotionRefused when
+        that run no longer plays; ValueError naming the field."""
+        source_id = _text(args, "source_id")
+        action = _text(args, "action", 20)
+        override, on = args.get("override"), args.get("on")
+
+        def steer() -> Any:
+            source = self.controller.state.source
+            if getattr(source, "source_id", None) != source_id or not isinstance(
+                source, PathSource
+            ):
+                raise MotionRefused("the run is no longer playing: nothing to steer")
+            return source.playback.steer(action, override=override, on=on)
+
+        return self.controller.submit(steer)
 
     def _op_set_gains(self, station: str, args: dict[str, Any]) -> Future:
         given = args.get("gains")

@@ -5,13 +5,45 @@ from __future__ import annotations
 import numpy as np
 
 from app.control.sources import Progress, Setpoint
-from app.link.paths import SampledPath
+from app.control.state import FeedState
+from app.link.paths import EXTRA_ACCEL_M_S2, MAX_SLEW_PER_S, Playback, SampledPath
 from app.runs.trajectories import PlannedRun
+
+REST_PROBE_S = 0.005  # a planned path is at rest where it moves less than EXTRA_ACCEL * this
+
+
+def program_marks(plan: PlannedRun) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """A program's segments as (m, 3) [line, start, end] and its M0 / M1 as (p, 3) [time,
+    line, optional] in run time [s] (the approach first); (None, None) for a run that is
+    not a program (its path has no ``segments``)."""
+    params = plan.params
+    segments = getattr(params, "segments", None)
+    if segments is None:
+        return None, None
+    offset = plan.approach_s
+    starts, ends = params.start_s + offset, params.end_s + offset
+    spans = np.array(
+        [[s.line, a, b] for s, a, b in zip(segments, starts, ends, strict=True)], dtype=float
+    ).reshape(-1, 3)
+    pauses = np.array(
+        [
+            [a, s.line, 1.0 if s.optional else 0.0]
+            for s, a in zip(segments, starts, strict=True)
+            if s.kind == "pause"
+        ],
+        dtype=float,
+    ).reshape(-1, 3)
+    return spans, pauses
 
 
 class TrajectorySource:
     """Plays a PlannedRun; with ``lead_s`` > 0 commands the point that far ahead (feed-forward
-    for the servos' position lag) while reporting the nominal point as the goal."""
+    for the servos' position lag) while reporting the nominal point as the goal.
+
+    Its time base is a :class:`~app.link.paths.Playback` (feed override, pause, single
+    step, M0 / M1), as the robot node's ``PathSource`` has it; ``feed_state`` says where
+    it stands (over the link, the station's copy is the node's, from its snapshots), and
+    ``start_play`` the override and optional stop it starts with."""
 
     name = "test"
 
@@ -28,6 +60,36 @@ class TrajectorySource:
         # two ticks (a tick late by more than the line lasts), which no sample shows
         self.lines_met: list[int] = []
         self._timed_s: float | None = None  # the timed part's time at the last tick
+        # the feed override and optional stop it starts with (a program path says them)
+        self.start_play: dict[str, object] = {
+            "override": float(getattr(plan.params, "feed_override", 1.0)),
+            "optional_stop": bool(getattr(plan.params, "optional_stop", False)),
+        }
+        self._playback: Playback | None = None
+        self.feed_state: FeedState | None = None
+
+    @property
+    def playback(self) -> Playback:
+        """This run's time base, made at its first use (in the loop: its first tick)."""
+        if self._playback is None:
+            plan = self.plan
+            peak = max(float(plan.params.peaks()[0]), 0.1)  # the approach's speed too
+            slew = min(MAX_SLEW_PER_S, EXTRA_ACCEL_M_S2 / peak)
+            rest_speed = EXTRA_ACCEL_M_S2 * REST_PROBE_S
+
+            def rest_at(t_s: float) -> bool:
+                h = REST_PROBE_S
+                a, b = plan.point_at(t_s - h), plan.point_at(t_s + h)
+                return float(np.linalg.norm(b - a)) / (2 * h) <= rest_speed
+
+            spans, pauses = program_marks(plan)
+            playback = Playback(plan.duration_s, slew, rest_at, spans, pauses, plan.approach_s)
+            if "override" in self.start_play:
+                playback.steer("feed", override=self.start_play["override"])  # type: ignore[arg-type]
+            if "optional_stop" in self.start_play:
+                playback.steer("optional_stop", on=self.start_play["optional_stop"])  # type: ignore[arg-type]
+            self._playback = playback
+        return self._playback
 
     def sampled(self, period_s: float) -> SampledPath:
         """This run as data for a robot node (app/link/paths.py): its points, wrist angles,
@@ -50,6 +112,7 @@ class TrajectorySource:
         if self._line_at is not None:
             timed = np.clip(times - plan.approach_s, 0.0, plan.params.duration_s)
             lines = np.where(index == 1, self._line_at(timed), -1).astype(int)
+        spans, pauses = program_marks(plan)
         return SampledPath(
             period_s=period_s,
             duration_s=plan.duration_s,
@@ -63,6 +126,8 @@ class TrajectorySource:
             approach_s=plan.approach_s,
             timed_s=plan.params.duration_s,
             name=self.name,
+            spans=spans,
+            pauses=pauses,
         )
 
     def progress(self) -> Progress:
@@ -72,9 +137,12 @@ class TrajectorySource:
         return Progress.at(plan.phase_at(t), t, plan.approach_s, test_s, stop_s)
 
     def next(self, dt_s: float) -> Setpoint:
-        self.t_s += dt_s
+        playback = self.playback
+        self.t_s = playback.advance(self.t_s, dt_s)
+        self.feed_state = playback.state
+        lead = playback.rate * self.lead_s  # a standing path commands its goal
         goal = self.plan.point_at(self.t_s)
-        commanded = self.plan.point_at(self.t_s + self.lead_s) if self.lead_s else goal
+        commanded = self.plan.point_at(self.t_s + lead) if lead else goal
         self.finished = self.t_s >= self.plan.duration_s
         phase = self.plan.phase_at(self.t_s)
         if self._line_at is not None:  # only in the timed part: the approach and the
@@ -82,6 +150,9 @@ class TrajectorySource:
             # the program's
             timed = min(max(self.t_s - self.plan.approach_s, 0.0), self.plan.params.duration_s)
             self.program_line = int(self._line_at(timed)) if phase == "timed" else None
+            stopped_at = self.feed_state.stop_line
+            if playback.rate == 0.0 and stopped_at is not None:  # standing at a stop
+                self.program_line = stopped_at
             if phase == "timed" and self._lines_between is not None:
                 since = 0.0 if self._timed_s is None else self._timed_s  # from its start
                 for line in self._lines_between(since, timed):
@@ -89,7 +160,7 @@ class TrajectorySource:
                         self.lines_met.append(line)
                 self._timed_s = timed
         # with a wrist the path's phi, at the commanded point's time (None: left alone)
-        phi = self.plan.phi_at(self.t_s + self.lead_s)
+        phi = self.plan.phi_at(self.t_s + lead)
         return Setpoint(
             point_m=commanded,
             goal_m=goal,

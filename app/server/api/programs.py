@@ -36,9 +36,12 @@ from app.control.commands import require_motion
 from app.control.errors import MotionRefused
 from app.control.model import RobotModel
 from app.fields import ReachVector3
+from app.link.codec import plain
+from app.link.paths import FEED_MAX, FEED_MIN
 from app.programs.check import CheckedProgram, ProgramReport
 from app.programs.dry_run import DryRunRefused
 from app.programs.errors import ProgramError
+from app.programs.library import MAX_NAME, LibraryError, ProgramLibrary
 from app.programs.verify import Violation
 from app.programs.workers import CheckJob, ProgramWorkers, WorkerError
 from app.server.api.deps import (
@@ -53,7 +56,7 @@ from app.server.api.deps import (
 from app.server.api.records import model_of
 from app.server.api.responses import RunStarted
 from app.server.api.runs import start_run
-from app.server.errors import CONTROL, UNAUTHORISED, ErrorBody
+from app.server.errors import CONTROL, INVALID, UNAUTHORISED, ErrorBody
 
 router = APIRouter(prefix="/programs", tags=["programs"])
 # A long program's check takes seconds of CPU and up to ~1 GB (programs.max_samples loop
@@ -75,6 +78,12 @@ class ProgramRequest(BaseModel):
     work_offset_m: ReachVector3 | None = Field(
         None, description="G54: the program origin in the base frame [m] (default: config)"
     )
+    name: str | None = Field(
+        None,
+        max_length=MAX_NAME,
+        description="the program's name in the library (its file's; default 'unnamed'): "
+        "every program sent is kept there (GET /api/programs/library)",
+    )
 
 
 class RunProgramRequest(ProgramRequest):
@@ -83,6 +92,21 @@ class RunProgramRequest(ProgramRequest):
     feedforward: bool = Field(
         False, description="command the point runs.feedforward_lead_s ahead (servo lag)"
     )
+    start_line: int | None = Field(
+        None,
+        ge=1,
+        description="run from this line (1-based): from the first move, dwell or pause on "
+        "it or after, with an approach move to its start checked like any run start "
+        "(default: from the start)",
+    )
+    feed_override: float = Field(
+        1.0,
+        ge=FEED_MIN,
+        le=FEED_MAX,
+        description="the feed override it starts with, 0.1 to 1.0 (the program is checked "
+        "at 100 % feed: never above)",
+    )
+    optional_stop: bool = Field(False, description="M1 stops the program (optional stop on)")
 
 
 ViolationOut = model_of(
@@ -216,10 +240,14 @@ def check(
     """Plan the program and check every loop sample (workspace with margin and ceiling,
     IK on the followed branch, joint limits, speed and acceleration, singularity margin,
     servo torque); all violations by line. Runs in a worker process; moves nothing."""
+    kept = _keep(settings, body, "check")
+    if isinstance(kept, JSONResponse):
+        return kept
     outcome = _check(body, controller, settings, workers)
     if isinstance(outcome, JSONResponse):
         return outcome
     checked, notes = outcome
+    notes = notes + kept
     report = checked.report.to_dict()
     report["notes"] = notes + report["notes"]
     if scene is not None:  # the checked path in the 3D scene, violations in red
@@ -233,6 +261,27 @@ def program_error(
     """A 422 in the programs' error shape (ProgramErrorOut): every key present."""
     body = {"detail": detail, "line": line, "word": word, "violations": violations or []}
     return JSONResponse(body, status_code=422)
+
+
+def library_of(settings) -> ProgramLibrary:
+    """The program library of ``settings``: ``<runs folder>/programs/``."""
+    return ProgramLibrary(settings.runs.folder_path / "programs")
+
+
+def _keep(settings, body: ProgramRequest, action: str) -> list[str] | JSONResponse:
+    """Keep the program sent in the library (app/programs/library.py): the notes to add
+    (one when it is not kept: too long, or the folder cannot be written); the 422 naming
+    ``name`` for a name the library refuses (before anything is checked)."""
+    try:
+        offset = None if body.work_offset_m is None else list(body.work_offset_m)
+        entry = library_of(settings).add(body.gcode, body.name or "unnamed", action, offset)  # type: ignore[arg-type]
+    except LibraryError as exc:
+        return program_error(str(exc), violations=[{"field": exc.field, "reason": exc.reason}])
+    except OSError as exc:
+        return [f"not kept in the program library: {exc.strerror or exc}"]
+    if entry is None:
+        return ["not kept in the program library: longer than it keeps"]
+    return []
 
 
 def _unreadable(exc: ProgramError) -> JSONResponse:
@@ -310,6 +359,91 @@ def _refused(checked: CheckedProgram) -> JSONResponse:
     return program_error(detail, first["line"], None, violations)
 
 
+class ProgramDefaultsOut(BaseModel):
+    """What a program is checked with when the body leaves it out (the config's)."""
+
+    work_offset_m: list[float] = Field(description="G54: the program origin [m]")
+    start_m: list[float] = Field(description="where an offline check starts [m]")
+    dry_run_max_s: float = Field(description="longest program the dry run plays [s]")
+    loop_rate_hz: float = Field(description="the loop's rate: one check sample per period")
+
+
+@router.get("/defaults", response_model=ProgramDefaultsOut, responses={**UNAUTHORISED, **INVALID})
+def program_defaults(settings: SettingsDep, _: TokenChecked) -> Any:
+    """The config's work offset, offline start and dry-run limit (the page's defaults)."""
+    return {
+        "work_offset_m": list(settings.programs.work_offset_m),
+        "start_m": list(settings.programs.start_m),
+        "dry_run_max_s": settings.programs.dry_run_max_s,
+        "loop_rate_hz": settings.loop.rate_hz,
+    }
+
+
+class LibraryEntryOut(BaseModel):
+    """A program kept in the library (app/programs/library.py Entry)."""
+
+    id: str = Field(description="16 hex digits (of the text's SHA-256): the same text is one")
+    name: str = Field(description="the name it was last sent with")
+    bytes: int = Field(description="its size in UTF-8 [bytes]")
+    lines: int = Field(description="its lines")
+    first: str = Field(description="its first non-empty line (up to 80 characters)")
+    sent_at: float = Field(description="the last send [s since the epoch, UTC]")
+    action: str = Field(description="the last send's: check, dry-run or run")
+    sends: int = Field(description="how many times it was sent")
+    work_offset_m: list[float] | None = Field(
+        description="the G54 origin it was last sent with [m] (null: the config's)"
+    )
+
+
+class LibraryOut(BaseModel):
+    """The programs kept, the most recently sent first."""
+
+    programs: list[LibraryEntryOut]
+    max_entries: int = Field(description="the most kept (the least recently sent go first)")
+    max_bytes: int = Field(description="a longer program is not kept [bytes]")
+
+
+class LibraryProgramOut(LibraryEntryOut):
+    """A kept program with its text."""
+
+    gcode: str = Field(description="the program's text")
+
+
+@router.get("/library", response_model=LibraryOut, responses={**UNAUTHORISED, **INVALID})
+def list_library(settings: SettingsDep, _: TokenChecked) -> Any:
+    """Every program sent to check, dry-run or run (any client), the most recent first."""
+    library = library_of(settings)
+    entries = library.entries()
+    return {
+        "programs": [e.to_dict() for e in entries],
+        "max_entries": library.max_entries,
+        "max_bytes": library.max_bytes,
+    }
+
+
+@router.get(
+    "/library/{program_id}",
+    response_model=LibraryProgramOut,
+    responses={
+        **UNAUTHORISED,
+        404: {"model": ErrorBody, "description": "no program of that id is kept"},
+        422: {"model": ProgramErrorOut, "description": "not an id of the library's form"},
+    },
+)
+def get_library_program(program_id: str, settings: SettingsDep, _: TokenChecked) -> Any:
+    """A kept program and its text, by its id from the list (16 hex digits: nothing else
+    is read, so no path leaves the library's folder)."""
+    try:
+        entry, text = library_of(settings).get(program_id)
+    except LibraryError as exc:
+        return program_error(str(exc), violations=[{"field": exc.field, "reason": exc.reason}])
+    except (KeyError, OSError, UnicodeDecodeError):
+        return JSONResponse(
+            {"detail": f"id: no program {program_id} in the library"}, status_code=404
+        )
+    return {**entry.to_dict(), "gcode": text}
+
+
 @router.post(
     "/dry-run",
     response_model=DryRunOut,
@@ -326,6 +460,9 @@ def dry_run_program(
     simulated bus of its own, stepped offline; never the live robot): the predicted
     tracking error (goal - FK) per program line. Programs longer than
     programs.dry_run_max_s are refused (422). Both in a worker process; moves nothing."""
+    kept = _keep(settings, body, "dry-run")
+    if isinstance(kept, JSONResponse):
+        return kept
     job, _notes = _job(body, controller, settings, from_robot=False)
     try:
         _checked, result = workers.dry_run(job, body.feedforward)
@@ -353,6 +490,9 @@ async def run_program(
     422 with the violations (detail names the first) when it fails, and nothing moves.
     Its progress carries program_line; its stats program.lines, the error per line."""
     controller = runs.controller
+    kept = _keep(controller.settings, body, "run")
+    if isinstance(kept, JSONResponse):
+        return kept
     _require_motion(controller)  # torque off, e-stop, fault: said as such, before the check
     controller.owner.check()  # a calibration or tuning holds the robot: before the check too
     model = controller.model  # the run is refused if another is in use when it starts
@@ -394,5 +534,118 @@ async def run_program(
         "work_offset_m": report.work_offset_m,
         "feedforward": body.feedforward,
     }
-    path = replace(program.path, feedforward=body.feedforward)
+    path = replace(
+        program.path,
+        feedforward=body.feedforward,
+        feed_override=body.feed_override,
+        optional_stop=body.optional_stop,
+    )
+    if body.start_line is not None:
+        if body.start_line > report.lines:
+            return program_error(
+                f"start_line: line {body.start_line} is past the program's end "
+                f"({report.lines} lines)"
+            )
+        if path.moves_wrist:  # its approach would not turn the wrist to that line's phi
+            return program_error(
+                "start_line: a program that turns the wrist (A words) runs from its start only"
+            )
+        try:
+            path = path.from_line(body.start_line)
+        except ValueError as exc:
+            return program_error(str(exc))
+        record["start_line"] = body.start_line
+    record["feed_override"] = body.feed_override
+    record["optional_stop"] = body.optional_stop
     return await start_run(request, runs, path, "program", record, model)
+
+
+class FeedOverrideRequest(BaseModel):
+    """A feed override for the running program."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    override: float = Field(
+        ge=FEED_MIN,
+        le=FEED_MAX,
+        description="0.1 to 1.0 of the planned feed (checked at 100 %: never above)",
+    )
+
+
+class OptionalStopRequest(BaseModel):
+    """The optional stop switch: M1 stops the program while it is on."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    on: bool = Field(description="M1 stops the program")
+
+
+class ProgramPlayOut(BaseModel):
+    """Where the running program's time stands after a command."""
+
+    run_id: str
+    feed_override: float = Field(description="the feed override set, 0.1 to 1.0")
+    feed_rate: float = Field(description="the rate its time runs at now (0: standing)")
+    paused: str | None = Field(description="why it stands or is stopping; null: running")
+    time_left_s: float = Field(description="path time left at the feed override [s]")
+    optional_stop: bool = Field(description="M1 stops")
+    stop_line: int | None = Field(description="the line a step or M0 / M1 stops (stopped) at")
+
+
+STEER_REFUSED: dict[int, dict[str, Any]] = {
+    **CONTROL,
+    409: {
+        "model": ErrorBody,
+        "description": "no program is running, a step with no line end ahead, no lease, "
+        "or a calibration or tuning holds the robot; nothing changes",
+    },
+    422: {
+        "model": ProgramErrorOut,
+        "description": "the body is refused (violations name the field and the reason)",
+    },
+}
+
+
+async def _steer(runs, action: str, **values: Any) -> dict[str, Any]:
+    run, state = await asyncio.to_thread(runs.steer, action, **values)
+    feed = state if isinstance(state, dict) else plain(state)
+    return {
+        "run_id": run.run_id,
+        "feed_override": feed["override"],
+        "feed_rate": feed["rate"],
+        "paused": feed["paused"],
+        "time_left_s": feed["time_left_s"],
+        "optional_stop": feed["optional_stop"],
+        "stop_line": feed["stop_line"],
+    }
+
+
+@router.post("/pause", response_model=ProgramPlayOut, responses=STEER_REFUSED)
+async def pause_program(runs: RunsDep, _: ControlClient) -> Any:
+    """Pause the running program: its time slows to a stand at a bounded rate, so the
+    tool decelerates along the checked path and stays on it (409 when none runs)."""
+    return await _steer(runs, "pause")
+
+
+@router.post("/resume", response_model=ProgramPlayOut, responses=STEER_REFUSED)
+async def resume_program(runs: RunsDep, _: ControlClient) -> Any:
+    """Resume a paused (or M0 / M1 / step-stopped) program at its feed override."""
+    return await _steer(runs, "resume")
+
+
+@router.post("/step", response_model=ProgramPlayOut, responses=STEER_REFUSED)
+async def step_program(runs: RunsDep, _: ControlClient) -> Any:
+    """Single step: run to the end of the current line (the next one it can stop at
+    exactly when already braking past it) and stop there; Resume goes on."""
+    return await _steer(runs, "step")
+
+
+@router.put("/feed", response_model=ProgramPlayOut, responses=STEER_REFUSED)
+async def set_feed(body: FeedOverrideRequest, runs: RunsDep, _: ControlClient) -> Any:
+    """Set the running program's feed override (0.1 to 1.0; the program was checked at
+    100 %: never above); its time rate moves there at a bounded slew."""
+    return await _steer(runs, "feed", override=body.override)
+
+
+@router.put("/optional-stop", response_model=ProgramPlayOut, responses=STEER_REFUSED)
+async def set_optional_stop(body: OptionalStopRequest, runs: RunsDep, _: ControlClient) -> Any:
+    """Switch the optional stop of the running program: M1 stops it while on."""
+    return await _steer(runs, "optional_stop", on=body.on)
