@@ -9,6 +9,7 @@ counted from the start of that part so the runs line up.
 
 from __future__ import annotations
 
+import textwrap
 from io import BytesIO
 from pathlib import Path
 from typing import Any
@@ -187,15 +188,40 @@ def figure(runs: list[dict[str, Any]], folders: list[Path], skip_s: float) -> Fi
             axes_i.set_xlabel("time in the scored part [s]")
         axes[0].set_ylabel("reference − measured [mm]")
         handles, labels = axes[0].get_legend_handles_labels()
-        if handles:
-            fig.legend(handles, labels, loc="upper center", ncol=2, frameon=False)
+        rows_of_legend = (len(handles) + 1) // 2
+        fig.set_figheight(3.8 + 0.2 * rows_of_legend)  # the plots keep their height
         note = "Scored part of each run (as in its statistics); lines break at missing ticks."
         if missing:
             note += " Nothing scored or no log: " + ", ".join(missing) + "."
-        fig.text(0.01, 0.01, note, fontsize=8)
-        rows_of_legend = (len(handles) + 1) // 2
-        fig.tight_layout(rect=(0, 0.05, 1, 0.92 - 0.06 * rows_of_legend))
+        fig.text(0.01, 0.01, "\n".join(textwrap.wrap(note, 150)), fontsize=8, va="bottom")
+        top = 1.0
+        if handles:
+            legend = fig.legend(
+                handles,
+                labels,
+                loc="upper center",
+                bbox_to_anchor=(0.5, 1.0),
+                ncol=2,
+                frameon=False,
+            )
+            top = _bottom_of(fig, legend) - 0.01
+        # the plots (titles included) fill what is left under the legend, over the note
+        fig.tight_layout(rect=(0, _top_of(fig, fig.texts[-1]) + 0.01, 1, top))
     return fig
+
+
+def _bottom_of(fig: Figure, artist: Any) -> float:
+    """Where ``artist``'s drawn box starts from the bottom, as a fraction of the figure."""
+    fig.canvas.draw()
+    box = artist.get_window_extent(fig.canvas.get_renderer())
+    return float(fig.transFigure.inverted().transform((box.x0, box.y0))[1])
+
+
+def _top_of(fig: Figure, artist: Any) -> float:
+    """Where ``artist``'s drawn box ends at the top, as a fraction of the figure."""
+    fig.canvas.draw()
+    box = artist.get_window_extent(fig.canvas.get_renderer())
+    return float(fig.transFigure.inverted().transform((box.x1, box.y1))[1])
 
 
 def png(runs: list[dict[str, Any]], folders: list[Path], skip_s: float) -> bytes:

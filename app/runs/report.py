@@ -145,8 +145,11 @@ def report_figure(
     wrist = bool(np.isfinite(phi[:, 0]).any())
     extras = (["lines"] if per_line else []) + (["wrist"] if wrist else [])
     with plt.rc_context(STYLE):
+        heading = heading_pieces(lines)
+        top_in, bottom_in = heading_height_in(heading), CAPTION_IN
+        height_in = PLOTS_IN + 2.4 * len(extras) + top_in + bottom_in
         if extras:  # a G-code program: a row of the error per program line; a wrist: phi
-            figure = plt.figure(figsize=(11, 7.2 + 2.4 * len(extras)))
+            figure = plt.figure(figsize=(11, height_in))
             ratios = [2, 1, *(1.2 for _ in extras)]
             grid = figure.add_gridspec(2 + len(extras), 3, height_ratios=ratios)
             axes = np.empty((2, 3), dtype=object)
@@ -161,7 +164,7 @@ def report_figure(
                     _wrist(row, *break_gaps(times[shown], phi, period_s), stats)
         else:
             figure, axes = plt.subplots(
-                2, 3, figsize=(11, 7.2), sharex=True, gridspec_kw={"height_ratios": [2, 1]}
+                2, 3, figsize=(11, height_in), sharex=True, gridspec_kw={"height_ratios": [2, 1]}
             )
         for i, name in enumerate(AXES):
             top, bottom = axes[0, i], axes[1, i]
@@ -173,14 +176,17 @@ def report_figure(
             bottom.set_ylabel(f"{name} error [mm]")
             bottom.set_xlabel("run time [s]")
             s = axis_stats.get(name, {})
-            top.set_title(
-                f"{name}: RMSE {describe.mm(s.get('rmse_m'))}, mean {describe.mm(s.get('mean_m'))}"
-                f", max |e| {describe.mm(s.get('max_abs_m'))}"
+            top.set_title(  # two lines: one would run into the next column's title
+                f"{name}: RMSE {describe.mm(s.get('rmse_m'))}\n"
+                f"mean {describe.mm(s.get('mean_m'))}, max |e| {describe.mm(s.get('max_abs_m'))}"
             )
         axes[0, 0].legend(loc="upper right")
-        _heading(figure, lines, stats)
-        figure.text(0.01, 0.01, _caption(times, scored, skip_s, gaps), fontsize=8)
-        figure.tight_layout(rect=(0, 0.03, 1, 0.8))
+        _heading(figure, heading)
+        caption = _caption(times, scored, skip_s, gaps)
+        figure.text(0.01, 0.1 / height_in, caption, fontsize=8, va="bottom")
+        # the plots fill what the heading and the caption leave, never under them
+        rect = (0, bottom_in / height_in, 1, 1 - top_in / height_in)
+        figure.tight_layout(rect=rect)
     return figure
 
 
@@ -248,21 +254,44 @@ def wrap(line: str, width: int) -> list[str]:
     return pieces
 
 
-def _heading(figure: Figure, lines: list[str], stats: dict[str, Any]) -> None:
-    y = 0.985
+HEADING_WIDTH = 130  # characters a heading line is wrapped at (fits 11 in at 9 pt)
+TITLE_PT, LINE_PT, LEADING = 11, 9, 1.45  # heading font sizes [pt]; line height / size
+PLOTS_IN = 6.6  # the six plots' height [in]; the heading and the caption come on top
+CAPTION_IN = 0.35  # the caption's strip at the bottom [in]
+
+
+def heading_pieces(lines: list[str]) -> list[tuple[str, bool, bool]]:
+    """The heading as printed, one entry per printed line: (text, is the title, is an
+    unhealthy verdict's line); every line of ``lines`` wrapped at HEADING_WIDTH."""
+    pieces = []
     for index, line in enumerate(lines):
         healthy = not line.startswith("verdict: NOT")
-        for part in wrap(line, 140):
-            figure.text(
-                0.01,
-                y,
-                part,
-                va="top",
-                fontsize=11 if index == 0 else 9,
-                fontweight="bold" if index == 0 or not healthy else "normal",
-                color="black" if healthy else BAD,
-            )
-            y -= 0.035 if index == 0 else 0.028
+        pieces += [(part, index == 0, not healthy) for part in wrap(line, HEADING_WIDTH)]
+    return pieces
+
+
+def heading_height_in(pieces: list[tuple[str, bool, bool]]) -> float:
+    """The height [in] the heading's printed lines take, with a margin above and below."""
+    points = sum((TITLE_PT if title else LINE_PT) * LEADING for _, title, _ in pieces)
+    return points / 72.0 + 0.2
+
+
+def _heading(figure: Figure, pieces: list[tuple[str, bool, bool]]) -> None:
+    """The heading's lines from the top of ``figure`` down, each at its own height, so
+    that however many a verdict has they take the room heading_height_in gave them."""
+    height_in = figure.get_figheight()
+    y_in = 0.1
+    for text, title, bad in pieces:
+        figure.text(
+            0.01,
+            1 - y_in / height_in,
+            text,
+            va="top",
+            fontsize=TITLE_PT if title else LINE_PT,
+            fontweight="bold" if title or bad else "normal",
+            color=BAD if bad else "black",
+        )
+        y_in += (TITLE_PT if title else LINE_PT) * LEADING / 72.0
 
 
 def write_report(

@@ -6,7 +6,7 @@
 import { Ring } from "./ring.js";
 import { wrist } from "./wrist.js";
 
-const CAPACITY = 50 * 60 + 100; // 60 s at the 50 Hz the tracking plots ask for
+const CAPACITY = 50 * 300 + 100; // 5 min (the longest window) at the 50 Hz the plots ask for
 const FRAME_MS = 100; // 10 frames/s: a wrist angle needs no more
 const DEG = 180 / Math.PI;
 const series = { t: new Ring(CAPACITY), goal: new Ring(CAPACITY), measured: new Ring(CAPACITY) };

@@ -5,7 +5,7 @@
 
 import { get, setToken } from "./api.js";
 import { isEstopKey, newPressId, postEstop } from "./estopkey.js";
-import { startPlots } from "./plots.js";
+import { liveAgain, replayRun, startPlots } from "./plots.js";
 import { setWrist, wrist } from "./wrist.js";
 
 const MESSAGE_TYPE = "deltadash-plots";
@@ -41,10 +41,26 @@ function onKey(event) {
   });
 }
 
+let started = false;
+let pendingReplay = null; // a replay asked for before the plots started
+
 function start(wristInfo) {
+  if (started) return;
+  started = true;
   setWrist(wristInfo);
   document.querySelectorAll("[data-wrist]").forEach((el) => { el.hidden = !wrist.enabled; });
   startPlots((online) => tell({ type: "stream", online }), framed ? askToken : null);
+  const asked = pendingReplay || new URLSearchParams(location.search).get("replay");
+  if (asked) replay(asked);
+}
+
+async function replay(runId) {
+  if (!started) {
+    pendingReplay = runId;
+    return;
+  }
+  const ok = await replayRun(runId);
+  tell({ type: "replayed", run_id: runId, ok });
 }
 
 window.addEventListener("keydown", onKey, { capture: true });
@@ -54,6 +70,8 @@ if (framed) {
     const data = event.data || {};
     if (data.kind !== MESSAGE_TYPE) return;
     if (data.type === "info") start(data.wrist);
+    else if (data.type === "replay" && typeof data.run_id === "string") replay(data.run_id);
+    else if (data.type === "live") liveAgain();
     else if (data.type === "token" && data.token) {
       setToken(data.token); // this frame's origin has its own storage
       if (tokenWaiter) tokenWaiter(true);

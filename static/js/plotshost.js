@@ -5,7 +5,9 @@
 //                  {type: "estop", press, event_unix_ms, sent_unix_ms, source} (a key pressed
 //                  while the frame had the focus; the frame sent POST /api/estop itself),
 //                  {type: "token", sent} (its telemetry stream was refused: it wants the token)
-//   page -> frame: {type: "info", wrist: {enabled, min_rad, max_rad}}, {type: "token", token}
+//                  {type: "replayed", run_id, ok} (a replay asked for is shown, or why not)
+//   page -> frame: {type: "info", wrist: {enabled, min_rad, max_rad}}, {type: "token", token},
+//                  {type: "replay", run_id} (show a recorded run in the plots), {type: "live"}
 
 import { promptToken, token } from "./api.js";
 import { estop } from "./control.js";
@@ -14,10 +16,22 @@ import { setStreamOnline } from "./status.js";
 
 const MESSAGE_TYPE = "deltadash-plots";
 
+let sendToFrame = null;
+
+// Replay the recorded run ``runId`` in the tracking plots (scrolled into view); the plots'
+// "Live" button goes back.
+export function replayInPlots(runId) {
+  if (!sendToFrame) return false;
+  sendToFrame({ type: "replay", run_id: runId });
+  document.getElementById("plots-frame").scrollIntoView({ block: "nearest" });
+  return true;
+}
+
 export function startPlotsFrame(info) {
   const frame = document.getElementById("plots-frame");
   const origin = isolatedOrigin(location.port);
   const send = (body) => frame.contentWindow?.postMessage({ kind: MESSAGE_TYPE, ...body }, origin);
+  sendToFrame = send;
   window.addEventListener("message", async (event) => {
     if (event.origin !== origin || event.source !== frame.contentWindow) return;
     const data = event.data || {};

@@ -13,12 +13,15 @@ the span. Runs: the loop-health flag with its reasons as tooltip, the report in 
 from __future__ import annotations
 
 import json
+import math
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from app.runs.logs import read_csv_rows
 from tests.support.browser import (
     PAGE_WAIT_S,
     PATIENT_SIM_ENV,
@@ -57,12 +60,16 @@ def _report_png(path: Path) -> None:
     plt.close(fig)
 
 
+RUNS: dict[str, Path] = {}  # run id -> its folder (the saved runs' logs)
+
+
 @pytest.fixture(scope="module")
 def server(tmp_path_factory) -> Iterator[Server]:
     folder = tmp_path_factory.mktemp("plots")
     runs = folder / "runs"
     for run_id, health in ((QUIET, HEALTHY), (LOADED, UNHEALTHY), (OLD, None)):
         run = save_run(runs, run_id, synthetic_rows(), health)
+        RUNS[run_id] = run.folder
         _report_png(run.folder / "report.png")
         run.has_report = True
         run.save()
@@ -143,6 +150,12 @@ def live_plot(plots: Any) -> Iterator[None]:
     fails half-way must not leave the shared page paused for the next."""
 
     def reset() -> None:
+        if plots.locator("#plot-live").is_visible():  # a replay left on: back to live
+            plots.click("#plot-live")
+            wait_for(lambda: plots.evaluate("window.deltadashPlot.replay") is None, "live plots")
+        for select, value in (("#plot-signals", "position"), ("#plot-yzoom", "1")):
+            if plots.locator(select).input_value() != value:
+                plots.select_option(select, value)
         set_paused(plots, False)
         if plots.locator("#plot-window").input_value() != "10":
             plots.select_option("#plot-window", "10")
@@ -247,8 +260,20 @@ def test_a_drag_zooms_a_time_range_and_double_click_restores(plots: Any, page: A
         "document.getElementById('plot')._fullLayout.xaxis5.range"
     ) == pytest.approx([lo, hi])
     save_artifact("plots-zoomed.png", page.locator("section.plots").screenshot())
-    page.mouse.dblclick(*pixel_of(plots, -4.0))
-    wait_for(lambda: x_range(plots) == [-10, 0], "the window restored by a double-click")
+    tries = {"double-clicks": 0, "at": -math.inf}
+
+    def restored() -> bool:
+        """The whole window back; else a double-click every 3 s (on a loaded machine the
+        frame can take the two clicks further apart than plotly's double-click time)."""
+        if x_range(plots) == [-10, 0]:
+            return True
+        if time.monotonic() - tries["at"] >= 3.0:
+            page.mouse.dblclick(*pixel_of(plots, -4.0))
+            tries["double-clicks"] += 1
+            tries["at"] = time.monotonic()
+        return False
+
+    wait_for(restored, "the window restored by a double-click", PAGE_WAIT_S, seen=lambda: tries)
     wait_for(lambda: not paused(plots), "the plot live again (the zoom had paused it)")
 
 
@@ -361,3 +386,220 @@ def test_the_files_column_is_fully_visible(page: Any, size: tuple[int, int]) -> 
         save_artifact(f"plots-runs-{width}x{height}.png", page.locator("section.runs").screenshot())
     finally:
         page.set_viewport_size({"width": 1366, "height": 900})
+
+
+def layout_of(plots: Any) -> dict[str, Any]:
+    """What the tracking plots show now: y titles, trace names and visibility, y ranges."""
+    return plots.evaluate(
+        """() => { const p = document.getElementById('plot'); const l = p.layout;
+          const y = (n) => l['yaxis' + (n === 1 ? '' : n)];
+          return { titles: [1, 2, 3, 4, 5, 6].map((n) => y(n).title.text),
+                   ranges: [1, 2, 3, 4, 5, 6].map((n) => y(n).range),
+                   names: p.data.map((d) => d.name),
+                   visible: p.data.map((d) => d.visible !== false), x: l.xaxis.range }; }"""
+    )
+
+
+def test_choosing_the_signals_changes_the_traces(plots: Any, page: Any) -> None:
+    plots.select_option("#plot-signals", "joints")
+    wait_for(lambda: layout_of(plots)["titles"][0] == "q1 [°]", "the joints' plots")
+    shown = layout_of(plots)
+    assert shown["titles"] == [
+        "q1 [°]",
+        "q2 [°]",
+        "q3 [°]",
+        "error q1 [°]",
+        "error q2 [°]",
+        "error q3 [°]",
+    ]
+    assert shown["names"][:3] == ["commanded", "measured", "error"]
+    wait_for(lambda: any(v is not None for v in drawn(plots)[1][1]), "measured joint angles drawn")
+    set_paused(plots, True)
+    data = drawn(plots)
+    # per joint: the error is commanded - measured at every drawn sample [deg]
+    for joint in range(3):
+        commanded, measured, error = (data[3 * joint + k][1] for k in range(3))
+        for c, m, e in zip(commanded, measured, error, strict=True):
+            if None not in (c, m, e):
+                assert e == pytest.approx(c - m, abs=2e-3)
+    assert "joints" in plots.locator("#plots-title").inner_text().lower()
+    save_artifact("plots-joints.png", page.locator("#plots-frame").screenshot())
+    set_paused(plots, False)
+    plots.select_option("#plot-signals", "servos")
+    wait_for(lambda: layout_of(plots)["titles"][0] == "leg 1 current [A]", "the servos' plots")
+    shown = layout_of(plots)
+    assert shown["titles"][3] == "leg 1 PWM [%]"
+    assert shown["visible"][:3] == [False, True, True]  # no goal trace for a current
+    plots.select_option("#plot-signals", "position")
+    wait_for(lambda: layout_of(plots)["titles"][0] == "x [mm]", "the position plots again")
+
+
+def test_the_xy_path_draws_the_same_samples_as_the_position_plots(plots: Any, page: Any) -> None:
+    wait_for(lambda: len(drawn(plots)[0][0]) > 20, "samples drawn")
+    set_paused(plots, True)
+    page_condition(plots, "() => window.deltadashXY.frames > 0", "the XY path drawn")
+    data = drawn(plots)
+    xy = plots.evaluate(
+        "document.getElementById('plot-xy').data.map((d) => [Array.from(d.x), Array.from(d.y)])"
+    )
+    # trace order: per axis goal, measured, error; the XY path is (x, y) of goal and measured
+    assert xy[0] == [data[0][1], data[3][1]]
+    assert xy[1] == [data[1][1], data[4][1]]
+    save_artifact("plots-xy.png", page.locator("#plots-frame").screenshot())
+    set_paused(plots, False)
+
+
+def test_y_zoom_narrows_the_y_range_about_its_middle(plots: Any) -> None:
+    set_paused(plots, True)
+    fit = layout_of(plots)["ranges"]
+    plots.select_option("#plot-yzoom", "5")
+
+    def zoomed() -> list[list[float]] | None:
+        ranges = layout_of(plots)["ranges"]
+        return ranges if ranges != fit else None
+
+    ranges = wait_for(zoomed, "the y ranges zoomed")
+    for before, after in zip(fit, ranges, strict=True):
+        assert after[1] - after[0] == pytest.approx((before[1] - before[0]) / 5)
+        assert sum(after) / 2 == pytest.approx(sum(before) / 2)
+    assert plots.evaluate("window.deltadashPlot.yZoom") == 5
+    plots.select_option("#plot-yzoom", "1")
+    wait_for(lambda: layout_of(plots)["ranges"] == fit, "the fitted y ranges again")
+    set_paused(plots, False)
+
+
+def test_a_five_minute_window_draws_at_most_600_points_per_trace(plots: Any) -> None:
+    plots.select_option("#plot-window", "300")
+    wait_for(lambda: x_range(plots) == [-300, 0], "a 5 min x range")
+    assert "last 5 min" in plots.locator("#plots-title").inner_text()
+    samples = plots.evaluate("window.deltadashPlot.samples")
+    page_condition(
+        plots, f"() => window.deltadashPlot.samples > {samples + 20}", "more samples arriving"
+    )
+    wait_for(lambda: len(drawn(plots)[0][0]) > 0, "samples drawn in the 5 min window")
+    assert all(len(trace[0]) <= 601 for trace in drawn(plots))
+    # every 10th sample (5 min at 50 Hz in at most 600 points), so the points are sparser
+    assert plots.evaluate("window.deltadashPlot.windowS") == 300
+
+
+def _open_report(page: Any, run_id: str) -> Any:
+    link = page.locator(f"tr[data-run='{run_id}'] a.report")
+    wait_for(lambda: link.count() == 1, "the report link")
+    link.click()
+    box = page.locator("#report-box")
+    wait_for(box.is_visible, "the lightbox")
+    return box
+
+
+def test_a_recorded_run_replays_in_the_plots_with_its_logged_values(plots: Any, page: Any) -> None:
+    rows = read_csv_rows(RUNS[LOADED] / "log.csv")
+    _open_report(page, LOADED)
+    page.click("#report-replay")
+    wait_for(lambda: not page.locator("#report-box").is_visible(), "the lightbox closed")
+    wait_for(
+        lambda: (plots.evaluate("window.deltadashPlot.replay") or {}).get("run_id") == LOADED,
+        "the replay of the run",
+    )
+    wait_for(lambda: x_range(plots) == [rows[0]["t_s"], rows[-1]["t_s"]], "the run's time range")
+    assert LOADED in plots.locator("#plots-title").inner_text()
+    assert plots.locator("#plot-live").is_visible()
+    by_time = {round(r["t_s"], 9): r for r in rows}
+    data = drawn(plots)
+    assert len(data[0][0]) == len(rows)  # 340 ticks: all of them, under every cap
+    for i, (column, kind) in enumerate(
+        (a, k) for a in "xyz" for k in ("goal", "measured", "error")
+    ):
+        for t, value in zip(*data[i], strict=True):
+            row = by_time[round(t, 9)]  # a drawn time is a logged tick's time
+            want = (
+                row[f"goal_{column}_m"] - row[f"measured_{column}_m"]
+                if kind == "error"
+                else row[f"{kind}_{column}_m"]
+            )
+            assert value == pytest.approx(want * 1e3, abs=1.5e-3), (kind, column, t)
+    # the XY path replays the logged x, y too
+    page_condition(plots, "() => window.deltadashXY.frames > 0", "the XY path drawn")
+    xy = plots.evaluate("Array.from(document.getElementById('plot-xy').data[1].x)")
+    assert xy == pytest.approx([r["measured_x_m"] * 1e3 for r in rows], abs=1.5e-3)
+    # live samples are not mixed in: the drawn data stays the run's
+    dropped = plots.evaluate("window.deltadashPlot.dropped")
+    page_condition(
+        plots, f"() => window.deltadashPlot.dropped > {dropped + 10}", "live samples dropped"
+    )
+    assert drawn(plots) == data
+    plots.select_option("#plot-signals", "servos")
+    wait_for(lambda: "no servo current" in plots.locator("#plot-state").inner_text(), "the note")
+    plots.select_option("#plot-signals", "position")
+    save_artifact("plots-replay.png", page.locator("#plots-frame").screenshot())
+    plots.click("#plot-live")
+    wait_for(lambda: x_range(plots) == [-10, 0], "the live window again")
+    assert plots.evaluate("window.deltadashPlot.replay") is None
+
+
+def test_the_interactive_report_draws_the_runs_logged_values(page: Any) -> None:
+    rows = read_csv_rows(RUNS[QUIET] / "log.csv")
+    box = _open_report(page, QUIET)
+    page.click("#report-interactive")
+
+    def report() -> Any:
+        page.evaluate("0")
+        frame = next((f for f in page.frames if "/report.html" in f.url), None)
+        try:
+            return frame if frame and frame.evaluate("window.deltadashReport.drawn") else None
+        except Exception:  # its document not there yet
+            return None
+
+    frame = wait_for(report, "the interactive report drawn", PAGE_WAIT_S)
+    assert not page.locator("#report-img").is_visible()
+    data = frame.evaluate(
+        "document.getElementById('ir-plot').data.map((d) => [Array.from(d.x), Array.from(d.y)])"
+    )
+    assert data[0][0] == pytest.approx([r["t_s"] for r in rows])
+    assert data[0][1] == pytest.approx([r["goal_x_m"] * 1e3 for r in rows], abs=1.5e-3)
+    assert data[1][1] == pytest.approx([r["measured_x_m"] * 1e3 for r in rows], abs=1.5e-3)
+    assert QUIET in frame.locator("#ir-title").inner_text()
+    assert "RMSE" in frame.locator("#ir-summary").inner_text()
+    # values under the pointer: plotly's hover label at a tick's time
+    t = rows[200]["t_s"]
+    last: dict[str, Any] = {}
+
+    def hover_label() -> bool:
+        x, y = frame.evaluate(
+            """(t) => { const p = document.getElementById('ir-plot');
+              const r = p.getBoundingClientRect();
+              const xa = p._fullLayout.xaxis, ya = p._fullLayout.yaxis;
+              return [r.left + xa._offset + xa.l2p(t), r.top + ya._offset + ya._length / 2]; }""",
+            t,
+        )
+        px, py = frame_pixel(frame, x, y)
+        page.mouse.move(px - 1, py)
+        page.mouse.move(px, py)
+        last["text"] = frame.evaluate(
+            "Array.from(document.querySelectorAll('.hoverlayer .hovertext'))"
+            ".map((e) => e.textContent)"
+        )
+        return any("measured x" in text for text in last["text"])
+
+    wait_for(hover_label, "a hover label with the measured x", PAGE_WAIT_S, seen=lambda: last)
+    save_artifact("plots-interactive-report.png", page.screenshot())
+    page.click("#report-interactive")  # back to the image
+    wait_for(lambda: page.locator("#report-img").is_visible(), "the PNG again")
+    page.click("#report-close")
+    wait_for(lambda: not box.is_visible(), "the lightbox closed")
+
+
+def test_the_drone_attitude_is_roll_pitch_yaw_of_its_quaternion(plots: Any) -> None:
+    """The drone pose set's attitude [rad, converted to deg when drawn] from the pose's
+    quaternion (w, x, y, z): hand-computed turns about one axis each, and none."""
+    half = 0.5 * math.radians(30)
+    cases = {
+        (1.0, 0.0, 0.0, 0.0): (0.0, 0.0, 0.0),
+        (math.cos(half), math.sin(half), 0.0, 0.0): (30.0, 0.0, 0.0),
+        (math.cos(half), 0.0, math.sin(half), 0.0): (0.0, 30.0, 0.0),
+        (math.cos(half), 0.0, 0.0, math.sin(half)): (0.0, 0.0, 30.0),
+    }
+    for quaternion, want in cases.items():
+        got = plots.evaluate(
+            "(q) => import('/js/plots.js').then((m) => m.attitude(...q))", list(quaternion)
+        )
+        assert [math.degrees(v) for v in got] == pytest.approx(want, abs=1e-9), quaternion

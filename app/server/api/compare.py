@@ -1,7 +1,9 @@
-"""Compare runs: two or more runs' statistics side by side and their errors overlaid.
+"""Reading runs back: two or more runs' statistics side by side and their errors
+overlaid; one run's recorded signals, decimated, for replay in the page's plots.
 
 Its paths sit under /api/runs/, so this router is included before the runs router (whose
-/runs/{run_id} would otherwise take "compare" for a run id).
+/runs/{run_id} would otherwise take "compare" for a run id, and /runs/{run_id}/{name}
+"series" for a file name).
 """
 
 from __future__ import annotations
@@ -11,8 +13,11 @@ from urllib.parse import quote
 
 from fastapi import APIRouter, HTTPException, Query
 from fastapi.responses import Response
+from pydantic import BaseModel, ConfigDict, Field
 
 from app.runs import compare
+from app.runs import series as run_series
+from app.runs.logs import read_messages
 from app.runs.manager import Run, RunManager
 from app.server.api.deps import RunsDep, SettingsDep
 from app.server.api.responses import CompareOut
@@ -76,3 +81,53 @@ def compare_plot(ids: Ids, runs: RunsDep, settings: SettingsDep) -> Response:
     records = [run.as_dict() for run in found]
     image = compare.png(records, [run.folder for run in found], settings.runs.stats_skip_s)
     return Response(image, media_type="image/png")
+
+
+class SeriesOut(BaseModel):
+    """A run's recorded signals, every ``stride``-th tick of its log (SI: m, rad, s)."""
+
+    model_config = ConfigDict(extra="forbid")
+    run_id: str
+    kind: str
+    state: str
+    samples: int = Field(description="ticks in the log")
+    stride: int = Field(description="every how many ticks one is given")
+    t_s: list[float] = Field(description="run time of each given tick [s]")
+    phase: list[str] = Field(description="the run's phase at each given tick")
+    signals: dict[str, list[float | None]] = Field(
+        description="log column (logs.COLUMNS name, e.g. goal_x_m, measured_q1_rad) -> its "
+        "values at t_s, null where unknown; error_{x,y,z}_m = goal - measured, and in a hold "
+        "world_error_{x,y,z}_m; columns the run never filled are left out"
+    )
+
+
+MaxPoints = Annotated[
+    int,
+    Query(
+        ge=10,
+        le=run_series.MAX_POINTS,
+        description=f"at most this many ticks per signal (10-{run_series.MAX_POINTS}); "
+        "a longer run is decimated (every n-th tick)",
+    ),
+]
+
+
+@router.get("/runs/{run_id}/series", response_model=SeriesOut, responses={**NOT_FOUND, **INVALID})
+def recorded_series(
+    run_id: str, runs: RunsDep, max_points: MaxPoints = run_series.DEFAULT_POINTS
+) -> dict[str, Any]:
+    """A run's recorded signals for replay: goal, measured and error per axis, the joints
+    (commanded and measured), the world frame in a hold, the wrist; every n-th tick so that
+    at most ``max_points`` come (404 for an unknown run or one without a log)."""
+    run = runs.get(run_id)
+    if run is None:
+        raise HTTPException(404, f"no run {run_id!r}")
+    path = run.folder / "log.mcap"
+    if not path.exists():
+        raise HTTPException(404, f"run {run_id} has no log")
+    try:
+        rows = read_messages(path)
+    except (OSError, ValueError) as exc:
+        raise HTTPException(404, f"run {run_id}'s log cannot be read: {exc}") from None
+    out = run_series.series(rows, max_points)
+    return {"run_id": run.run_id, "kind": run.kind, "state": run.state, **out}
