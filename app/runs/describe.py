@@ -111,6 +111,13 @@ def _waypoints(p: dict[str, Any]) -> str:
 
 
 def _hold(p: dict[str, Any]) -> str:
+    if p.get("source") == "external":  # on the pose input (the page's hold in world)
+        goal = p.get("position_m")
+        at = f"at {mm(goal)} in the world" if goal is not None else "where the tool was"
+        return (
+            f"hold in world on the pose input: {number(p.get('duration_s'))} s {at}, latency "
+            f"compensation {on_off(p.get('latency_compensation'))}"
+        )
     drone = p.get("drone") or p
     return (
         f"hold in world on the simulated drone: {number(p.get('duration_s'))} s, latency "

@@ -191,6 +191,12 @@ class Scene:
             return None
         return (runs.progress(latest.run_id) or {}).get("program_line")
 
+    def _pose_input(self) -> Any:
+        """The drone's pose input as the node last said (its status), for the drone drawn
+        outside a hold; None when the controller has no node (in-process)."""
+        node_status = getattr(self.controller, "node_status", None)
+        return None if node_status is None else node_status().get("pose")
+
     def update(self, now_s: float) -> None:
         """One display frame from the controller's latest snapshot, sent as one batch."""
         snap = self.controller.snapshot()
@@ -206,7 +212,7 @@ class Scene:
             )
             self.ghost.visible = bool(commanded and self.gui_ghost.value)
             self.goals.update(snap, now_s)
-            self.world.update(snap)
+            self.world.update(snap, self._pose_input())
             self.tests.record(snap, now_s)
             if self.frames % PANEL_EVERY == 0:
                 self.panel.update(snap)

@@ -208,7 +208,7 @@ class HoldSource:
             phi_rad=phi,
             phase="approach" if self.t_s < self.approach_s else "hold",
             finished=self.finished,
-            extra=self._world(outside, seen.age_s, limited),
+            extra=self._world(outside, seen.age_s, limited, self._now(seen)),
         )
 
     def _wrist_angle(self, seen_base: Pose, base: Pose) -> tuple[float | None, bool]:
@@ -254,17 +254,34 @@ class HoldSource:
             return None
         return [*np.asarray(pose.position).tolist(), *np.asarray(pose.quaternion).tolist()]
 
-    def _world(self, outside: bool, age_s: float, limited: bool = False) -> dict:
+    @staticmethod
+    def _now(seen: Observation) -> Pose:
+        """The drone's pose now: the observed one carried forward by its age at its
+        velocity (the tool is measured now; the pose is ``age_s`` old)."""
+        if seen.velocity_m_s is None or seen.angular_velocity_rad_s is None:
+            return seen.pose
+        return predict(seen.pose, seen.velocity_m_s, seen.angular_velocity_rad_s, seen.age_s)
+
+    def _world(
+        self, outside: bool, age_s: float, limited: bool = False, seen: Pose | None = None
+    ) -> dict:
+        """The hold's world-frame figures: the tip's world goal, the tip measured in the
+        world [m] (through the true drone pose in simulation, else through ``seen``, the pose
+        input's latest sample carried forward by its age: what the pose input says,
+        ``measured_world_from`` "pose input"), the goal outside, the pose's age [s] and
+        the drone's pose."""
         truth = self.provider.true_pose(self.t_s)
         measured_world = None
-        if truth is not None:
-            measured_world = (truth @ self.mount).apply(self.measured()).tolist()
+        through = truth if truth is not None else seen
+        if through is not None:
+            measured_world = (through @ self.mount).apply(self.measured()).tolist()
         world = {
             "goal_world_m": self.goal_world.tolist(),
             "measured_world_m": measured_world,
             "outside": outside,
             "pose_age_s": age_s,
             "drone_pose": self.drone_pose(truth),
+            "measured_world_from": "truth" if truth is not None else "pose input",
         }
         if self.wrist is not None:  # the heading: goal, measured (true pose, wrist read)
             measured_heading = None

@@ -44,7 +44,10 @@ def body_of(data: dict[str, Any]) -> str:
 
 
 def sample_from_json(data: dict[str, Any]):
-    """A PoseSample from the documented JSON; PoseError or KeyError names what is wrong."""
+    """A PoseSample from the documented JSON; PoseError or KeyError names what is wrong.
+    ``source`` (set by the receiving input, never by a client: the HTTP route forbids it,
+    the WebSocket route and the UDP listener overwrite it) names the input; "http" when
+    absent."""
     missing = [key for key in ("t", "position", "quaternion") if key not in data]
     if missing:
         raise PoseError(f"missing field(s): {', '.join(missing)}")
@@ -55,6 +58,7 @@ def sample_from_json(data: dict[str, Any]):
             data["quaternion"],
             data.get("velocity"),
             data.get("angular_velocity"),
+            source=data.get("source", "http"),
         )
     except OverflowError:  # an integer too large for a float (e.g. 400 digits)
         raise PoseError("a number is too large (beyond a 64-bit float)") from None
@@ -248,7 +252,7 @@ class UdpPoseListener(PoseInput):
         tracker = self.tracker if body_of(data) == "drone" else self.platform
         if tracker is None:
             raise PoseError("body: 'platform' poses are not taken here")
-        if tracker.push(sample_from_json(data)):
+        if tracker.push(sample_from_json({**data, "source": "udp"})):
             self.accepted += 1
 
 
@@ -346,7 +350,7 @@ def sample_from_odometry(msg: Any):
     world_velocity = odometry_velocity_enu(
         msg.child_frame_id, msg.frame_id, body_velocity, sample.pose.rotation
     )
-    return make_sample(sample.t_s, position, quaternion, world_velocity, omega)
+    return make_sample(sample.t_s, position, quaternion, world_velocity, omega, source="mavlink")
 
 
 def push_odometry(tracker: PoseTracker, msg: Any) -> bool:

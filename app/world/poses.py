@@ -20,6 +20,10 @@ import numpy as np
 from kinematics import Pose, PoseError
 from kinematics.pose import unit_quaternion
 
+# the pose inputs a sample can come from (GET /api/mav/pose ``source``): the API's POST and
+# WebSocket, the UDP and MAVLink listeners, and the simulated drone's feed (drone_feed.py)
+SOURCES = ("http", "websocket", "udp", "mavlink", "simulated")
+
 
 @dataclass(frozen=True)
 class PoseSample:
@@ -27,7 +31,8 @@ class PoseSample:
 
     position_m (3,) [m]; quaternion (4,) (w, x, y, z) body to world; velocity_m_s (3,)
     [m/s] and angular_velocity_rad_s (3,) [rad/s, body frame] when the source knows them.
-    received_s: time.monotonic() at arrival (for staleness).
+    received_s: time.monotonic() at arrival (for staleness). source: which input sent it
+    (one of ``SOURCES``: http, websocket, udp, mavlink, simulated).
     """
 
     t_s: float
@@ -36,6 +41,7 @@ class PoseSample:
     velocity_m_s: np.ndarray | None = None
     angular_velocity_rad_s: np.ndarray | None = None
     received_s: float = 0.0
+    source: str = "http"
 
     @property
     def pose(self) -> Pose:
@@ -49,8 +55,11 @@ def make_sample(
     velocity_m_s: Any = None,
     angular_velocity_rad_s: Any = None,
     received_s: float | None = None,
+    source: str = "http",
 ) -> PoseSample:
-    """A validated sample; PoseError names the bad field."""
+    """A validated sample; PoseError names the bad field (``source`` one of ``SOURCES``)."""
+    if source not in SOURCES:
+        raise PoseError(f"source: {source!r} is not one of {', '.join(SOURCES)}")
     if not isinstance(t_s, (int, float)) or not math.isfinite(t_s):
         raise PoseError(f"t: must be a finite time in seconds, got {t_s!r}")
     position = Pose.from_arrays(position_m).position
@@ -68,6 +77,7 @@ def make_sample(
         unit_quaternion(quaternion),
         *extras,
         received_s=time.monotonic() if received_s is None else received_s,
+        source=source,
     )
 
 
@@ -150,10 +160,18 @@ class PoseTracker:
         return ("stale" if age > self.stale_after_s else "ok"), age
 
     def status(self) -> dict[str, Any]:
+        """The stream's health (state, age [s], rate [Hz], counters) and its latest sample:
+        ``source`` (the input it came from), ``position_m`` [m] and ``quaternion`` (w, x,
+        y, z, body to world); the three None before any sample."""
         state, age = self.health()
+        with self._lock:
+            latest = self._latest
         return {
             "state": state,
             "age_s": None if math.isinf(age) else age,
+            "source": None if latest is None else latest.source,
+            "position_m": None if latest is None else latest.position_m.tolist(),
+            "quaternion": None if latest is None else latest.quaternion.tolist(),
             "rate_hz": self._rate_hz,
             "accepted": self.accepted,
             "dropped": self.dropped,

@@ -11,12 +11,13 @@ import numpy as np
 from fastapi import APIRouter, WebSocket
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.control.errors import GoalRejected
+from app.control.errors import GoalRejected, MotionRefused
 from app.fields import Finite, Vector3
 from app.server.api.deps import (
     ControlClient,
     ControllerDep,
     RunsDep,
+    SettingsDep,
     TokenChecked,
     WorldDep,
     websocket_token_ok,
@@ -25,9 +26,10 @@ from app.server.api.models import Accepted
 from app.server.api.responses import PoseAccepted, PoseInputStatus, RunStarted
 from app.server.errors import CONTROL, INVALID, UNAUTHORISED
 from app.server.world_client import WorldClient
+from app.world.drone_feed import feed_of, start_feed, stop_feed
 from app.world.drone_sim import DroneSimParams
 from app.world.inputs import body_of, parse_pose, sample_from_json
-from kinematics import PoseError
+from kinematics import Pose, PoseError
 
 router = APIRouter(tags=["drone"])
 
@@ -68,11 +70,66 @@ class HoldRequest(BaseModel):
     )
 
 
+class DroneProfile(BaseModel):
+    """A simulated drone's drift profile (app/world/drone_sim.py): SI, degrees for angles."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    seed: Annotated[int, Field(ge=0, lt=2**32)] = 0
+    drift_m: Annotated[float, Field(ge=0, le=0.2, allow_inf_nan=False)] = DroneSimParams.drift_m
+    tilt_deg: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = DroneSimParams.tilt_deg
+    yaw_deg: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = DroneSimParams.yaw_deg
+    gust_m: Annotated[float, Field(ge=0, le=0.2, allow_inf_nan=False)] = DroneSimParams.gust_m
+    latency_s: Annotated[float, Field(ge=0, le=0.5, allow_inf_nan=False)] = DroneSimParams.latency_s
+    rate_hz: Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)] = DroneSimParams.rate_hz
+
+    def drone(self) -> DroneSimParams:
+        fields = ("seed", "drift_m", "tilt_deg", "yaw_deg", "gust_m", "latency_s", "rate_hz")
+        return DroneSimParams(**{name: getattr(self, name) for name in fields})
+
+
+class SimulatedDroneRequest(DroneProfile):
+    """Start (``running`` true, with its drift profile) or stop the simulated drone that
+    feeds the pose input like a motion-capture stream."""
+
+    running: bool
+    rate_hz: Annotated[float, Field(gt=0, le=200, allow_inf_nan=False)] = DroneSimParams.rate_hz
+
+
+class SimulatedDroneOut(BaseModel):
+    """The simulated drone feeding the pose input: running, its profile (SI), poses sent."""
+
+    running: bool
+    params: dict[str, Any] | None = None
+    sent: int = 0
+    last_error: str | None = None
+
+
+class PoseView(PoseInputStatus):
+    """GET /api/mav/pose: the input's health, its latest pose and the simulated drone."""
+
+    tool_world_m: list[float] | None = Field(
+        None,
+        description="the tool tip in the world [m] through the latest pose and the mount, "
+        "the tip as measured now (null: no pose or no measurement)",
+    )
+    mount_position_m: list[float] = Field(description="[world] the base in the drone body [m]")
+    mount_quaternion: list[float] = Field(description="[world] the base's attitude in the body")
+    simulated: SimulatedDroneOut = Field(description="the simulated drone (POST /mav/simulated)")
+
+
 class HoldTestRequest(BaseModel):
-    """The thesis's MAV compensation routine (ch. 6.2) on the simulated drone, as a run."""
+    """A hold in the world as a run: the thesis's MAV compensation routine (ch. 6.2) on the
+    simulated drone (source "simulated": the drone lives in the loop and moves the twin's
+    base), or on the pose input (source "external": motion capture, MAVLink, the simulated
+    drone's feed), at a world goal (``position_m``; null: where the tool is)."""
 
     model_config = ConfigDict(extra="forbid", strict=True)
     duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = 20.0
+    position_m: Vector3 | None = Field(None, description="the tip's world goal [m]; null: here")
+    source: Literal["simulated", "external"] = "simulated"
+    heading_rad: float | None = Field(
+        None, allow_inf_nan=False, description="with a wrist: the tool's world heading [rad]"
+    )
     latency_compensation: bool = True
     seed: Annotated[int, Field(ge=0, lt=2**32)] = 0
     drift_m: Annotated[float, Field(ge=0, le=0.2, allow_inf_nan=False)] = DroneSimParams.drift_m
@@ -87,7 +144,8 @@ class HoldTestRequest(BaseModel):
         return DroneSimParams(**{name: getattr(self, name) for name in fields})
 
 
-def _push(world: WorldClient, data: dict[str, Any]) -> dict[str, Any]:
+def _push(world: WorldClient, data: dict[str, Any], source: str) -> dict[str, Any]:
+    data = {**data, "source": source}  # the input it came by, never the client's say
     body_of(data)  # checked here: a bad body or field is the caller's 422, not the node's
     sample_from_json(data)
     return world.push(data)
@@ -97,19 +155,56 @@ def _push(world: WorldClient, data: dict[str, Any]) -> dict[str, Any]:
 def post_pose(body: PoseBody, world: WorldDep, _: TokenChecked) -> dict[str, Any]:
     """One pose sample of the drone (or, with ``"body": "platform"``, of a marker on the
     platform); out-of-order, duplicate or jumping samples are dropped (accepted=false)."""
-    return _push(world, body.model_dump())
+    return _push(world, body.model_dump(), "http")
 
 
-@router.get("/mav/pose", response_model=PoseInputStatus, responses=INVALID)
+def _simulated(world: WorldClient) -> dict[str, Any]:
+    feed = feed_of(world)
+    return {"running": False} if feed is None else feed.status()
+
+
+@router.get("/mav/pose", response_model=PoseView, responses=INVALID)
 def get_pose_status(
-    world: WorldDep, body: Literal["drone", "platform"] = "drone"
+    world: WorldDep,
+    settings: SettingsDep,
+    controller: ControllerDep,
+    body: Literal["drone", "platform"] = "drone",
 ) -> dict[str, Any]:
     """The pose input's health for ``body`` (the drone's by default, or the platform
     marker's): state (ok/stale/lost/none), age, rate, counters (and the UDP input's
-    refused datagrams), and ``sources``: each pose source, what it accepts (open, token,
+    refused datagrams), ``sources``: each pose source, what it accepts (open, token,
     trusted, signed, refused), whether its listener is alive, its counters and last
-    error."""
-    return world.pose_status(body)
+    error; the latest sample (``source``, ``position_m`` [m], ``quaternion``), the mount
+    (the base in the drone body), the tool tip in the world through them
+    (``tool_world_m``) and the simulated drone's feed (``simulated``)."""
+    status = world.pose_status(body)
+    mount = Pose.from_arrays(settings.world.mount_position_m, settings.world.mount_quaternion)
+    tip = np.asarray(controller.snapshot().point_measured_m, dtype=float)
+    tool = None
+    if status.get("position_m") is not None and np.isfinite(tip).all():
+        drone = Pose.from_arrays(status["position_m"], status["quaternion"])
+        tool = (drone @ mount).apply(tip).tolist()
+    return status | {
+        "tool_world_m": tool,
+        "mount_position_m": list(settings.world.mount_position_m),
+        "mount_quaternion": list(settings.world.mount_quaternion),
+        "simulated": _simulated(world),
+    }
+
+
+@router.post("/mav/simulated", response_model=SimulatedDroneOut, responses={**CONTROL, **INVALID})
+def post_simulated_drone(
+    body: SimulatedDroneRequest, world: WorldDep, _: ControlClient
+) -> dict[str, Any]:
+    """Start (``running`` true) the simulated drone with its drift profile, feeding the
+    pose input at ``rate_hz`` like a motion-capture stream (``GET /api/mav/pose`` source
+    "simulated"; a hold with source "external" follows it), or stop it (the pose then goes
+    stale, then lost: a hold on it freezes, then faults). Needs the lease; moves nothing by
+    itself."""
+    if not body.running:
+        stop_feed(world)
+        return _simulated(world)
+    return start_feed(world, body.drone()).status()
 
 
 @router.websocket("/mav/pose")
@@ -129,7 +224,7 @@ async def stream_poses(websocket: WebSocket, world: WorldDep) -> None:
         try:
             if text is None:
                 raise PoseError("a pose is a JSON text frame, got a binary frame")
-            await asyncio.to_thread(_push, world, parse_pose(text))
+            await asyncio.to_thread(_push, world, parse_pose(text), "websocket")
         except (ValueError, KeyError, TypeError, PoseError) as exc:
             await websocket.send_json({"error": str(exc)})
 
@@ -151,12 +246,50 @@ async def post_hold(
     return Accepted(result={"goal_world_m": answer["goal_world_m"]})
 
 
+def _check_external(seen: dict[str, Any], goal: np.ndarray | None, controller: Any) -> None:
+    """Refuse a hold on the pose input unless its latest pose is fresh (MotionRefused,
+    409) and, for a world ``goal`` [m], unless the goal is inside the workspace through
+    that pose and the mount (GoalRejected naming ``position_m``, 422)."""
+    if seen.get("state") != "ok" or seen.get("position_m") is None:
+        age = seen.get("age_s")
+        told = "" if age is None else f", {age * 1e3:.0f} ms old"
+        raise MotionRefused(
+            f"source: the drone's pose input is {seen.get('state', 'none')}{told}; "
+            "a hold on it needs a fresh pose (start the simulated drone or a pose stream)"
+        )
+    if goal is None:
+        return
+    world = controller.settings.world
+    mount = Pose.from_arrays(world.mount_position_m, world.mount_quaternion)
+    drone = Pose.from_arrays(seen["position_m"], seen["quaternion"])
+    goal_base = (drone @ mount).apply_inverse(goal)
+    if not controller.gate.inside(goal_base, 0.0):
+        raise GoalRejected(
+            "position_m: outside the workspace at the drone's pose now "
+            f"(in the base frame [{', '.join(f'{v:.4f}' for v in goal_base)}] m)"
+        )
+
+
 @router.post("/tests/hold", response_model=RunStarted, responses=CONTROL)
 async def post_hold_test(body: HoldTestRequest, world: WorldDep, runs: RunsDep, _: ControlClient):
-    """Hold the current tool position in the world under a simulated drifting drone, as a run
-    with world-frame stats (stats.world.{x,y,z}) and the time the goal spent outside."""
+    """Hold the tool in the world as a run, with world-frame stats (stats.world.{x,y,z}) and
+    the time the goal spent outside: at ``position_m`` (null: where it is), on the simulated
+    drone (source "simulated") or the pose input (source "external": refused with 409
+    unless its pose is fresh, and a goal outside the workspace at the drone's pose now is
+    a 422 naming ``position_m``)."""
     model = runs.controller.model  # the hold is checked on it (refused if it changes)
-    hold = world.hold(None, body.drone(), body.latency_compensation, duration_s=body.duration_s)
-    params = {**body.model_dump(), "drone": asdict(body.drone())}
+    goal = None if body.position_m is None else np.asarray(body.position_m, dtype=float)
+    simulated = body.drone() if body.source == "simulated" else None
+    if simulated is None:
+        seen = await asyncio.to_thread(world.pose_status, "drone")
+        _check_external(seen, goal, runs.controller)
+    hold = world.hold(
+        goal, simulated, body.latency_compensation, body.heading_rad, duration_s=body.duration_s
+    )
+    if simulated is None:  # on the pose input: no simulated drone's profile to record
+        profile = set(DroneProfile.model_fields)
+        params = {**body.model_dump(exclude=profile), "drone": None}
+    else:
+        params = {**body.model_dump(), "drone": asdict(simulated)}
     run = await asyncio.to_thread(runs.start_source, "hold", params, hold, model)
     return {"run_id": run.run_id}
