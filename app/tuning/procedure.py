@@ -40,6 +40,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
 import tomllib
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -154,6 +155,7 @@ class TuningRun(ProcedureRun):
     check: OfferJob | None = None  # the twin check asked for
     offer: Offer | None = None  # what it found (the suggestions are its chosen gains)
     aborted: threading.Event = field(default_factory=threading.Event, repr=False)
+    created_unix_s: float = field(default_factory=time.time)
 
     def servo(self, joint: int) -> int:
         return self.servo_ids[joint - 1]
@@ -230,6 +232,21 @@ class TuningManager(ProcedureManager[TuningRun]):
         for recorded in run.runs.values():  # the step or chirp run, if one is running
             self.runs.abort(recorded, f"tuning run {run.run_id} aborted")
         self._stop_motion()
+
+    def list(self) -> list[TuningRun]:
+        """This server's runs (kept in memory), newest first."""
+        return sorted(self._runs.values(), key=lambda r: r.created_unix_s, reverse=True)
+
+    def summary(self, run: TuningRun) -> dict[str, Any]:
+        """The list's entry (GET /api/tuning): id, state, joints, whether the suggested
+        gains met the goal on the twin (None until checked), error."""
+        return {
+            "run_id": run.run_id,
+            "state": run.state,
+            "joints": list(run.joints),
+            "met_goal": None if run.offer is None else bool(run.offer.met),
+            "error": run.error,
+        }
 
     def start(self, joints: tuple[int, ...], target: Target) -> TuningRun:
         """Start a run (returns at once; its thread moves the arm).

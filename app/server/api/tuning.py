@@ -157,6 +157,17 @@ class TuningOut(BaseModel):
     files: list[str]
 
 
+class TuningSummary(BaseModel):
+    """A tuning run in the list: its state, joints, and whether the suggested gains met
+    the goal on the twin (null until the check is done)."""
+
+    run_id: str
+    state: str
+    joints: list[int]
+    met_goal: bool | None
+    error: str | None
+
+
 class GainsOut(BaseModel):
     gains: dict[str, ServoGains] = Field(description="the gains now in use, per servo id")
     config_written: str | None = Field(description="the config file written, if one is in use")
@@ -187,6 +198,12 @@ async def start_tuning(
     except TuningError as exc:
         raise HTTPException(422, str(exc)) from None
     return {"run_id": run.run_id}
+
+
+@router.get("/tuning", response_model=list[TuningSummary])
+def list_tuning_runs(tuning: TuningDep) -> list[dict[str, Any]]:
+    """This server's tuning runs, newest first (a page reloaded finds the one running)."""
+    return [tuning.summary(run) for run in tuning.list()]
 
 
 @router.post("/tuning/revert", response_model=GainsOut, responses=CONTROL)
