@@ -95,7 +95,10 @@ class Controller:
         self.joint_bus = OffsetBus(self.servos)
         self.backend_description = backend_description or backend
         self.boot = uuid.uuid4().hex[:12]  # this loop's id, in every snapshot
-        info = RobotInfo(backend, self.backend_description, tuple(self.servo_ids), self.boot)
+        wrist_id = wrist.servo_id if wrist.enabled else None
+        info = RobotInfo(
+            backend, self.backend_description, tuple(self.servo_ids), self.boot, wrist_id
+        )
         self.state = LoopState.initial(settings.safety, self.period_s, info)
         # [control] gravity_compensation: servo goals shifted by the predicted sag (the
         # loop's commanded joints stay the goal's, so status and following errors see it);
@@ -414,18 +417,25 @@ class Controller:
         return self.gate.tip(platform, phi_measured(self.state))
 
     def set_gains(self, gains: dict[int, PositionGains]) -> Future:
-        """Position gains per leg servo id (app/tuning), written to the servos in the
-        control thread; refused while a motion runs (MotionRefused in the Future) and for
-        ids that are not the legs' (ValueError, at once). The Future holds the gains now in
-        use (`gains`)."""
-        ordered = commands.ordered_gains(gains, tuple(self.servo_ids))
+        """Position gains per leg servo id (app/tuning), and optionally the wrist's servo
+        id's (the servo panel), written to the servos in the control thread; refused while
+        a motion runs (MotionRefused in the Future) and for ids that are not the legs' or
+        the wrist's (ValueError, at once). The Future holds the gains now in use
+        (`gains`; the wrist's too where it was given)."""
+        wrist_id = self.wrist.servo_id if self.wrist is not None else None
+        wrist_gains = gains.get(wrist_id) if wrist_id is not None else None
+        legs = {sid: g for sid, g in gains.items() if sid != wrist_id or wrist_gains is None}
+        ordered = commands.ordered_gains(legs, tuple(self.servo_ids))
 
         def write() -> dict[int, PositionGains]:
             if (moving := self._moving()) is not None:
                 raise MotionRefused(f"a {moving} is running: gains change only while the arm rests")
+            if wrist_gains is not None and self.wrist is not None:
+                self.wrist.wrist_gains = wrist_gains  # written with the legs' below
             self._use_gains(ordered)
             self.state.notice = "position gains changed"
-            return dict(zip(self.servo_ids, ordered, strict=True))
+            written = dict(zip(self.servo_ids, ordered, strict=True))
+            return written if wrist_gains is None else {**written, wrist_id: wrist_gains}
 
         return self.submit_motion(write)
 
@@ -434,14 +444,17 @@ class Controller:
         five registers per servo, read in the control thread between ticks, so the read
         holds one tick back by its bus transactions); refused while a motion runs
         (MotionRefused in the Future): a run's record would show the late tick. The
-        Future holds them per leg servo id."""
+        Future holds them per leg servo id, and the wrist's servo id's with a wrist."""
 
         def read() -> dict[int, PositionGains]:
             if (moving := self._moving()) is not None:
                 raise MotionRefused(
                     f"a {moving} is running: the servos' gains are read only while the arm rests"
                 )
-            return dict(zip(self.servo_ids, self.servos.read_gains(), strict=True))
+            read = dict(zip(self.servo_ids, self.servos.read_gains(), strict=True))
+            if self.wrist is not None and self.wrist.wrist_gains_read is not None:
+                read[self.wrist.servo_id] = self.wrist.wrist_gains_read  # read with the legs'
+            return read
 
         return self.submit(read)
 

@@ -37,6 +37,7 @@ class WristBus:
     def __init__(self, bus: ServoBus, servo_id: int) -> None:
         self.bus = bus
         self.wrist_gains = PositionGains()
+        self.wrist_gains_read: PositionGains | None = None  # as the wrist's registers said
         self.servo_id = servo_id
         self.phi_rad: float | None = None
         self.reading: WristReading | None = None
@@ -85,6 +86,8 @@ class WristBus:
             float(state.temperature_c[k]),
             tuple(state.hardware_errors[k]),
             None if state.torque_enabled is None else bool(state.torque_enabled[k]),
+            float(state.voltage_v[k]),
+            float(state.pwm[k]),
         )
         return state.joints(k)
 
@@ -101,8 +104,10 @@ class WristBus:
             self.bus.set_gains([*gains, self.wrist_gains])
 
     def read_gains(self) -> list[PositionGains]:
-        """The legs' gains (the wrist's is the last of the bus's)."""
-        return self.bus.read_gains()[:-1]
+        """The legs' gains (the wrist's is the last of the bus's: kept in
+        `wrist_gains_read`)."""
+        *legs, self.wrist_gains_read = self.bus.read_gains()
+        return legs
 
     def reboot(self, ids: Sequence[int] | None = None) -> None:
         self.bus.reboot(ids)

@@ -29,7 +29,7 @@ class SinusoidParams:
     With a wrist, phi(t) = phi_amplitude_rad sin(2 pi phi_frequency_hz t) [rad] turns the
     tool as a fourth axis (0: the wrist is left alone, as without one). These defaults are
     the API's and the command line's too (app/runs/types.py, app/cli/run.py read them;
-    the page's form repeats them, tests/runs/test_run_types.py checks it).
+    the page's form takes them from GET /api/tests).
     """
 
     amplitude_m: tuple[float, float, float] = (0.05, 0.05, 0.08)

@@ -41,6 +41,16 @@ Hz = Annotated[float, Field(gt=0, le=20, allow_inf_nan=False, strict=True)]
 # the paths' defaults, the models' defaults (a path's tuples are the body's JSON lists)
 _SINE, _CHIRP, _STEP = SinusoidParams(), ChirpParams(), StepParams()
 _WAYPOINTS = {f.name: f.default for f in fields(WaypointParams)}  # points and times: none
+# an example the schema gives (the page's first rows): a 30 mm square at the sinusoid's
+# centre, a second a side, back where it began
+_SQUARE_M = (
+    (0.0, 0.0, -0.24),
+    (0.03, 0.0, -0.24),
+    (0.03, 0.03, -0.24),
+    (0.0, 0.03, -0.24),
+    (0.0, 0.0, -0.24),
+)
+_SQUARE_S = (0.0, 1.0, 2.0, 3.0, 4.0)
 
 
 class RunRequest(BaseModel):
@@ -144,10 +154,13 @@ class StepRequest(RunRequest):
 class WaypointsRequest(RunRequest):
     """Points [m] reached at times [s] (first at 0), resting at each; minimum-jerk between."""
 
-    points_m: Annotated[list[ReachVector3], Field(min_length=2, max_length=MAX_WAYPOINTS)]
+    points_m: Annotated[
+        list[ReachVector3],
+        Field(min_length=2, max_length=MAX_WAYPOINTS, examples=[[list(p) for p in _SQUARE_M]]),
+    ]
     times_s: Annotated[
         list[Annotated[float, Field(ge=0, le=600, allow_inf_nan=False, strict=True)]],
-        Field(min_length=2, max_length=MAX_WAYPOINTS),
+        Field(min_length=2, max_length=MAX_WAYPOINTS, examples=[list(_SQUARE_S)]),
     ]
     feedforward: bool = _WAYPOINTS["feedforward"]
 

@@ -12,12 +12,17 @@ Dynamixel Wizard gives, through the loop and its checks.
   passes it before anything moves and the recorder logs it at the loop rate like every
   run. `step_response` reads that log back: the goal and measured angle of the joint, and
   the rise time, overshoot and settling time of the measured response.
+- **The wrist's servo** (with a [wrist]: the fourth on the bus, `WRIST` as its joint): its
+  gains read and written as a leg's; its step is a step of phi (`plan_wrist_step`,
+  `WristStepParams`) from where the wrist rests, the legs held, inside the wrist's limits,
+  and `wrist_step_response` reads the wrist's goal and measured phi back from the log.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -52,6 +57,9 @@ RISE = (0.1, 0.9)  # the rise time is from 10 % to 90 % of the measured change
 PHASES = ("approach", "timed", "stop")
 
 
+WRIST = 4  # the panel's joint number of the wrist's servo (the legs are 1..3)
+
+
 def leg_joint(controller: Controller, servo_id: int) -> int:
     """The joint (1..3) whose servo is ``servo_id``. Raises KeyError for another id."""
     ids = list(controller.servo_ids)
@@ -60,25 +68,90 @@ def leg_joint(controller: Controller, servo_id: int) -> int:
     return ids.index(servo_id) + 1
 
 
-def plan_joint_step(
-    controller: Controller, servo_id: int, step_rad: float, duration_s: float
-) -> JointStepParams:
-    """The step of ``servo_id``'s joint by ``step_rad`` [rad] from where the arm rests now;
-    nothing moves (the run manager plans and checks it).
+def wrist_servo_id(controller: Controller) -> int | None:
+    """The wrist's servo id ([wrist] servo_id), None without a wrist."""
+    wrist = controller.settings.wrist
+    return wrist.servo_id if wrist.enabled else None
 
-    Raises:
-        KeyError: not a leg's servo (404).
-        GoalRejected: the step's size or its end outside the joint limits, naming
-            ``step_rad`` (422).
-        MotionRefused: the robot may not move (e-stop, fault, torque off), its state is
-            stale, or it is not at rest (409).
-    """
-    joint = leg_joint(controller, servo_id)
+
+def panel_joint(controller: Controller, servo_id: int) -> int:
+    """The panel's joint of ``servo_id``: 1..3 for a leg's servo, `WRIST` (4) for the
+    wrist's. Raises KeyError for another id."""
+    if servo_id == wrist_servo_id(controller):
+        return WRIST
+    return leg_joint(controller, servo_id)
+
+
+def panel_servo_ids(controller: Controller) -> list[int]:
+    """Every servo the panel offers, in bus order: the legs', then the wrist's."""
+    wrist = wrist_servo_id(controller)
+    return [*controller.servo_ids, *([] if wrist is None else [wrist])]
+
+
+def _step_size(step_rad: float) -> None:
     if not MIN_STEP_RAD <= abs(step_rad) <= MAX_STEP_RAD:
         raise GoalRejected(
             f"step_rad: {math.degrees(step_rad):.2f} deg; a step is "
             f"{math.degrees(MIN_STEP_RAD):g} to {math.degrees(MAX_STEP_RAD):g} deg either way"
         )
+
+
+@dataclass(frozen=True)
+class WristStepParams:
+    """A step of the wrist angle phi by ``step_rad`` [rad] from ``start_phi_rad`` at
+    ``step_at_s``, the legs held at the joints ``start_rad`` (3,) [rad], then hold: the
+    wrist servo's step response (the servo panel's step of servo 4). phi climbs at
+    ``ramp_rad_s`` [rad/s] (under the wrist's speed limit, which the tick keeps anyway).
+
+    The loop takes tool tips at phi: ``tip_of(joints, phi)`` maps the held joints (3,)
+    [rad] and angles (*) [rad] to the tips (*, 3) [m] (the tool turns about the platform's
+    z), so the platform stays where it is while the tool turns."""
+
+    start_rad: tuple[float, float, float]
+    start_phi_rad: float
+    step_rad: float
+    ramp_rad_s: float
+    tip_of: Callable[[np.ndarray, np.ndarray], np.ndarray] = field(repr=False, compare=False)
+    step_at_s: float = 0.2
+    duration_s: float = 1.0
+    feedforward: bool = False
+
+    phi_field = "step_rad"  # the field to name when the wrist cannot do it
+
+    @property
+    def rise_s(self) -> float:
+        """How long phi's goal climbs [s]."""
+        return abs(self.step_rad) / self.ramp_rad_s
+
+    @property
+    def moves_wrist(self) -> bool:
+        return True
+
+    def phi_at(self, t: np.ndarray) -> np.ndarray:
+        """phi's goal [rad] at timed-part times ``t`` (*) [s]."""
+        t = np.asarray(t, dtype=np.float64)
+        climbed = np.clip((t - self.step_at_s) / self.rise_s, 0.0, 1.0) * self.step_rad
+        return self.start_phi_rad + climbed
+
+    def phi_peak_speed(self) -> float:
+        return self.ramp_rad_s
+
+    def derivatives(self, t: np.ndarray, order: int) -> np.ndarray:
+        t = np.asarray(t, dtype=np.float64)
+        if order == 0:
+            return self.tip_of(np.asarray(self.start_rad), self.phi_at(t))
+        h = 1e-4  # central differences, as JointStepParams: zero where phi stands
+        below, above = self.derivatives(t - h, order - 1), self.derivatives(t + h, order - 1)
+        return (above - below) / (2.0 * h)
+
+    def peaks(self) -> tuple[float, float, float]:
+        return 0.0, 0.0, 0.0  # the approach and stop join it at rest
+
+
+def _at_rest(controller: Controller) -> tuple[Any, np.ndarray]:
+    """The snapshot of an arm at rest and its commanded joints (3,) [rad], a step's start.
+    Raises MotionRefused: it may not move (e-stop, fault, torque off), its state is stale,
+    a motion runs or it moves."""
     snap = controller.snapshot()
     require_motion(snap)
     stale_ms = STALE_SHARE * controller.settings.safety.stale_feedback_s * 1e3
@@ -102,6 +175,82 @@ def plan_joint_step(
     start = np.asarray(snap.joints_commanded_rad, dtype=np.float64)
     if not np.isfinite(start).all():
         raise MotionRefused("no commanded joints yet: torque on and hold the arm first")
+    return snap, start
+
+
+def plan_wrist_step(controller: Controller, step_rad: float, duration_s: float) -> WristStepParams:
+    """The step of the wrist's phi by ``step_rad`` [rad] from where it rests, the legs held
+    where the arm rests; nothing moves (the run manager plans and checks it: the tips at
+    each phi, the wrist's limits and speed).
+
+    Raises:
+        KeyError: no wrist (404).
+        GoalRejected: the step's size, or its end outside the wrist's limits, naming
+            ``step_rad`` (422).
+        MotionRefused: as `plan_joint_step` (409).
+    """
+    if wrist_servo_id(controller) is None:
+        raise KeyError("wrist")
+    _step_size(step_rad)
+    snap, start = _at_rest(controller)
+    held = snap.phi_commanded_rad if math.isfinite(snap.phi_commanded_rad) else snap.tool_phi_rad
+    phi0 = float(held)
+    wrist = controller.settings.wrist
+    end = phi0 + step_rad
+    if not wrist.min_angle_rad <= end <= wrist.max_angle_rad:
+        raise GoalRejected(
+            f"step_rad: the step's end: phi {math.degrees(end):.1f} deg is outside the "
+            f"wrist's limits [{math.degrees(wrist.min_angle_rad):.1f}, "
+            f"{math.degrees(wrist.max_angle_rad):.1f}] deg"
+        )
+    gate, robot = controller.gate, controller.robot
+    platform = robot.fk(start).points
+
+    def tip_of(_joints: np.ndarray, phi: np.ndarray) -> np.ndarray:
+        angles = np.asarray(phi, dtype=np.float64)
+        return gate.tip(np.broadcast_to(platform, (*angles.shape, 3)), angles)
+
+    return WristStepParams(
+        start_rad=tuple(float(v) for v in start),  # type: ignore[arg-type]
+        start_phi_rad=phi0,
+        step_rad=float(step_rad),
+        ramp_rad_s=RAMP_FRACTION * wrist.max_speed_rad_s,
+        tip_of=tip_of,
+        step_at_s=STEP_AT_S,
+        duration_s=float(duration_s),
+    )
+
+
+def wrist_step_record(params: WristStepParams, servo_id: int) -> dict[str, Any]:
+    """The wrist step's parameters as run.json keeps them (SI)."""
+    return {
+        "servo_id": servo_id,
+        "joint": WRIST,
+        "step_rad": params.step_rad,
+        "start_rad": list(params.start_rad),
+        "start_phi_rad": params.start_phi_rad,
+        "step_at_s": params.step_at_s,
+        "duration_s": params.duration_s,
+        "ramp_rad_s": params.ramp_rad_s,
+    }
+
+
+def plan_joint_step(
+    controller: Controller, servo_id: int, step_rad: float, duration_s: float
+) -> JointStepParams:
+    """The step of ``servo_id``'s joint by ``step_rad`` [rad] from where the arm rests now;
+    nothing moves (the run manager plans and checks it).
+
+    Raises:
+        KeyError: not a leg's servo (404).
+        GoalRejected: the step's size or its end outside the joint limits, naming
+            ``step_rad`` (422).
+        MotionRefused: the robot may not move (e-stop, fault, torque off), its state is
+            stale, or it is not at rest (409).
+    """
+    joint = leg_joint(controller, servo_id)
+    _step_size(step_rad)
+    snap, start = _at_rest(controller)
     end = start.copy()
     end[joint - 1] += step_rad
     gate, robot, phi = controller.gate, controller.robot, float(snap.phi_rad)
@@ -213,6 +362,42 @@ def step_figures(
     elif begin + int(outside[-1]) < len(s) - 1:
         figures["settling_s"] = float(t_s[begin + int(outside[-1]) + 1])
     return {k: _finite(v) for k, v in figures.items()}
+
+
+def wrist_step_response(rows: Sequence[dict[str, Any]], params: WristStepParams) -> dict[str, Any]:
+    """The wrist step's record from its run's log rows, as `step_response` gives a leg's:
+    phi's goal (as written to the servo) and measured [rad] per sample, times [s] from the
+    step, and its figures."""
+    cmd, meas = "phi_commanded_rad", "phi_measured_rad"
+    kept = [
+        r
+        for r in rows
+        if r.get("phase") in PHASES and None not in (r.get("t_s"), r.get(cmd), r.get(meas))
+    ]
+    if not kept:
+        empty = np.zeros(0)
+        return {
+            "clock": "t_s",
+            "t_s": [],
+            "goal_rad": [],
+            "measured_rad": [],
+            "figures": step_figures(empty, empty, empty),
+        }
+    clock = "sim_time_s" if all(r.get("sim_time_s") is not None for r in kept) else "t_s"
+    t = np.array([r[clock] for r in kept], dtype=float)
+    u = np.array([r[cmd] for r in kept], dtype=float)
+    y = np.array([r[meas] for r in kept], dtype=float)
+    last = np.append(np.diff(t) > 0, True)  # the last row of each time (identify.record_of)
+    t, u, y = t[last], u[last], y[last]
+    moved = np.flatnonzero(np.abs(u - params.start_phi_rad) > 1e-9)
+    t = t - (float(t[moved[0]]) if moved.size else float(t[0]))
+    return {
+        "clock": clock,
+        "t_s": t.tolist(),
+        "goal_rad": u.tolist(),
+        "measured_rad": y.tolist(),
+        "figures": step_figures(t, u, y),
+    }
 
 
 def step_response(rows: Sequence[dict[str, Any]], params: JointStepParams) -> dict[str, Any]:

@@ -1,152 +1,16 @@
-// The sinusoid test form (preview, start, abort, progress), the runs table and comparing runs.
-// The running run comes from the server (GET /api/runs: its progress and parameters), so a
-// page reloaded mid-run, or another tab, shows where the run really is.
+// The runs table and comparing runs; the test-run form (preview, start, abort, progress) is
+// static/js/testruns.js. The running run comes from the server (GET /api/runs: its progress
+// and parameters), so a page reloaded mid-run, or another tab, shows where the run really is.
 
-import { get, getBlob, post, mm, fixed } from "./api.js";
-import { command } from "./control.js";
+import { get, getBlob, mm, fixed } from "./api.js";
 import { escape } from "./status.js";
-import { operatorText, parseDecimal, showError, showMessage, setText } from "./ui.js";
+import { followRun, onRunStatus, startTestRuns } from "./testruns.js";
+import { showError, setText } from "./ui.js";
 
 const RUNS_POLL_MS = 2000;
-const PREVIEW_DELAY_MS = 300;
-let active = null; // { id, kind, description, progress, at, filled } of the running run
-let previewTimer = null;
+export const onStatus = onRunStatus; // the form's progress and preview follow each status
 const picked = new Set(); // run ids ticked for comparing
 let compareUrl = null; // the object URL of the shown comparison plot
-
-// Form fields (mm, Hz, deg, s; a decimal comma is a decimal point) -> the API's body (m, rad),
-// or { error } naming the first field that is not a number (its box is marked).
-function sinusoidBody() {
-  const form = document.getElementById("sine-form");
-  let error = null;
-  const number = (name, scale) => {
-    const input = form.elements[name];
-    const parsed = parseDecimal(input.value);
-    input.setAttribute("aria-invalid", parsed.error ? "true" : "false");
-    if (parsed.error && !error) error = `${input.getAttribute("aria-label") || name}: ${parsed.error}`;
-    return parsed.error ? null : parsed.value * scale;
-  };
-  const triple = (name, scale) => [0, 1, 2].map((i) => number(`${name}${i}`, scale));
-  const body = {
-    amplitude_m: triple("amp", 1e-3), frequency_hz: triple("freq", 1),
-    phase_rad: triple("phase", Math.PI / 180), offset_m: triple("off", 1e-3),
-    duration_s: number("duration", 1), feedforward: form.elements.feedforward.checked,
-  };
-  return error ? { error } : body;
-}
-
-async function preview() {
-  const out = document.getElementById("sine-preview");
-  const body = sinusoidBody();
-  if (body.error) { // nothing asked of the server about a form that is not numbers
-    out.textContent = body.error;
-    out.title = "";
-    out.className = "preview bad";
-    return;
-  }
-  try {
-    const c = await post("/api/tests/sinusoid/check", body);
-    const speed = c.peak_joint_speed_rad_s === null ? "–" : fixed(c.peak_joint_speed_rad_s, 2);
-    const head = `peak joint speed ${speed} rad/s (limit ${fixed(c.joint_speed_limit_rad_s, 1)}), ` +
-      `peak platform speed ${fixed(c.peak_speed_m_s, 2)} m/s: `;
-    out.textContent = head + (c.feasible ? "feasible" : operatorText({ message: c.detail }).text);
-    out.title = c.feasible ? "" : `server: ${c.detail}`;
-    out.className = c.feasible ? "preview ok" : "preview bad";
-  } catch (err) {
-    out.textContent = operatorText(err).text;
-    out.title = `server: ${err.message}`;
-    out.className = "preview bad";
-  }
-}
-
-function schedulePreview() {
-  clearTimeout(previewTimer);
-  previewTimer = setTimeout(preview, PREVIEW_DELAY_MS);
-}
-
-async function start(event) {
-  event.preventDefault();
-  const body = sinusoidBody();
-  if (body.error) {
-    showMessage(`Not started: ${body.error}`, "error");
-    return;
-  }
-  try {
-    const { run_id } = await command("/api/tests/sinusoid", body);
-    active = { id: run_id, kind: "sinusoid", description: "", progress: null, at: 0, filled: true };
-    showMessage(`Run ${run_id} started`);
-    refreshRuns();
-  } catch (err) {
-    showError(err);
-  }
-}
-
-function abort() {
-  if (active) command(`/api/runs/${active.id}/abort`).then(refreshRuns).catch(showError);
-}
-
-// Progress through the test part: the server's figure at the last poll, advanced by the time
-// since while the status says the test part is going (approach, timed/hold, stop).
-// Feasibility depends on where the robot starts: re-check when its state changes.
-let previewKey = "";
-
-function testShare(phase) {
-  const p = active.progress;
-  if (phase === "stop") return 1;
-  if (!p || !p.test_duration_s) return 0;
-  const going = phase === "timed" || phase === "hold";
-  const since = going && p.phase === phase ? (performance.now() - active.at) / 1000 : 0;
-  return Math.min((p.test_elapsed_s + since) / p.test_duration_s, 1);
-}
-
-export function onStatus(s) {
-  // a relaxed arm moves on its own (falls, swings): re-check as it moves, to the centimetre
-  const where = s.torque ? "" : (s.ee.position_m || []).map((v) => (v === null ? "" : Math.round(v * 100))).join(",");
-  const key = `${s.mode}|${s.torque}|${s.estopped}|${s.faults.length}|${where}`;
-  if (key !== previewKey && s.mode !== "test") {
-    previewKey = key;
-    schedulePreview();
-  }
-  const bar = document.getElementById("run-progress");
-  const running = Boolean(active) && (s.mode === "test" || s.mode === "hold-world");
-  document.getElementById("sine-abort").disabled = !running;
-  bar.hidden = !running;
-  if (!running) {
-    setText("run-phase", "");
-    setText("run-params", "");
-    return;
-  }
-  bar.value = testShare(s.phase);
-  const percent = `${Math.round(bar.value * 100)} %`;
-  bar.textContent = percent;
-  setText("run-phase", `run ${active.id}: ${s.phase || "starting"} ${percent}`);
-  setText("run-params", active.description);
-}
-
-// The form shows the running sinusoid's parameters (mm, Hz, deg, s), once per run.
-function fillForm(params) {
-  const form = document.getElementById("sine-form");
-  const set = (name, value) => { if (form.elements[name]) form.elements[name].value = String(value); };
-  const round = (v) => Math.round(v * 1e6) / 1e6;
-  [0, 1, 2].forEach((i) => {
-    set(`amp${i}`, round(params.amplitude_m[i] * 1e3));
-    set(`freq${i}`, round(params.frequency_hz[i]));
-    set(`phase${i}`, round(params.phase_rad[i] * 180 / Math.PI));
-    set(`off${i}`, round(params.offset_m[i] * 1e3));
-  });
-  set("duration", round(params.duration_s));
-  form.elements.feedforward.checked = Boolean(params.feedforward);
-}
-
-function follow(run) {
-  if (!active || active.id !== run.run_id) active = { id: run.run_id, kind: run.kind, filled: false };
-  Object.assign(active, { description: run.description, progress: run.progress, at: performance.now() });
-  if (!active.filled && run.kind === "sinusoid") {
-    fillForm(run.params);
-    schedulePreview();
-  }
-  active.filled = true;
-}
 
 const triple = (t, key) => (t ? ["x", "y", "z"].map((a) => mm(t[a]?.[key], 2)).join(" / ") : "–");
 
@@ -200,9 +64,7 @@ export async function refreshRuns() {
     if (body.innerHTML !== html) body.innerHTML = html;
     // a run started anywhere (this tab before a reload, the CLI, the 3D scene, another tab)
     // is followed from the server's record: its progress and parameters
-    const running = runs.find((r) => r.state === "running");
-    if (running) follow(running);
-    else active = null;
+    followRun(runs.find((r) => r.state === "running") || null);
     const known = new Set(runs.map((r) => r.run_id));
     for (const id of picked) if (!known.has(id)) picked.delete(id);
     updateCompareButton();
@@ -284,16 +146,11 @@ function closeCompare() {
 }
 
 export function startRuns() {
-  const form = document.getElementById("sine-form");
-  form.addEventListener("submit", start);
-  form.addEventListener("input", schedulePreview);
-  document.getElementById("sine-abort").addEventListener("click", abort);
+  startTestRuns(refreshRuns);
   document.getElementById("run-rows").addEventListener("change", onPick);
   document.getElementById("compare-runs").addEventListener("click", compare);
   document.getElementById("compare-close").addEventListener("click", closeCompare);
   startReportBox();
-  preview();
   refreshRuns();
   setInterval(refreshRuns, RUNS_POLL_MS);
-  setText("sine-preview", "checking…");
 }

@@ -1,4 +1,5 @@
-// The servo panel: one leg servo at a time, as the Dynamixel Wizard gives it. Its gains read
+// The servo panel: one servo at a time (a leg's, or with a wrist the wrist's: its step a
+// step of φ within the wrist's limits), as the Dynamixel Wizard gives it. Its gains read
 // from the servo (GET /api/servos/{id}/gains), edited within the registers' limits and
 // written (POST, the lease), reverted (POST /api/tuning/revert); a step of its joint (POST
 // /api/servos/{id}/step, answered with the record) drawn on a canvas 2D. Nothing here runs
@@ -13,6 +14,7 @@ const GAINS = ["p", "i", "d", "ff1", "ff2"];
 const WHOLE = /^\d+$/;
 const COLOURS = { goal: "#868e96", measured: "#d9480f", grid: "#e9ecef", axis: "#495057" };
 let servoId = null; // the servo shown
+let roles = new Map(); // servo id -> { role: "leg" | "wrist", joint }, from the status
 let limits = null; // per gain { min, max }, from the last read
 let stepLimitsDeg = { min: 0.5, max: 5 }; // the step's magnitude [deg], from the last read
 let busy = false; // a read, write, revert or step on its way: one at a time
@@ -49,8 +51,28 @@ function showGains(body) {
     form.elements[k].value = String(body.servo[k]);
     form.elements[k].setAttribute("aria-invalid", "false");
   }
-  el("sp-revert").dataset.revertable = String(Boolean(body.revertable));
-  setText("sp-step-range", `${stepLimitsDeg.min}–${stepLimitsDeg.max}° either way`);
+  // the revert is the legs' (the tuning's): the wrist's gains are not kept for it
+  const wrist = body.role === "wrist";
+  el("sp-revert").dataset.revertable = String(Boolean(body.revertable) && !wrist);
+  el("sp-revert").title = wrist
+    ? "the revert restores the legs' gains; write the wrist's back by hand"
+    : "the gains before the last write or tuning apply, back on the servos";
+  const within = body.limits_rad
+    ? `, φ within ${deg(body.limits_rad.min).toFixed(1)} to ${deg(body.limits_rad.max).toFixed(1)}°`
+    : "";
+  setText("sp-step-range", `${stepLimitsDeg.min}–${stepLimitsDeg.max}° either way${within}`);
+}
+
+// What a step moves, in words: a leg's joint, or the wrist's φ with the legs held.
+function showRole(id) {
+  const wrist = (roles.get(id) || {}).role === "wrist";
+  setText("sp-step-note", wrist
+    ? "a step of φ from where the wrist rests, the legs held"
+    : "from where the arm rests, the other joints held");
+  setText("sp-legend-what", wrist ? "φ, the wrist's angle" : "the joint's angle");
+  el("sp-plot").setAttribute("aria-label", wrist
+    ? "the step: the wrist's goal φ (dashed) and measured φ over time"
+    : "the step: the joint's goal (dashed) and measured angle over time");
 }
 
 // ``quiet``: a read the page made by itself (a servo chosen, the page loaded) says what went
@@ -262,17 +284,22 @@ function draw(answer) {
 function chooseServo(id) {
   servoId = id;
   el("sp-servo").value = String(id);
+  showRole(id);
   setBusy(busy);
   read({ quiet: true });
 }
 
-// Each status: the servo list (the legs' ids), once; the first servo is read at once.
+// Each status: the servo list (every servo on the bus with its role: the legs', then the
+// wrist's), once; the first servo is read at once.
 export function onServoStatus(s) {
   const select = el("sp-servo");
-  const ids = s.joints.servo_ids;
-  if (select.options.length !== ids.length) {
-    select.innerHTML = ids.map((id, k) => `<option value="${id}">servo ${id} (joint ${k + 1})</option>`).join("");
-    if (servoId === null && ids.length) chooseServo(ids[0]);
+  const servos = s.servos || s.joints.servo_ids.map((id, k) => ({ id, role: "leg", joint: k + 1 }));
+  if (select.options.length !== servos.length) {
+    roles = new Map(servos.map((v) => [v.id, v]));
+    select.innerHTML = servos.map((v) => `<option value="${v.id}">servo ${v.id} ` +
+      `(${v.role === "wrist" ? "wrist, φ" : `joint ${v.joint}`})</option>`).join("");
+    if (servoId === null && servos.length) chooseServo(servos[0].id);
+    else if (servoId !== null) select.value = String(servoId);
   }
 }
 

@@ -1,12 +1,11 @@
 """The run types come from one registry (app/runs/types.py): each type's defaults build a
 path that plans, every start route's body is the registry's model, and the defaults are
-written once (the path dataclass's; the model, the OpenAPI document and the page's form
-agree with it)."""
+written once (the path dataclass's; the model, the OpenAPI document and GET /api/tests,
+which the page's form is made from, agree with it)."""
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -124,23 +123,14 @@ class _FormValues(HTMLParser):
             self.inside = False
 
 
-def test_the_pages_sinusoid_form_shows_the_models_defaults():
-    """The form's fields (mm, Hz, deg, s) are the sinusoid's defaults: a changed default
-    fails here until the page follows."""
-    parser = _FormValues("sine-form")
+def test_the_pages_run_form_repeats_no_default():
+    """The page's test-run form is made from GET /api/tests (the models' schemas, their
+    defaults: tests/app/server/test_api_run_types.py), so index.html holds no field of its
+    own to drift from the models'."""
+    parser = _FormValues("run-form")
     parser.feed(PAGE.read_text(encoding="utf-8"))
-    shown = parser.values
-    default = SinusoidRequest()
-    for prefix, values, scale in (
-        ("amp", default.amplitude_m, 1e3),
-        ("freq", default.frequency_hz, 1.0),
-        ("phase", default.phase_rad, 180 / math.pi),
-        ("off", default.offset_m, 1e3),
-    ):
-        for axis, value in enumerate(values):
-            assert float(shown[f"{prefix}{axis}"]) == pytest.approx(value * scale), prefix
-    assert float(shown["duration"]) == default.duration_s
-    assert shown["feedforward"] is default.feedforward
+    assert parser.values == {}
+    assert "run-fields" in PAGE.read_text(encoding="utf-8")
     assert SinusoidParams() == SinusoidRequest().params()
 
 

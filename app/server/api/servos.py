@@ -1,7 +1,8 @@
-"""Servos resource (issue 21's servo panel): one leg servo's gains, read from the servo and
+"""Servos resource (issue 21's servo panel): one servo's gains, read from the servo and
 written to it, and a step of its joint with the response it recorded (app/tuning/
-servo_panel.py). The revert is the tuning's: POST /api/tuning/revert undoes the last apply
-or write."""
+servo_panel.py). The servos are the legs' and, with a [wrist], the wrist's (its step a step
+of phi, within the wrist's limits). The revert is the tuning's: POST /api/tuning/revert
+undoes the last apply or write of the legs' gains."""
 
 from __future__ import annotations
 
@@ -30,10 +31,15 @@ from app.tuning.servo_panel import (
     KIND,
     MAX_STEP_RAD,
     MIN_STEP_RAD,
-    leg_joint,
+    WRIST,
+    panel_joint,
+    panel_servo_ids,
     plan_joint_step,
+    plan_wrist_step,
     step_record,
     step_response,
+    wrist_step_record,
+    wrist_step_response,
 )
 from hardware.bus import PositionGains
 
@@ -41,7 +47,9 @@ router = APIRouter(tags=["servos"])
 READ_TIMEOUT_S = 5.0
 STEP_WAIT_S = 60.0  # beyond the step's own duration: a starved twin runs slower than the clock
 POLL_S = 0.02
-NO_SERVO = {404: {"model": ErrorBody, "description": "servo_id is not a leg's servo"}}
+NO_SERVO = {
+    404: {"model": ErrorBody, "description": "servo_id is not a leg's servo nor the wrist's"}
+}
 BUSY = {
     409: {
         "model": ErrorBody,
@@ -85,14 +93,18 @@ class Range(BaseModel):
 
 
 class ServoGainsOut(BaseModel):
-    """One leg servo's gains: ``servo`` as the servo's own registers hold them (read now),
-    ``in_use`` as the loop set them (they differ only if something else wrote the servo),
-    the registers' ``limits``, the step sizes a step accepts (``step_rad``: its
-    magnitude, either sign [rad]) and whether POST /api/tuning/revert has something to
-    undo (``revertable``)."""
+    """One servo's gains: ``servo`` as the servo's own registers hold them (read now),
+    ``in_use`` as the loop set them (they differ only if something else wrote the servo;
+    the wrist's: as read), the registers' ``limits``, the step sizes a step accepts
+    (``step_rad``: its magnitude, either sign [rad]) and whether POST /api/tuning/revert
+    has something to undo (``revertable``: the legs' gains only). ``joint`` is 1..3 for a
+    leg, 4 for the wrist (``role``); ``limits_rad`` the joint's range a step must stay in
+    (the wrist's limits; null for a leg: its limits are the gate's, checked per step)."""
 
     servo_id: int
     joint: int
+    role: Literal["leg", "wrist"]
+    limits_rad: Range | None
     servo: ServoGains
     in_use: ServoGains
     limits: dict[str, Range]
@@ -168,11 +180,14 @@ class JointStepOut(BaseModel):
 
 
 def _joint(controller: Any, servo_id: int) -> int:
+    """The panel's joint of ``servo_id``: 1..3 a leg's, 4 the wrist's; 404 otherwise."""
     try:
-        return leg_joint(controller, servo_id)
+        return panel_joint(controller, servo_id)
     except KeyError:
-        ids = list(controller.servo_ids)
-        raise HTTPException(404, f"servo_id: {servo_id} is not a leg's servo ({ids})") from None
+        ids = panel_servo_ids(controller)
+        raise HTTPException(
+            404, f"servo_id: {servo_id} is not a servo of this robot ({ids})"
+        ) from None
 
 
 async def _read(controller: Any, servo_id: int) -> PositionGains:
@@ -191,11 +206,16 @@ async def read_servo_gains(servo_id: int, controller: ControllerDep, tuning: Tun
     servo does not answer."""
     joint = _joint(controller, servo_id)
     servo = await _read(controller, servo_id)
+    wrist = controller.settings.wrist
     return {
         "servo_id": servo_id,
         "joint": joint,
+        "role": "wrist" if joint == WRIST else "leg",
+        "limits_rad": (
+            {"min": wrist.min_angle_rad, "max": wrist.max_angle_rad} if joint == WRIST else None
+        ),
         "servo": servo.as_dict(),
-        "in_use": controller.gains[servo_id].as_dict(),
+        "in_use": (servo if joint == WRIST else controller.gains[servo_id]).as_dict(),
         "limits": {k: {"min": lo, "max": hi} for k, (lo, hi) in GAIN_LIMITS.items()},
         "step_rad": {"min": MIN_STEP_RAD, "max": MAX_STEP_RAD},
         "revertable": tuning.revertable,
@@ -220,12 +240,29 @@ async def write_servo_gains(
     /api/tuning/revert restores the set they replaced. 422 naming the field outside its
     register's range (nothing is written); 409 while a motion, a run, a calibration or a
     tuning runs."""
-    _joint(controller, servo_id)
+    joint = _joint(controller, servo_id)
     if calibration.running():
         raise MotionRefused("a calibration run is in progress: gains change once it ends")
-    written = await asyncio.to_thread(tuning.write, servo_id, body.gains())
+    if joint == WRIST:
+        written = await asyncio.to_thread(_write_wrist, controller, tuning, servo_id, body.gains())
+    else:
+        written = await asyncio.to_thread(tuning.write, servo_id, body.gains())
     servo = await _read(controller, servo_id)
     return {"servo_id": servo_id, "servo": servo.as_dict(), **written}
+
+
+def _write_wrist(
+    controller: Any, tuning: Any, servo_id: int, gains: PositionGains
+) -> dict[str, Any]:
+    """The wrist's gains written (the legs keep theirs), refused as a leg's write is while
+    a tuning, a run or a procedure runs; not kept for revert nor written to the config file
+    (the config holds the legs' gains)."""
+    if tuning.running():
+        raise MotionRefused("a tuning run is in progress: gains change once it ends")
+    if (other := controller.owner.busy()) is not None:
+        raise MotionRefused(other)
+    in_use = controller.set_gains({**controller.gains, servo_id: gains}).result(timeout=5.0)
+    return {"gains": {str(k): g.as_dict() for k, g in in_use.items()}, "config_written": None}
 
 
 @router.post(
@@ -247,9 +284,16 @@ async def step_servo(
     step_rad (too small or large, its end outside the joint limits or the workspace);
     409 when the arm does not rest, its state is stale, or it may not move."""
     joint = _joint(controller, servo_id)
-    params = plan_joint_step(controller, servo_id, body.step_rad, body.duration_s)
+    if joint == WRIST:  # a step of phi, the legs held
+        params: Any = plan_wrist_step(controller, body.step_rad, body.duration_s)
+        record, respond = wrist_step_record(params, servo_id), wrist_step_response
+        start = [float(params.start_phi_rad)]
+    else:
+        params = plan_joint_step(controller, servo_id, body.step_rad, body.duration_s)
+        record, respond = step_record(params, servo_id), step_response
+        start = list(params.start_rad)
     try:
-        started = await start_run(request, runs, params, KIND, step_record(params, servo_id))
+        started = await start_run(request, runs, params, KIND, record)
     except GoalRejected as exc:  # the batch check: name the field it came from
         raise GoalRejected(f"step_rad: the step is {exc.reason}") from None
     run = runs.get(started["run_id"])
@@ -270,6 +314,6 @@ async def step_servo(
         "state": run.state,
         "reason": run.reason,
         "step_rad": params.step_rad,
-        "start_rad": list(params.start_rad),
-        **step_response(rows, params),
+        "start_rad": start,
+        **respond(rows, params),
     }

@@ -37,13 +37,16 @@ COMMANDS = [
     ("/api/programs/run", {"gcode": "G4 P0.5"}),
 ]
 # POST routes that need no lease: stopping, taking or giving back the lease, pose input
-# (it feeds a hold the lease holder started; it cannot start one), the sinusoid preview and
+# (it feeds a hold the lease holder started; it cannot start one), the run types' previews and
 # a program's check and dry run (they move nothing: the dry run plays on a twin of its own)
 NO_LEASE = {
     "/api/estop",
     "/api/lease",
     "/api/mav/pose",
     "/api/tests/sinusoid/check",
+    "/api/tests/chirp/check",
+    "/api/tests/step/check",
+    "/api/tests/waypoints/check",
     "/api/programs/check",
     "/api/programs/dry-run",
 }
