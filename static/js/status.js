@@ -8,6 +8,12 @@ const POLL_MS = 200;
 const STALE_MS = 1000; // values older than this are greyed and marked stale
 const HANGING_BELOW_M = 0.1; // measured this far below the home point: the arm hangs
 let lastStatusAt = null; // performance.now() of the last status answer
+// The link's round trip: each status poll's request to answer [ms], the last LINK_SAMPLES of
+// them; their median over LINK_SLOW_MS says "link slow: 450 ms" in the header's link fact
+// (the page then lags by that much: moves and jogs still stop on the server's own deadline).
+const LINK_SAMPLES = 5;
+const LINK_SLOW_MS = 300;
+const roundTrips = [];
 const BACKENDS = { sim: "simulator", emulated: "emulated bus", dynamixel: "real servos" };
 export const state = { status: null, online: false, streamOnline: false, why: "", listeners: [] };
 
@@ -23,19 +29,36 @@ export function setStreamOnline(online) {
   updateConnection();
 }
 
+// The median round trip of the last polls [ms], or null before LINK_SAMPLES of them.
+export function linkRoundTripMs() {
+  if (roundTrips.length < LINK_SAMPLES) return null;
+  const sorted = [...roundTrips].sort((a, b) => a - b);
+  return sorted[Math.floor(sorted.length / 2)];
+}
+
+function noteRoundTrip(ms) {
+  roundTrips.push(ms);
+  if (roundTrips.length > LINK_SAMPLES) roundTrips.shift();
+}
+
 function updateConnection() {
   const ok = state.online && state.streamOnline;
   const conn = document.getElementById("conn");
   // the server answers, but its robot node does not (503 "robot offline: ...")
   const robotOffline = !state.online && state.why.startsWith("robot offline");
-  conn.textContent = ok
+  const trip = linkRoundTripMs();
+  const slow = ok && trip !== null && trip > LINK_SLOW_MS;
+  conn.title = trip === null ? "" : `status round trip ${trip.toFixed(0)} ms (median of the last ${LINK_SAMPLES})`;
+  conn.textContent = slow
+    ? `link slow: ${(Math.round(trip / 10) * 10).toFixed(0)} ms`
+    : ok
     ? "connected"
     : state.online
       ? "no telemetry"
       : robotOffline
         ? "robot offline"
         : "offline";
-  conn.className = ok ? "ok" : "bad";
+  conn.className = slow ? "warn" : ok ? "ok" : "bad";
   const banner = document.getElementById("banner");
   banner.hidden = ok;
   if (robotOffline) {
@@ -69,8 +92,22 @@ function renderPose(pose) {
   // shown once a pose source has sent something: the header stays one line otherwise
   el.parentElement.hidden = !pose || pose.state === "none";
   if (el.parentElement.hidden) return;
-  el.textContent = `${pose.state} ${fixed(pose.age_s * 1000, 0)} ms`;
+  el.textContent = `${pose.state} ${fixed(pose.age_s * 1000, 0)} ms, ${fixed(pose.rate_hz, 0)} Hz`;
   el.className = pose.state === "ok" ? "ok" : "bad";
+  el.title = `drone pose input (hold in world): ${pose.source || "no"} source, state, age, rate`;
+}
+
+// Notices (about the last command: "starting from the measured position") and warnings
+// are not faults: a neutral strip of their own, not the red one.
+function renderNotices(s) {
+  const strip = document.getElementById("notices");
+  if (!strip) return;
+  const items = [];
+  if (s.warning) items.push(`<li class="warn">${escape(s.warning)}</li>`);
+  if (s.notice) items.push(`<li>${escape(s.notice)}</li>`);
+  const html = items.join("");
+  if (strip.innerHTML !== html) strip.innerHTML = html;
+  strip.hidden = items.length === 0;
 }
 
 function renderFaults(s) {
@@ -82,11 +119,10 @@ function renderFaults(s) {
   });
   if (s.faults_dropped) items.push(`<li class="muted">${s.faults_dropped} older faults not shown</li>`);
   if (s.estopped) items.unshift("<li><strong>E-stop engaged</strong>: nothing moves until Reset</li>");
-  if (s.warning) items.push(`<li class="warn">${escape(s.warning)}</li>`);
-  if (s.notice) items.push(`<li class="muted">${escape(s.notice)}</li>`);
   const html = items.join("");
   if (list.innerHTML !== html) list.innerHTML = html;
   list.hidden = items.length === 0;
+  renderNotices(s);
 }
 
 const known = (v) => Boolean(v) && v.every((x) => x !== null && x !== undefined);
@@ -149,9 +185,25 @@ function servoRow(j, i, torque) {
     `<td>${fixed(j.temperature_c[i], 0)}</td>${errorCell}<td>${reboot}</td></tr>`;
 }
 
+// The wrist's servo (status.wrist_servo: the fourth on the bus) as a row like the legs':
+// phi as read and as commanded in the angle columns.
+function wristRow(w, torque) {
+  const one = (name) => [w[name]];
+  const j = {
+    servo_ids: [w.servo_id], position_rad: one("position_rad"), commanded_rad: one("commanded_rad"),
+    velocity_rad_s: one("velocity_rad_s"), current_a: one("current_a"), pwm: one("pwm"),
+    voltage_v: one("voltage_v"), temperature_c: one("temperature_c"),
+    hardware_errors: [w.hardware_errors], torque_enabled: [w.torque_enabled],
+  };
+  return servoRow(j, 0, torque).replace(`<th scope="row">${w.servo_id}</th>`,
+    `<th scope="row" title="the wrist's servo: its angle is φ">${w.servo_id} <span class="muted">wrist</span></th>`);
+}
+
 function renderServos(s) {
   const j = s.joints;
-  const html = j.servo_ids.map((_, i) => servoRow(j, i, s.torque)).join("");
+  const legs = j.servo_ids.map((_, i) => servoRow(j, i, s.torque).replace(
+    `<th scope="row">${j.servo_ids[i]}</th>`, `<th scope="row" title="joint ${i + 1}">${j.servo_ids[i]}</th>`));
+  const html = legs.join("") + (s.wrist_servo ? wristRow(s.wrist_servo, s.torque) : "");
   const body = document.getElementById("servo-rows");
   if (body.innerHTML !== html) body.innerHTML = html;
 }
@@ -166,8 +218,10 @@ async function poll() {
     const s = await get("/api/status");
     state.status = s;
     lastStatusAt = performance.now();
+    noteRoundTrip(lastStatusAt - askedAt);
     checkStale();
     if (!state.online) setOnline(true);
+    else updateConnection(); // the link fact follows the round trip
     renderHeader(s);
     renderFaults(s);
     renderPosition(s);

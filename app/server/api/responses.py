@@ -199,6 +199,40 @@ class PoseInputStatus(_Out):
     sources: list[PoseSourceOut] | None = Field(
         None, description="GET only: every pose source, what it accepts and its counters"
     )
+    # hold-in-world on the page (issue 32): the latest sample, as app/world/poses.py keeps it
+    source: str | None = Field(
+        None,
+        description="the input the latest sample came by: http | websocket | udp | mavlink | "
+        "simulated (null: none yet)",
+    )
+    position_m: list[float] | None = Field(None, description="the latest sample's position [m]")
+    quaternion: list[float] | None = Field(
+        None, description="the latest sample's attitude (w, x, y, z), body to world"
+    )
+
+
+class ServoRole(_Out):
+    """A servo on the bus: its Dynamixel ``id``, its ``role`` and, for a leg, its joint."""
+
+    id: int
+    role: Literal["leg", "wrist"]
+    joint: int | None = Field(description="1..3 for a leg (joint order); null for the wrist")
+
+
+class WristServoStatus(_Out):
+    """The wrist's servo (the fourth on the bus): phi as read and as last written [rad],
+    and its readings as the legs' servos have them in ``joints``."""
+
+    servo_id: int
+    position_rad: MaybeFloat = Field(description="phi as read [rad]")
+    commanded_rad: MaybeFloat = Field(description="phi as last written [rad]")
+    velocity_rad_s: MaybeFloat
+    current_a: MaybeFloat
+    voltage_v: MaybeFloat
+    temperature_c: MaybeFloat
+    pwm: MaybeFloat = Field(description="PWM duty cycle, signed (1 = full)")
+    hardware_errors: list[str]
+    torque_enabled: bool | None
 
 
 class StatusOut(_Out):
@@ -241,6 +275,14 @@ class StatusOut(_Out):
         description="the position gains in use per leg servo id, register units: p, i, d, "
         "ff1, ff2 (POST /api/tuning/{run_id}/apply changes them)"
     )
+    servos: list[ServoRole] = Field(
+        description="every servo on the bus in bus order with its role: the legs (as "
+        "joints.servo_ids lists them, which stays the legs'), then the wrist's if fitted"
+    )
+    wrist_servo: WristServoStatus | None = Field(
+        description="the wrist's servo as last read (null figures before its first read); "
+        "null without a wrist"
+    )
 
 
 class TelemetryLoop(_Out):
@@ -261,6 +303,9 @@ class WorldFrame(_Out):
     )
     heading_limited: bool | None = Field(
         None, description="with a wrist: its limits cut the heading (held at the limit)"
+    )
+    drone_pose: list[float | None] | None = Field(
+        None, description="the drone's pose the hold works from: x, y, z [m], qw, qx, qy, qz"
     )
 
 
@@ -289,6 +334,8 @@ class TelemetryMessage(_Out):
     error_m: MaybeVector3 = Field(
         description="commanded - measured [m]; null without a setpoint (torque off, e-stop, fault)"
     )
+    current_a: MaybeVector3 = Field(description="the leg servos' current [A], joint order")
+    pwm: MaybeVector3 = Field(description="the leg servos' PWM duty (1 = full), joint order")
     ee: TelemetryEe
     loop: TelemetryLoop
     faults: list[FaultOut]
@@ -401,6 +448,22 @@ class RunProgress(_Out):
     test_duration_s: float | None = Field(description="the test part's length [s]")
     program_line: int | None = Field(
         None, description="a G-code program's line being executed (1-based); null otherwise"
+    )
+    feed_override: float | None = Field(
+        None, description="the feed override set, 0.1 to 1.0 (checked at 1.0: never above)"
+    )
+    feed_rate: float | None = Field(
+        None, description="the rate the path's time runs at now (0: standing, 1: as planned)"
+    )
+    paused: str | None = Field(
+        None, description="why the run stands or is stopping, in words; null: running"
+    )
+    time_left_s: float | None = Field(
+        None, description="the path time left at the feed override [s]"
+    )
+    optional_stop: bool | None = Field(None, description="M1 stops (the optional stop is on)")
+    stop_line: int | None = Field(
+        None, description="the program line a single step or an M0 / M1 stops (stopped) at"
     )
 
 

@@ -69,6 +69,40 @@ def status(
         "gains": {
             str(sid): g.as_dict() for sid, g in zip(snap.info.servo_ids, snap.gains, strict=True)
         },
+        "servos": servos(snap),
+        "wrist_servo": wrist_servo(snap),
+    }
+
+
+def servos(snap: Snapshot) -> list[dict[str, Any]]:
+    """Every servo on the bus in bus order, with its role: the legs (``joint`` 1..3, as
+    ``joints.servo_ids`` lists them), then the wrist's when one is fitted (joint null)."""
+    legs = [{"id": sid, "role": "leg", "joint": k + 1} for k, sid in enumerate(snap.info.servo_ids)]
+    wrist = snap.info.wrist_servo_id
+    return legs + ([] if wrist is None else [{"id": wrist, "role": "wrist", "joint": None}])
+
+
+def _maybe(value: float | None) -> float | None:
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+def wrist_servo(snap: Snapshot) -> dict[str, Any] | None:
+    """The wrist's servo as last read (null figures before its first read): phi measured
+    and commanded [rad] and its readings; None without a wrist."""
+    sid = snap.info.wrist_servo_id
+    if sid is None:
+        return None
+    read = snap.wrist_servo
+    figure = (lambda name: _maybe(getattr(read, name))) if read is not None else (lambda _: None)
+    return {
+        "servo_id": sid,
+        "position_rad": _maybe(snap.phi_measured_rad),
+        "commanded_rad": _maybe(snap.phi_commanded_rad),
+        **{name: figure(name) for name in ("velocity_rad_s", "current_a", "voltage_v")},
+        "temperature_c": figure("temperature_c"),
+        "pwm": figure("pwm"),
+        "hardware_errors": list(read.hardware_errors) if read is not None else [],
+        "torque_enabled": read.torque_enabled if read is not None else None,
     }
 
 
@@ -116,6 +150,9 @@ def telemetry(snap: Snapshot) -> dict[str, Any]:
         "commanded_m": floats(snap.point_commanded_m),
         "measured_m": floats(snap.point_measured_m),
         "error_m": floats(snap.shown_error_m),
+        # the servos' readings the tick already has (the plots' signals; no extra work)
+        "current_a": floats(snap.readings["current_a"]),
+        "pwm": floats(snap.readings["pwm"]),
         "ee": {
             "position_m": floats(snap.point_measured_m),
             "platform_m": floats(snap.platform_measured_m),
@@ -141,6 +178,7 @@ def world_frame(snap: Snapshot) -> dict[str, Any] | None:
         return None
     error = [g - m for g, m in zip(goal, measured, strict=True)]
     frame = {"goal_m": floats(goal), "measured_m": floats(measured), "error_m": floats(error)}
+    frame["drone_pose"] = extra.get("drone_pose")  # position [m], quaternion (w, x, y, z)
     heading, seen = extra.get("heading_world_rad"), extra.get("measured_heading_world_rad")
     if heading is not None:  # a wrist keeps the tool's heading too
         frame["heading_rad"] = heading
