@@ -663,6 +663,13 @@ class RunSettings(_Section):
     plan_timeout_s: float = Field(
         5.0, gt=0, description="a run whose planning and check took longer is not started [s]"
     )
+    max_pause_s: float = Field(
+        600.0,
+        gt=0,
+        le=86_400,
+        description="a run paused (Pause, M0, M1, a single step's stop) longer than this "
+        "is aborted; while paused its log keeps one row a second [s]",
+    )
 
 
 class WorldSettings(_Section):

@@ -14,9 +14,15 @@ run: ``POST /api/programs/run`` on a running server (``--url``): takes the contr
 lease (as ``deltadash run`` does), turns torque on, starts the program (the server
 checks it first: a failing program is refused with its violations), follows it with a
 progress bar naming the line in execution, gives control back and prints the error per
-program line. Exit 0: done; 1: the run did not finish (aborted, e-stop); 2: refused
-(violations, unreadable, control held by another client) or bad input; 3: the run could
-not be aborted or control given back at exit; 130: Ctrl-C (the run is aborted first).
+program line. Where the program stops (M0; M1 with ``--optional-stop``; a pause or a
+single step from the page or the API) it says where and why on stderr and waits, as
+LinuxCNC waits for Cycle Start: on a terminal Enter resumes it (``POST
+/api/programs/resume``; what was typed before the stop is dropped, so a stray Enter never
+starts the robot); otherwise it says how to resume from the page or the API and keeps
+waiting. Ctrl-C aborts the run, standing or not. Exit 0: done; 1: the run did not finish
+(aborted, e-stop); 2: refused (violations, unreadable, control held by another client) or
+bad input; 3: the run could not be aborted or control given back at exit; 130: Ctrl-C
+(the run is aborted first).
 
 Only the standard library is imported at module level (``deltadash --help`` stays fast).
 """
@@ -90,7 +96,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         help="run a program on a running server (checked there first)",
         description="Take control of the server at --url, turn torque on and run FILE "
         "(POST /api/programs/run: the server checks it from where the robot is and refuses "
-        "it with its violations if it fails); print the error per program line at the end.",
+        "it with its violations if it fails); print the error per program line at the end. "
+        "At an M0 (an M1 with --optional-stop) it says where it stopped and waits: on a "
+        "terminal Enter resumes, Ctrl-C aborts.",
         epilog="Exit 0: done; 1: the run did not finish; 2: refused or bad input; 3: the run "
         "could not be aborted or control given back; 130: Ctrl-C (the run is aborted).",
     )
@@ -112,6 +120,11 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         metavar=("X", "Y", "Z"),
         help="G54: the program origin in the base frame [mm] (default programs.work_offset_m)",
     )
+    run.add_argument(
+        "--optional-stop",
+        action="store_true",
+        help="M1 stops the program as M0 does (off: M1 runs through)",
+    )
     run.add_argument("--json", action="store_true", help="print the run as JSON")
     run.set_defaults(handler=_run)
 
@@ -124,8 +137,16 @@ def format_report(name: str, report: dict[str, Any], settings: Any) -> str:
     """The report as text, lengths in mm (one line per violation)."""
     violations = report["violations"]
     lines = {v["line"] for v in violations}
+    folded = sum(1 for v in violations if v.get("folded_under") is not None)
     verdict = (
-        "PASSES" if report["ok"] else f"FAILS: {len(violations)} violations on {len(lines)} line(s)"
+        "PASSES"
+        if report["ok"]
+        else f"FAILS: {len(violations)} violations on {len(lines)} line(s)"
+        + (
+            f": {len(violations) - folded} first cause(s), {folded} folded under them"
+            if folded
+            else ""
+        )
     )
     ratio = report["worst_torque_ratio"]
     out = [
@@ -143,12 +164,18 @@ def format_report(name: str, report: dict[str, Any], settings: Any) -> str:
         + f" (limit {settings.programs.max_torque_ratio:.2f})",
     ]
     out += [f"  note: {note}" for note in report["notes"]]
-    for v in violations:
-        out.append(
-            f"  line {v['line']}: {v['kind']} at t = {v['t_s']:.3f} s, {_mm(v['point_m'])}: "
-            f"{v['message']}"
-        )
+    out += [format_violation(v) for v in violations]
     return "\n".join(out)
+
+
+def format_violation(v: dict[str, Any]) -> str:
+    """One violation as a report line, folded as the page folds it: a move's first cause
+    at ``  line N: ...``, the others of its line (``folded_under`` set) under it, indented
+    and marked ``|_`` (a consequence, or more on the same line)."""
+    text = f"{v['kind']} at t = {v['t_s']:.3f} s, {_mm(v['point_m'])}: {v['message']}"
+    if v.get("folded_under") is not None:
+        return f"      |_ {text}"
+    return f"  line {v['line']}: {text}"
 
 
 def read_program(path: str) -> str:
@@ -254,12 +281,91 @@ def _check(args: argparse.Namespace) -> int:
     return 0 if report.ok else 1
 
 
+POLL_S = 0.25  # how often the run is looked at [s]
+
+
+def stop_words(progress: dict[str, Any]) -> str | None:
+    """Where and why a running program stands, in words (``progress``: a run's progress
+    from ``GET /api/runs/{id}``): "paused at M0, line 3"; None while it moves (or brakes
+    to a stand)."""
+    paused = progress.get("paused")
+    if not paused or paused == "pausing" or progress.get("feed_rate") != 0.0:
+        return None
+    line = progress.get("stop_line")
+    line = progress.get("program_line") if line is None else line
+    if paused.startswith("M0"):
+        what = "M0"
+    elif paused.startswith("M1"):
+        what = "M1 (optional stop)"
+    elif paused.startswith("single step"):
+        what = "a single step's end"
+    else:
+        what = "a pause from the page or the API"
+    return f"paused at {what}" + ("" if line is None else f", line {line}")
+
+
+def _say(text: str) -> None:
+    """A line on stderr, above the progress bar on a terminal."""
+    if sys.stderr.isatty():
+        from tqdm import tqdm
+
+        tqdm.write(text, file=sys.stderr)
+    else:
+        print(text, file=sys.stderr, flush=True)
+
+
+def _terminal() -> bool:
+    isatty = getattr(sys.stdin, "isatty", None)
+    return bool(isatty is not None and isatty())
+
+
+def _drop_typed() -> None:
+    """Drop what was typed on the terminal before a stop (a stray Enter resumes nothing)."""
+    import contextlib
+    import termios
+
+    with contextlib.suppress(OSError, ValueError, termios.error):
+        termios.tcflush(sys.stdin.fileno(), termios.TCIFLUSH)
+
+
+def _enter_pressed(timeout_s: float) -> bool:
+    """Whether a line was entered on stdin (a terminal) within ``timeout_s`` [s]; it is
+    read. EOFError at the end of its input (Ctrl-D): no Enter can come from it."""
+    import select
+
+    ready, _, _ = select.select([sys.stdin], [], [], timeout_s)
+    if not ready:
+        return False
+    if sys.stdin.readline() == "":
+        raise EOFError
+    return True
+
+
+def _resume(url: str, headers: dict[str, str]) -> None:
+    """``POST /api/programs/resume``; a refusal (the run ended meanwhile, control taken
+    by another client) is said, and the program keeps standing."""
+    import urllib.error
+
+    from app.cli import run as cli_run
+
+    try:
+        cli_run._http(f"{url}/api/programs/resume", "POST", None, headers)
+    except urllib.error.HTTPError as exc:
+        _say(f"resume refused: {exc.code} {_refusal(exc).get('detail', exc.reason)}")
+    else:
+        _say("resumed")
+
+
 def _follow(url: str, body: dict[str, Any], headers: dict[str, str], problems: list[str]):
-    """Start the program, follow it to its end (aborting it if interrupted); the run."""
+    """Start the program, follow it to its end (aborting it if interrupted); the run.
+    At a stop, say where and why; on a terminal Enter resumes it (module doc)."""
     from app.cli import run as cli_run
     from app.cli.progress import Progress
 
     running = None
+    terminal = _terminal()
+    no_enter = "stdin is not a terminal"  # why Enter cannot resume it here
+    said: str | None = None  # the stop last said (once per stop)
     try:
         cli_run._http(f"{url}/api/torque", "POST", {"enabled": True}, headers)
         run_id = running = cli_run._http(f"{url}/api/programs/run", "POST", body, headers)["run_id"]
@@ -274,7 +380,28 @@ def _follow(url: str, body: dict[str, Any], headers: dict[str, str], problems: l
                     bar.update_to(
                         progress.get("elapsed_s") or 0.0, label, total=progress["duration_s"]
                     )
-                time.sleep(0.25)
+                stop = stop_words(progress)
+                if stop is not None and stop != said:
+                    if terminal:
+                        _drop_typed()
+                        _say(f"{stop}: press Enter to resume, Ctrl-C to abort")
+                    else:
+                        _say(
+                            f"{stop}: {no_enter}: resume it from the page's "
+                            "program row (Take control, then Resume) or with POST "
+                            "/api/programs/resume; Ctrl-C aborts"
+                        )
+                said = stop
+                if stop is not None and terminal:
+                    try:
+                        if _enter_pressed(POLL_S):
+                            _resume(url, headers)
+                        continue
+                    except EOFError:  # its input ended (Ctrl-D): wait as without one
+                        terminal, said = False, None
+                        no_enter = "stdin has ended (Ctrl-D)"
+                        continue
+                time.sleep(POLL_S)
         running = None
         return run
     finally:
@@ -295,9 +422,16 @@ def _run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     url = args.url.rstrip("/")
-    body: dict[str, Any] = {"gcode": text, "feedforward": args.feedforward}
+    # its name in the server's program library: the file's (a label, no folder)
+    body: dict[str, Any] = {
+        "gcode": text,
+        "feedforward": args.feedforward,
+        "name": Path(args.file).name[:120] or "unnamed",
+    }
     if args.work_offset is not None:
         body["work_offset_m"] = [v * 1e-3 for v in args.work_offset]
+    if args.optional_stop:
+        body["optional_stop"] = True
     problems: list[str] = []
     code = 0
     try:
@@ -315,11 +449,7 @@ def _run(args: argparse.Namespace) -> int:
         for v in refusal.get("violations") or []:
             if "kind" not in v:  # a body field the server refused: its detail says it
                 continue
-            print(
-                f"  line {v['line']}: {v['kind']} at t = {v['t_s']:.3f} s, "
-                f"{_mm(v['point_m'])}: {v['message']}",
-                file=sys.stderr,
-            )
+            print(format_violation(v), file=sys.stderr)
         code = 2
     except (urllib.error.URLError, OSError) as exc:
         print(f"error: {url}: {exc}", file=sys.stderr)

@@ -101,6 +101,10 @@ COLUMNS = [
     "world_heading_goal_rad",
     "world_heading_measured_rad",
     "heading_limited",
+    # a program standing (Pause, M0 / M1, a single step's stop) or braking to: why, in
+    # words (app/link/paths.py Playback); empty while it runs. Standing, one row a second
+    # is kept (app/runs/recorder.py)
+    "paused",
 ]
 
 SCHEMA = {
@@ -349,6 +353,8 @@ def read_csv_rows(path: Path) -> list[dict[str, Any]]:
     def value(name: str, cell: str) -> Any:
         if name in texts:
             return cell
+        if name == "paused":  # a text, or empty while the program runs (None)
+            return cell or None
         if cell == "":
             return None
         if cell in ("True", "False"):

@@ -264,6 +264,29 @@ class RunManager:
             self.controller.stop_source(self._active[1]).result(timeout=START_TIMEOUT_S)
         return run
 
+    def steer(self, action: str, kinds: tuple[str, ...] = ("program",), **values: Any) -> Any:
+        """Steer the running run's time (app/link/paths.py ``Playback.steer``): "pause",
+        "resume", "step", "feed" (``override`` 0.1 to 1.0) or "optional_stop" (``on``).
+        Returns (run, its FeedState) once the loop took it. MotionRefused when no run of
+        ``kinds`` is running (or a step on a path with no lines); ValueError naming the
+        field (``override``, ``on``); nothing moves on a refusal."""
+        active = self._active
+        if active is None or active[0].state != "running" or active[0].kind not in kinds:
+            raise MotionRefused(f"no {' or '.join(kinds)} is running: nothing to {action}")
+        run, source = active
+        if action in ("resume", "step"):
+            self.controller.owner.check()  # a procedure holds the robot: it may not move
+        steer_source = getattr(self.controller, "steer_source", None)
+        if steer_source is not None:  # over the link: the node plays it
+            future = steer_source(source, action, **values)
+        else:  # a loop in this process plays the station's source itself
+            playback = source.playback
+            future = self.controller.submit(lambda: playback.steer(action, **values))
+        state = future.result(
+            timeout=max(START_TIMEOUT_S, self.controller.settings.server.command_timeout_s)
+        )
+        return run, state
+
     def progress(self, run_id: str) -> dict[str, Any] | None:
         """How far the running run ``run_id`` is (see app/control/sources.py's ``Progress``;
         a length not known yet is None), or None when it is not the one running."""
@@ -281,6 +304,14 @@ class RunManager:
         line = getattr(source, "program_line", None)  # a G-code program's line in execution
         if line is not None:
             out["program_line"] = line
+        feed = getattr(source, "feed_state", None)  # a path's feed override, pause, time left
+        if feed is not None:
+            out["feed_override"] = feed.override
+            out["feed_rate"] = feed.rate
+            out["paused"] = feed.paused
+            out["time_left_s"] = feed.time_left_s
+            out["optional_stop"] = feed.optional_stop
+            out["stop_line"] = feed.stop_line
         return out
 
     def close(self) -> None:

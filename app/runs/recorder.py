@@ -3,6 +3,14 @@
 The control thread only appends to a queue; the writer thread writes the logs, keeps the
 samples for the statistics and, when the run ends (finished, aborted, e-stop or fault),
 closes the files, computes the stats and draws the report.
+
+A run's log is bounded: a run is planned within ``runs.max_samples`` loop periods, and
+while a program stands (Pause, M0, M1, a single step's stop: its time rate 0) the
+recorder keeps one row a second (``PAUSED_ROW_EVERY_S``, marked with why it stands in
+``paused``), plus every tick the loop's health needs (an overrun, a stale reading, a
+fault, a long gap, and the tick after one); a pause longer than ``runs.max_pause_s``
+aborts the run, saying so. Standing, a run writes at most ``max_pause_s`` rows a pause
+(plus those unhealthy ticks) instead of 200 a second without end.
 """
 
 from __future__ import annotations
@@ -30,6 +38,7 @@ if TYPE_CHECKING:
     from app.runs.source import TrajectorySource
 
 _END = object()
+PAUSED_ROW_EVERY_S = 1.0  # while a program stands: one row a second [s]
 
 
 def _values(vector: np.ndarray) -> list[float | None]:
@@ -72,7 +81,24 @@ def row_of(snap: Snapshot, t_s: float) -> dict[str, Any]:
     row["world_heading_goal_rad"] = extra.get("heading_world_rad")
     row["world_heading_measured_rad"] = extra.get("measured_heading_world_rad")
     row["heading_limited"] = extra.get("heading_limited")
+    row["paused"] = None  # a program standing or braking to: set by the recorder
     return row
+
+
+def pause_reason(paused_s: float, limit_s: float, why: str) -> str:
+    """The abort reason of a run paused ``paused_s`` [s], over ``limit_s`` [s]."""
+    return (
+        f"paused {paused_s:.0f} s ({why}), over the limit of {limit_s:.0f} s "
+        "(runs.max_pause_s): aborted so its log stays bounded"
+    )
+
+
+def needed_for_health(snap: Snapshot, period_s: float) -> bool:
+    """A tick the loop's health is judged on (app/runs/health.py): an overrun, a stale
+    reading, a fault, or a gap over two loop periods ``period_s`` [s]."""
+    gap = snap.gap_ms
+    long_gap = gap is not None and math.isfinite(gap) and gap > 2e3 * period_s
+    return bool(snap.overrun or snap.stale or snap.faults or long_gap)
 
 
 def _column(rows: list[dict[str, Any]], name: str) -> np.ndarray:
@@ -167,6 +193,11 @@ class Recorder:
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._t0: float | None = None
         self._rows: list[dict[str, Any]] = []
+        self.max_pause_s = controller.settings.runs.max_pause_s
+        self._standing_since: float | None = None  # loop time the program stood from [s]
+        self._kept_at = -math.inf  # loop time of the last row kept while standing [s]
+        self._after_unhealthy = False  # the previous tick was one health needs
+        self._pause_aborted = False
         self._thread = threading.Thread(target=self._write, name=f"run-{run.run_id}", daemon=True)
         _LIVE.add(self)
         self._thread.start()
@@ -189,9 +220,37 @@ class Recorder:
         if self._t0 is None:
             self._t0 = snap.time_s
             self.log.start_ns = time.time_ns()  # log times: UTC wall clock of this tick
+        if not self._keep(snap):
+            return
         row = row_of(snap, snap.time_s - self._t0)
         row["line"] = getattr(self.source, "program_line", None)  # a G-code program's line
+        feed = getattr(self.source, "feed_state", None)
+        row["paused"] = None if feed is None else feed.paused
         self._queue.put((row, snap))  # the snapshot too: the ROS 2 log's messages
+
+    def _keep(self, snap: Snapshot) -> bool:
+        """Whether this tick becomes a row: every tick while the run moves; standing, one
+        a second and those the loop's health needs (and the tick after each). A stand
+        longer than max_pause_s stops the run (once; the run ends at the next ticks)."""
+        feed = getattr(self.source, "feed_state", None)
+        unhealthy = needed_for_health(snap, self.controller.period_s)
+        after, self._after_unhealthy = self._after_unhealthy, unhealthy
+        if feed is None or feed.paused is None or feed.rate != 0.0:
+            self._standing_since = None
+            return True
+        now = snap.time_s
+        if self._standing_since is None:
+            self._standing_since, self._kept_at = now, -math.inf
+        standing_s = now - self._standing_since
+        if standing_s > self.max_pause_s and not self._pause_aborted:
+            self._pause_aborted = True
+            if self.run.abort_reason is None:
+                self.run.abort_reason = pause_reason(standing_s, self.max_pause_s, feed.paused)
+            self.controller.stop_source(self.source)  # queued: the loop stops it next
+        if now - self._kept_at >= PAUSED_ROW_EVERY_S - 1e-9:
+            self._kept_at = now
+            return True
+        return unhealthy or after
 
     def _why_stopped(self, snap: Snapshot) -> str:
         if snap.estopped:
