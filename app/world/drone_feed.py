@@ -43,15 +43,18 @@ def pose_message(drone: SimulatedDrone, t_s: float) -> tuple[float, dict[str, An
 
 class DroneFeed:
     """A thread pushing a SimulatedDrone's measurements into the pose input ``push`` (a
-    callable taking the pose JSON: WorldClient.push) at its rate, until ``stop``."""
+    callable taking the pose JSON: WorldClient.push) at its rate, until ``stop``, or until
+    ``allowed`` (checked before each push; None: always) says False: the feed stops itself
+    then, saying so in ``last_error`` (the lease that started it given back or taken)."""
 
     def __init__(
         self,
         push: Callable[[dict[str, Any]], Any],
         params: DroneSimParams,
         clock: Callable[[], float] = time.monotonic,
+        allowed: Callable[[], bool] | None = None,
     ) -> None:
-        self.push, self.params, self.clock = push, params, clock
+        self.push, self.params, self.clock, self.allowed = push, params, clock, allowed
         self.drone = SimulatedDrone(params)
         self.sent = 0
         self.failures = 0
@@ -88,6 +91,10 @@ class DroneFeed:
     def _run(self) -> None:
         period = 1.0 / self.params.rate_hz
         while not self._stop.wait(period / 2):  # twice per measurement: none skipped
+            if self.allowed is not None and not self.allowed():
+                self.last_error = "stopped: the lease that started it was given back or taken"
+                self._stop.set()
+                return
             self.step(self.clock())
             if self.failures >= MAX_FAILURES:
                 self.last_error = f"stopped: {self.last_error}"
@@ -121,11 +128,13 @@ def feed_of(world: Any) -> DroneFeed | None:
         return _feeds.get(world)
 
 
-def start_feed(world: Any, params: DroneSimParams) -> DroneFeed:
+def start_feed(
+    world: Any, params: DroneSimParams, allowed: Callable[[], bool] | None = None
+) -> DroneFeed:
     """Stop ``world``'s feed if any and start one of ``params`` pushing into
-    ``world.push``; returns it."""
+    ``world.push`` while ``allowed()`` (None: until stopped); returns it."""
     stop_feed(world)
-    feed = DroneFeed(world.push, params).start()
+    feed = DroneFeed(world.push, params, allowed=allowed).start()
     with _lock:
         _feeds[world] = feed
     return feed

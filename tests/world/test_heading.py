@@ -149,6 +149,7 @@ def test_without_a_wrist_the_hold_sends_no_phi_and_no_heading():
         assert set(setpoint.extra) == {
             "goal_world_m",
             "measured_world_m",
+            "measured_world_from",
             "outside",
             "pose_age_s",
             "drone_pose",

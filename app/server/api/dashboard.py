@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 import plotly
-from fastapi import APIRouter, HTTPException
+from fastapi import APIRouter, Depends, HTTPException
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -42,6 +42,7 @@ from app.server.api.deps import (
     SceneDep,
     SettingsDep,
     TokenChecked,
+    require_read_token,
 )
 from app.server.api.responses import InfoOut
 from app.server.errors import INVALID, UNAUTHORISED, UNAVAILABLE
@@ -170,7 +171,13 @@ def check_run(runs: RunManager, controller: Controller, params: TimedPath) -> di
 check_sinusoid = check_run  # the first run type's preview, by its old name
 
 
-@router.get("/api/tests", response_model=list[RunTypeOut], response_model_by_alias=True)
+@router.get(
+    "/api/tests",
+    response_model=list[RunTypeOut],
+    response_model_by_alias=True,
+    responses=UNAUTHORISED,
+    dependencies=[Depends(require_read_token)],  # this router has no reads dependency
+)
 def list_run_types() -> list[dict[str, Any]]:
     """The run types POST /api/tests/<name> starts, in the registry's order, each with its
     body's JSON schema (fields, bounds, defaults; SI units named by each field's suffix).

@@ -8,12 +8,13 @@ from dataclasses import asdict
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from fastapi import APIRouter, WebSocket
+from fastapi import APIRouter, Header, WebSocket
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.control.errors import GoalRejected, MotionRefused
 from app.fields import Finite, Vector3
 from app.server.api.deps import (
+    AuthorityDep,
     ControlClient,
     ControllerDep,
     RunsDep,
@@ -27,7 +28,7 @@ from app.server.api.responses import PoseAccepted, PoseInputStatus, RunStarted
 from app.server.errors import CONTROL, INVALID, UNAUTHORISED
 from app.server.world_client import WorldClient
 from app.world.drone_feed import feed_of, start_feed, stop_feed
-from app.world.drone_sim import DroneSimParams
+from app.world.drone_sim import DroneSimParams, SimulatedDrone
 from app.world.inputs import body_of, parse_pose, sample_from_json
 from kinematics import Pose, PoseError
 
@@ -194,17 +195,36 @@ def get_pose_status(
 
 @router.post("/mav/simulated", response_model=SimulatedDroneOut, responses={**CONTROL, **INVALID})
 def post_simulated_drone(
-    body: SimulatedDroneRequest, world: WorldDep, _: ControlClient
+    body: SimulatedDroneRequest,
+    world: WorldDep,
+    runs: RunsDep,  # not ControllerDep: stopping the drone must work with the robot offline
+    authority: AuthorityDep,
+    _: ControlClient,
+    x_lease: Annotated[str | None, Header(description="the lease it runs under")] = None,
 ) -> dict[str, Any]:
     """Start (``running`` true) the simulated drone with its drift profile, feeding the
     pose input at ``rate_hz`` like a motion-capture stream (``GET /api/mav/pose`` source
     "simulated"; a hold with source "external" follows it), or stop it (the pose then goes
-    stale, then lost: a hold on it freezes, then faults). Needs the lease; moves nothing by
-    itself."""
+    stale, then lost: a hold on it freezes, then faults). Needs the lease, and flies only
+    while that lease is the current one (given back or taken over: it stops). Refused
+    (409) while another source's pose is fresh (it would stand in for a live input) or
+    while a hold in the world runs (it would move the tool after a drone that is not
+    there). Moves nothing by itself."""
     if not body.running:
         stop_feed(world)
         return _simulated(world)
-    return start_feed(world, body.drone()).status()
+    if runs.controller.snapshot().mode == "hold-world":
+        raise MotionRefused(
+            "a hold in the world is running: stop it before starting the simulated drone "
+            "(the hold would follow it)"
+        )
+    seen = world.pose_status("drone")
+    if seen.get("state") == "ok" and seen.get("source") not in (None, "simulated"):
+        raise MotionRefused(
+            f"the drone's pose input is live from {seen['source']}: the simulated drone "
+            "would stand in for it; stop that stream first"
+        )
+    return start_feed(world, body.drone(), allowed=lambda: authority.holds(x_lease)).status()
 
 
 @router.websocket("/mav/pose")
@@ -238,6 +258,14 @@ async def post_hold(
         raise GoalRejected("position_m: required with frame 'world'")
     goal = None if body.frame == "current" else np.asarray(body.position_m)
     simulated = DroneSimParams() if body.source == "simulated" else None
+    if goal is not None and simulated is not None:  # as /tests/hold: at the drone's start
+        start = SimulatedDrone(simulated).true_state(0.0)[0]
+        _check_goal(start, goal, controller, "at the simulated drone's start")
+    elif goal is not None:  # on the pose input: against its latest pose, where there is one
+        seen = await asyncio.to_thread(world.pose_status, "drone")
+        if seen.get("state") == "ok" and seen.get("position_m") is not None:
+            drone = Pose.from_arrays(seen["position_m"], seen["quaternion"])
+            _check_goal(drone, goal, controller, "at the drone's pose now")
     hold = world.hold(goal, simulated, body.latency_compensation, body.heading_rad)
     model = controller.model  # the hold is checked on it (refused if it changes meanwhile)
     # the hold mode blends in from wherever the robot is: no start point to check
@@ -257,15 +285,21 @@ def _check_external(seen: dict[str, Any], goal: np.ndarray | None, controller: A
             f"source: the drone's pose input is {seen.get('state', 'none')}{told}; "
             "a hold on it needs a fresh pose (start the simulated drone or a pose stream)"
         )
-    if goal is None:
-        return
+    if goal is not None:
+        drone = Pose.from_arrays(seen["position_m"], seen["quaternion"])
+        _check_goal(drone, goal, controller, "at the drone's pose now")
+
+
+def _check_goal(drone: Pose, goal: np.ndarray, controller: Any, when: str) -> None:
+    """GoalRejected (422, naming ``position_m``) unless the world ``goal`` [m] is inside
+    the workspace through the drone's pose ``drone`` and the mount (``when``: which pose)."""
     world = controller.settings.world
     mount = Pose.from_arrays(world.mount_position_m, world.mount_quaternion)
-    drone = Pose.from_arrays(seen["position_m"], seen["quaternion"])
-    goal_base = (drone @ mount).apply_inverse(goal)
-    if not controller.gate.inside(goal_base, 0.0):
+    with np.errstate(all="ignore"):  # a goal light-years away: inf or nan, refused below
+        goal_base = (drone @ mount).apply_inverse(goal)
+    if not np.isfinite(goal_base).all() or not controller.gate.inside(goal_base, 0.0):
         raise GoalRejected(
-            "position_m: outside the workspace at the drone's pose now "
+            f"position_m: outside the workspace {when} "
             f"(in the base frame [{', '.join(f'{v:.4f}' for v in goal_base)}] m)"
         )
 
@@ -283,6 +317,9 @@ async def post_hold_test(body: HoldTestRequest, world: WorldDep, runs: RunsDep, 
     if simulated is None:
         seen = await asyncio.to_thread(world.pose_status, "drone")
         _check_external(seen, goal, runs.controller)
+    elif goal is not None:  # the simulated drone starts at its pose at t = 0
+        start = SimulatedDrone(simulated).true_state(0.0)[0]
+        _check_goal(start, goal, runs.controller, "at the simulated drone's start")
     hold = world.hold(
         goal, simulated, body.latency_compensation, body.heading_rad, duration_s=body.duration_s
     )

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from app.control.commands import require_motion
 from app.control.errors import MotionRefused
@@ -84,6 +84,18 @@ class ProgramRequest(BaseModel):
         description="the program's name in the library (its file's; default 'unnamed'): "
         "every program sent is kept there (GET /api/programs/library)",
     )
+
+    @field_validator("gcode")
+    @classmethod
+    def _unicode(cls, gcode: str) -> str:
+        """A JSON string may carry a lone surrogate (\\ud800): no UTF-8 text has one."""
+        try:
+            gcode.encode("utf-8")
+        except UnicodeEncodeError as exc:
+            raise ValueError(
+                f"not Unicode text: a lone surrogate at character {exc.start + 1}"
+            ) from None
+        return gcode
 
 
 class RunProgramRequest(ProgramRequest):

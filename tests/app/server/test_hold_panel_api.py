@@ -33,6 +33,11 @@ def _pose(client) -> dict:
 
 
 def _fly(client, **profile) -> dict:
+    # the drone is refused while another source's pose is fresh (it would stand in for it)
+    wait_for(
+        lambda: (p := _pose(client))["state"] != "ok" or p["source"] == "simulated",
+        "the poses the last test posted no longer fresh",
+    )
     answer = ok_json(client.post("/api/mav/simulated", json={"running": True, **profile}))
     wait_for(
         lambda: _pose(client)["source"] == "simulated" and _pose(client)["state"] == "ok",
