@@ -86,7 +86,7 @@ PATHS = ("listener", "middleware", "route")
 def start_moving(page: Any, server: Server) -> None:
     """A 30 s sinusoid started from the page, waited on until its test part runs (started
     again if a loaded machine faulted it on the way)."""
-    page.fill("input[name=duration]", "30")
+    page.fill("#run-fields input[name=duration]", "30")
     deadline = time.monotonic() + 300.0
     while True:
         runs = server.get("/api/runs")
@@ -107,8 +107,9 @@ def start_moving(page: Any, server: Server) -> None:
                 page.click("#goal-form button[type=submit]")
                 if page.locator("#confirm").is_visible():  # a long move is confirmed
                     page.click("#confirm-yes")
-            else:
-                page.click("#sine-start")
+            else:  # below the fold since issue 32's panels: scrolled to, a patient click
+                page.locator("#run-start").scroll_into_view_if_needed(timeout=120_000)
+                page.click("#run-start", timeout=120_000)
             time.sleep(1.0)
         else:
             time.sleep(0.05)
