@@ -102,6 +102,10 @@ class Peer:
 def ros_robot(folder: Path, **env: str) -> Iterator[tuple[Any, Peer, int]]:
     """A robot node with its ROS side on a domain of its own, and the peer."""
     domain = random.randint(1, 200)
+    # a peer's message stamped "now" can arrive over 0.5 s late on a loaded 2-core machine
+    # and be refused as old before the check a test looks at (tests/ros2/test_inputs.py
+    # tests the stamp's bounds on simulated time)
+    env = {"DELTADASH_ROS2__STAMP_AGE_S": "30", **env}
     with robot_node(folder, DELTADASH_ROS2__DOMAIN_ID=str(domain), **env) as node:
         peer = Peer(node.endpoint, domain)
         try:

@@ -99,11 +99,41 @@ class Server:
 PATIENT_LINK_S = 5.0
 
 
+PORT_TRIES = 3  # starts of a server whose free port another process took meanwhile
+
+
 @contextmanager
 def serve(folder: Path, scene: bool = False, preamble: str = "", **env: str) -> Iterator[Server]:
     """`deltadash serve` on free ports with runs under ``folder``, the 3D scene on if
     ``scene``; extra DELTADASH_* ``env``; ``preamble``: Python run in the server's process
-    before it starts (e.g. tests.support.slow_checks.PREAMBLE)."""
+    before it starts (e.g. tests.support.slow_checks.PREAMBLE).
+
+    A free port is free only when it is looked at: another process (a test worker beside
+    this one, a robot node's socket) can bind it before the server does. A server that
+    exits saying its address is in use is started again on other ports."""
+    log = folder / "serve.log"
+    for attempt in range(1, PORT_TRIES + 1):
+        served = _start(folder, scene, preamble, env, log)
+        if served is not None:
+            break
+        if attempt == PORT_TRIES:
+            pytest.fail(f"deltadash serve found no free port:\n{log.read_text()[-3000:]}")
+    process = served.process
+    try:
+        yield served
+    finally:
+        process.terminate()
+        try:
+            process.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            process.kill()
+
+
+def _start(
+    folder: Path, scene: bool, preamble: str, extra: dict[str, str], log: Path
+) -> Server | None:
+    """One start of `deltadash serve` (see :func:`serve`), up; None when it exited because
+    a port was taken between the look and its bind; fails the test on any other end."""
     port = free_port()
     env = {
         **os.environ,
@@ -116,24 +146,21 @@ def serve(folder: Path, scene: bool = False, preamble: str = "", **env: str) -> 
         # behind chromium's software WebGL on a loaded 2-core machine: tests of the link's
         # loss set their own (tests/link/)
         "DELTADASH_LINK__STATION_TIMEOUT_S": str(PATIENT_LINK_S),
-        **env,
+        **extra,
     }
-    log = folder / "serve.log"
     code = f"{preamble}\nimport sys; from app.cli import main; sys.exit(main())"
     command = [sys.executable, "-c", code]
     with log.open("wb") as out:
         process = subprocess.Popen([*command, "serve"], env=env, stdout=out, stderr=out)
     served = Server(f"http://127.0.0.1:{port}", process, log)
-    try:
-        end = time.monotonic() + START_S
-        while not served.up():
-            if process.poll() is not None or time.monotonic() > end:
-                pytest.fail(f"deltadash serve did not start:\n{log.read_text()[-3000:]}")
-            time.sleep(0.2)
-        yield served
-    finally:
-        process.terminate()
-        try:
-            process.wait(timeout=15)
-        except subprocess.TimeoutExpired:
+    end = time.monotonic() + START_S
+    while not served.up():
+        if process.poll() is not None or time.monotonic() > end:
+            said = log.read_text(errors="replace")
+            if process.poll() is not None and "address already in use" in said:
+                return None
             process.kill()
+            process.wait()
+            pytest.fail(f"deltadash serve did not start:\n{said[-3000:]}")
+        time.sleep(0.2)
+    return served
