@@ -118,11 +118,12 @@ class PoseView(PoseInputStatus):
     simulated: SimulatedDroneOut = Field(description="the simulated drone (POST /mav/simulated)")
 
 
-class HoldTestRequest(BaseModel):
+class HoldTestRequest(DroneProfile):
     """A hold in the world as a run: the thesis's MAV compensation routine (ch. 6.2) on the
     simulated drone (source "simulated": the drone lives in the loop and moves the twin's
     base), or on the pose input (source "external": motion capture, MAVLink, the simulated
-    drone's feed), at a world goal (``position_m``; null: where the tool is)."""
+    drone's feed), at a world goal (``position_m``; null: where the tool is); the simulated
+    drone's profile as ``DroneProfile``'s fields."""
 
     model_config = ConfigDict(extra="forbid", strict=True)
     duration_s: Annotated[float, Field(gt=0, le=600, allow_inf_nan=False)] = 20.0
@@ -132,17 +133,6 @@ class HoldTestRequest(BaseModel):
         None, allow_inf_nan=False, description="with a wrist: the tool's world heading [rad]"
     )
     latency_compensation: bool = True
-    seed: Annotated[int, Field(ge=0, lt=2**32)] = 0
-    drift_m: Annotated[float, Field(ge=0, le=0.2, allow_inf_nan=False)] = DroneSimParams.drift_m
-    tilt_deg: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = DroneSimParams.tilt_deg
-    yaw_deg: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = DroneSimParams.yaw_deg
-    gust_m: Annotated[float, Field(ge=0, le=0.2, allow_inf_nan=False)] = DroneSimParams.gust_m
-    latency_s: Annotated[float, Field(ge=0, le=0.5, allow_inf_nan=False)] = DroneSimParams.latency_s
-    rate_hz: Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)] = DroneSimParams.rate_hz
-
-    def drone(self) -> DroneSimParams:
-        fields = ("seed", "drift_m", "tilt_deg", "yaw_deg", "gust_m", "latency_s", "rate_hz")
-        return DroneSimParams(**{name: getattr(self, name) for name in fields})
 
 
 def _push(world: WorldClient, data: dict[str, Any], source: str) -> dict[str, Any]:
