@@ -221,7 +221,12 @@ def test_a_step_jog_moves_exactly_its_step(page: Any, tooled: Server) -> None:
         ("0.1", "x-", 0, -1),
     ):
         page.select_option("#jog-step", step_mm)
-        start = status(tooled)["ee"]["commanded_m"]
+        # the arm may still be on its way to the goal a step before left: start from rest
+        start = wait_for(
+            lambda: (g := status(tooled)["goal"]["position_m"]) and at_rest(tooled, g) and g,
+            "the arm at rest before the step",
+            seen=seen(page, tooled),
+        )
         jogs = len(sent(page, "/api/jog"))
         page.click(f"[data-jog='{button}']")
         want = list(start)
