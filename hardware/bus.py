@@ -16,6 +16,7 @@ refused the instruction; `HardwareError` when a servo is latched in a hardware f
 from __future__ import annotations
 
 import enum
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, Protocol, runtime_checkable
@@ -156,6 +157,35 @@ def per_joint(gains: PositionGains | Sequence[PositionGains], n: int) -> list[Po
     return listed
 
 
+def goal_current_units(
+    currents_a: Sequence[float], limits_units: Sequence[int], unit_a: float
+) -> list[int]:
+    """Goal Current (102) register values for `currents_a` [A], one per joint (n,).
+
+    Each current is rounded to whole units of `unit_a` [A] (the XM430's 2.69 mA) and must
+    lie within 0 .. that joint's Current Limit (38), `limits_units` [units] (n,).
+
+    Raises ValueError for a sequence of another length than `limits_units`, or naming the
+    joint (1-based), the value and the limit for a value that is not finite, negative or
+    above the limit; nothing is returned then, so a caller writes all or nothing.
+    """
+    values = [float(c) for c in currents_a]
+    if len(values) != len(limits_units):
+        raise ValueError(f"goal currents for {len(values)} joints: the bus has {len(limits_units)}")
+    units = []
+    for joint, (value, limit) in enumerate(zip(values, limits_units, strict=True), start=1):
+        if not math.isfinite(value) or value < 0:
+            raise ValueError(f"goal current of joint {joint}: {value} A must be finite and >= 0")
+        count = round(value / unit_a)
+        if count > limit:
+            raise ValueError(
+                f"goal current of joint {joint}: {value} A is above its Current Limit "
+                f"{limit * unit_a:.4g} A ({limit} units of {unit_a * 1e3:g} mA)"
+            )
+        units.append(count)
+    return units
+
+
 @dataclass(frozen=True)
 class BusStats:
     """Counters since connect: transactions, failed tries, retries, and give-ups; and
@@ -211,6 +241,21 @@ class ServoBus(Protocol):
 
         Raises NotConnectedError, CommError; ServoStatusError (the real servo's Access
         Error) or BusError (the simulator) if torque is on.
+        """
+
+    def set_goal_current(self, currents_a: Sequence[float]) -> None:
+        """Goal Current (102) per joint [A], shape (n_joints,), in joint order.
+
+        Each value must be finite and within 0 .. the servo's Current Limit (38) (XM430:
+        1193 units of 2.69 mA = 3.209 A); it is rounded to whole 2.69 mA units. In
+        Current-based Position Control Mode (5) the firmware bounds the motor current,
+        and so the output torque (Kt * Goal Current), by it; in Current Control Mode (0)
+        it is the target current; other modes ignore it. A RAM item: it may be written
+        with torque on.
+
+        Raises ValueError naming the joint, the value and the limit (nothing written), or
+        for a sequence of the wrong length; NotConnectedError, CommError,
+        ServoStatusError.
         """
 
     def write_goal(self, positions_rad: Sequence[float]) -> None:

@@ -140,9 +140,13 @@ class SimpleServoModel:
         if cmd.profile_acceleration_rad_s2 > 0:
             a_max = cmd.profile_acceleration_rad_s2
         accel = max(-a_max, min(a_max, accel))
-        # The motor supplies inertia plus damping torque, within the Current Limit.
+        # The motor supplies inertia plus damping torque, within the Current Limit (and in
+        # Current-based Position Control Mode within the Goal Current, as the firmware).
+        bound = cmd.current_limit_a
+        if cmd.mode == OperatingMode.CURRENT_BASED_POSITION:
+            bound = min(bound, abs(cmd.goal_current_a))
         current = (p.inertia_kg_m2 * accel + p.damping_nm_s * v) / p.torque_constant_nm_a
-        current = max(-cmd.current_limit_a, min(cmd.current_limit_a, current))
+        current = max(-bound, min(bound, current))
         accel = (p.torque_constant_nm_a * current - p.damping_nm_s * v) / p.inertia_kg_m2
         v_new = v + accel * h
         return MotionState(state.position_rad + v_new * h, v_new, current)

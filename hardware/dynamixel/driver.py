@@ -35,9 +35,17 @@ from dataclasses import dataclass
 import dynamixel_sdk as sdk
 import numpy as np
 
-from hardware.bus import BusStats, JointState, PositionGains, ServoInfo, per_joint
+from hardware.bus import (
+    BusStats,
+    JointState,
+    PositionGains,
+    ServoInfo,
+    goal_current_units,
+    per_joint,
+)
 from hardware.calibration import JointCalibration, goal_ticks
 from hardware.dynamixel.control_table import (
+    AMPERE_PER_CURRENT_UNIT,
     MODEL_NUMBER_XM430_W210,
     STATE_BLOCK_SIZE,
     STATE_BLOCK_START,
@@ -218,9 +226,45 @@ class DynamixelBus:
             raise refused
 
     def set_operating_mode(self, mode: OperatingMode) -> None:
+        """Operating Mode (11) on all joints, one servo at a time (an EEPROM item).
+
+        The servo itself refuses it while its torque is on (Access Error): the first such
+        servo raises ServoStatusError and the servos after it are not written. The firmware
+        resets Goal Current and Goal PWM to their limits on a mode change: set the goal
+        current after the mode. Raises NotConnectedError, CommError, ServoStatusError.
+        """
         self._write_all(Reg.OPERATING_MODE, [int(mode)] * len(self.ids))
         self.read_setups(self.ids)
         self._align_turns(self.ids)  # a mode change resets the count to one turn
+
+    def set_goal_current(self, currents_a: Sequence[float]) -> None:
+        """Goal Current (102) per joint [A], shape (n_joints,), one servo at a time.
+
+        Each value is checked against the Current Limit (38) read from its servo (in
+        2.69 mA units) before anything is written, so a refused value leaves every servo
+        as it was; a RAM item, written with torque on or off (the firmware takes it either
+        way). In Current-based Position Control Mode the firmware bounds the motor current
+        by it (torque <= Kt * Goal Current).
+
+        Raises ValueError naming the joint, the value and the limit (`goal_current_units`),
+        or for a sequence of the wrong length; NotConnectedError, CommError,
+        ServoStatusError.
+        """
+        if len(currents_a) != len(self.ids):
+            raise ValueError(
+                f"goal currents for {len(currents_a)} joints: the bus has {len(self.ids)}"
+            )
+        limits = [self.link.read(i, Reg.CURRENT_LIMIT) for i in self.ids]
+        self._write_all(
+            Reg.GOAL_CURRENT, goal_current_units(currents_a, limits, AMPERE_PER_CURRENT_UNIT)
+        )
+
+    def read_goal_current(self) -> list[float]:
+        """Each joint's Goal Current (102) as its servo holds it [A], in joint order.
+
+        Raises NotConnectedError, CommError, ServoStatusError.
+        """
+        return [current_to_ampere(self.link.read(i, Reg.GOAL_CURRENT)) for i in self.ids]
 
     def write_goal(self, positions_rad: Sequence[float]) -> None:
         ticks = goal_ticks(self.config.joints, positions_rad)

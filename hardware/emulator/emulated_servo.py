@@ -152,6 +152,8 @@ class EmulatedServo:
         t.set(Reg.PRESENT_POSITION, shaft + self.present_offset)
         torque_on = not torque and t.get(Reg.TORQUE_ENABLE)
         in_position = t.get(Reg.OPERATING_MODE) == OperatingMode.POSITION
+        if t.get(Reg.OPERATING_MODE) != mode:
+            t.goals_to_limits()  # the firmware resets Goal PWM and Goal Current to limits
         if t.get(Reg.OPERATING_MODE) != mode or (torque_on and in_position):
             self.restart_count()
 

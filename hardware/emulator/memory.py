@@ -58,12 +58,23 @@ class ServoMemory:
             self.set(Reg.ID, kept[Reg.ID])
         if keep_baud:
             self.set(Reg.BAUD_RATE, kept[Reg.BAUD_RATE])
+        self.goals_to_limits()
 
     def reset_ram(self) -> None:
         """RAM items back to defaults, as a reboot does (EEPROM kept)."""
         for reg in Reg:
             if reg.value.area is Area.RAM:
                 self.set(reg, reg.value.default)
+        self.goals_to_limits()
+
+    def goals_to_limits(self) -> None:
+        """Goal PWM (100) := PWM Limit (36) and Goal Current (102) := Current Limit (38), as
+        the firmware sets them at power-on, reboot and an Operating Mode change (e-manual:
+        Goal PWM's initial value is the PWM Limit; the Operating Mode note resets Goal PWM
+        to it; Goal Current is taken to follow its Current Limit alike)."""
+        for goal, limit in _LIMITS.items():
+            if goal is not Reg.GOAL_VELOCITY:
+                self.set(goal, self.get(limit))
 
     def get(self, reg: Reg) -> int:
         """The value of `reg` (signed items decoded as signed)."""

@@ -11,7 +11,9 @@ whatever moves the shaft (the MuJoCo twin, or the emulator through a MotionModel
    KdP = D / 16, KFF = FF / 4; e in ticks, rates in ticks per control period (an
    assumption: ROBOTIS documents the scalings but not the time base). Clamped to the PWM
    Limit (885 = 100 %).
-4. Motor: terminal voltage = PWM / 885 * input voltage; current i = (V - Ke w) / R; output
+4. Motor: terminal voltage = PWM / 885 * input voltage; current i = (V - Ke w) / R (in
+   Current-based Position Control Mode the PWM is first clamped so that
+   |i| <= min(|Goal Current|, Current Limit), as the firmware bounds it); output
    torque Kt i (the gearbox's dry friction is applied by whatever moves the shaft).
    R, Kt and Ke come from the datasheet's torque-speed line
    (stall torque and current, no-load speed, all at the rated voltage), so the available
@@ -164,7 +166,9 @@ class Xm430:
         else:  # PWM mode: Goal PWM is not part of MotionCommand, so the output is idle
             pwm = 0.0
         if live and cmd.mode is OperatingMode.CURRENT_BASED_POSITION:
-            pwm = self._limit_current(pwm, cmd.current_limit_a, shaft_rad_s)
+            # the firmware's bound: |Goal Current|, itself never above the Current Limit
+            bound = min(abs(cmd.goal_current_a), cmd.current_limit_a)
+            pwm = self._limit_current(pwm, bound, shaft_rad_s)
         limit = p.pwm_limit
         pwm = -limit if pwm < -limit else (limit if pwm > limit else pwm)
         current = 0.0
@@ -228,6 +232,8 @@ class Xm430:
         return volts / p.supply_voltage_v * PWM_FULL_SCALE
 
     def _limit_current(self, pwm: float, limit_a: float, shaft_rad_s: float) -> float:
+        """`pwm` clamped so that the motor current at this speed stays within +-`limit_a`
+        [A] (Current-based Position Control Mode: an ideal current limiter)."""
         high = self._current_pwm(limit_a, shaft_rad_s)
         low = self._current_pwm(-limit_a, shaft_rad_s)
         return max(low, min(high, pwm))
