@@ -7,6 +7,7 @@ bus interface and the app can name it without loading MuJoCo.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -19,12 +20,37 @@ GRAVITY_M_S2 = 9.81
 class BaseMotion:
     """The base's attitude (quaternion w, x, y, z, body to world), the acceleration of its
     origin in the world [m/s^2], and its angular velocity [rad/s] and acceleration
-    [rad/s^2] in the base frame."""
+    [rad/s^2] in the base frame.
+
+    position_m: the base origin in the world [m], (3,), None when not known (then the
+    world is the base frame: nothing moves a plate fixed in the world); velocity_m_s: that
+    origin's velocity in the world [m/s], (3,). With a position the twin moves its
+    world-fixed plates to base^-1 * plate_world (hardware.sim.surfaces.Plate.fixed_in),
+    at the velocity that follows from velocity_m_s and angular_velocity_rad_s.
+
+    Raises:
+        ValueError: position_m or velocity_m_s not three finite numbers (naming it).
+    """
 
     attitude_wxyz: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
     acceleration_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
     angular_velocity_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     angular_acceleration_rad_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    position_m: tuple[float, float, float] | None = None
+    velocity_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        for name in ("position_m", "velocity_m_s"):
+            value = getattr(self, name)
+            if value is None and name == "position_m":
+                continue
+            try:
+                triple = tuple(float(v) for v in value)
+            except (TypeError, ValueError):
+                raise ValueError(f"{name}: must be three numbers, got {value!r}") from None
+            if len(triple) != 3 or not all(math.isfinite(v) for v in triple):
+                raise ValueError(f"{name}: must be three finite numbers, got {list(triple)}")
+            object.__setattr__(self, name, triple)
 
     @property
     def rotating(self) -> bool:

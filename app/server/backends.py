@@ -80,7 +80,13 @@ def _twin(settings: Settings, realtime: bool = True) -> ServoBus:
     if not isinstance(robot, RotaryDelta):
         raise ValueError("robot.type: the simulator models rotary Deltas; use backend 'emulated'")
     sim = settings.hardware.sim
-    twin = TwinConfig(robot=robot, joints=_calibrations(settings), true_robot=sim.true_robot(robot))
+    twin = TwinConfig(
+        robot=robot,
+        joints=_calibrations(settings),
+        true_robot=sim.true_robot(robot),
+        tip_offset_m=settings.tool.offset_m,
+        plates=sim.build_plates(),
+    )
     bus = ProcessSimBus if settings.hardware.sim_process and realtime else SimBus
     return bus(
         SimBusConfig(

@@ -19,16 +19,25 @@ mechanism's true angles theta_i.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from hardware.sim.masses import THESIS_MASSES, DeltaMasses
+from hardware.sim.surfaces import CONTACT_GROUP, CONTACT_IMPEDANCE, TIP_RADIUS_M, Plate
 from kinematics import PerLegRotaryDelta, RotaryDelta
 
 MOTOR_JOINTS = ("motor_1", "motor_2", "motor_3")
 WRIST_JOINT = "wrist"  # the wrist's hinge about the platform's z (qpos = phi [rad])
 PLATFORM_JOINTS = ("platform_x", "platform_y", "platform_z")
+TIP_GEOM = "tip"  # the tool tip's sphere, the only geom that touches the plates
+PLATE_MASS_KG = 100.0  # a kinematic plate's mass (_plates_xml)
+
+
+def plate_name(index: int) -> str:
+    """The body and geom name of plate `index` (0-based, the config's order)."""
+    return f"plate_{index}"
 
 
 @dataclass(frozen=True)
@@ -129,7 +138,55 @@ def _leg_xml(
     </body>"""
 
 
-def _platform_xml(robot: PerLegRotaryDelta, masses: DeltaMasses, home) -> str:
+def _tip_xml(tip_offset_m) -> str:
+    """The tool tip: a small sphere that collides with the plates only (CONTACT_GROUP)."""
+    return f"""
+          <geom name="{TIP_GEOM}" type="sphere" size="{TIP_RADIUS_M:.6g}" pos="{_fmt(tip_offset_m)}"
+                contype="{CONTACT_GROUP}" conaffinity="0" condim="3" mass="0" rgba="1 .1 .1 1"/>"""
+
+
+def _plates_xml(plates) -> str:
+    """Each plate a body with a box geom, its top face through the plate's point (the
+    body's origin, its z the normal).
+
+    The body is free (a freejoint) but kinematic: `PLATE_MASS_KG`, its gravity
+    compensated, put back on its path before each step (DeltaTwin.step): it keeps the
+    pose and velocity the twin gives it (DeltaTwin.set_plate_pose). A plate that moves in
+    the base frame (a wall fixed in the world under a drifting drone) moves with a
+    velocity, so the contact's damping sees the true relative speed, which a mocap body
+    (no velocity in MuJoCo) would not. Within a step the contact force accelerates it as
+    a free body; the solref allows for that (DeltaTwin). A far heavier plate (1e6 kg
+    and up) upsets MuJoCo's solver: the tip then chatters on it or bounces off. Its
+    solref is written for a unit inverse mass (`Plate.direct_solref(1)`); the twin
+    scales it by the tip's and the plate's body_invweight0 once the model is compiled.
+    priority="1": the contact takes the plate's friction, solref and solimp, not a mix
+    with the tip's."""
+    d = CONTACT_IMPEDANCE
+    inertia = PLATE_MASS_KG * 0.01  # spherical (no gyroscopic torque while it turns)
+    out = []
+    for i, plate in enumerate(plates):
+        frame = plate.frame()
+        half = plate.thickness_m / 2.0
+        k, b = plate.direct_solref(1.0)
+        condim = 3 if plate.friction > 0.0 else 1
+        out.append(f"""
+    <body name="{plate_name(i)}" pos="{_fmt(plate.point_m)}" quat="{_fmt(_quat_of(frame))}"
+          gravcomp="1">
+      <freejoint name="{plate_name(i)}"/>
+      <inertial pos="0 0 0" mass="{PLATE_MASS_KG:.6g}"
+                diaginertia="{inertia:.6g} {inertia:.6g} {inertia:.6g}"/>
+      <geom name="{plate_name(i)}" type="box" pos="0 0 {-half:.12g}"
+            size="{plate.half_size_m[0]:.12g} {plate.half_size_m[1]:.12g} {half:.12g}"
+            contype="0" conaffinity="{CONTACT_GROUP}" condim="{condim}" priority="1"
+            friction="{max(plate.friction, 1e-5):.12g} 0 0" solref="{k:.12g} {b:.12g}"
+            solimp="{d} {d} 0.001 0.5 2" rgba=".5 .6 .5 .6"/>
+    </body>""")
+    return "".join(out)
+
+
+def _platform_xml(
+    robot: PerLegRotaryDelta, masses: DeltaMasses, home, tip_offset_m=(0.0, 0.0, 0.0)
+) -> str:
     """The platform on three slides (qpos = its centre [m]) with its ball-joint sites."""
     x, y, z = home
     ankle_xy = [
@@ -144,7 +201,10 @@ def _platform_xml(robot: PerLegRotaryDelta, masses: DeltaMasses, home) -> str:
     # a disc; its rotation is locked by the slides, so only A + B >= C must hold
     radius = max(robot.r)
     i_plat = m_plat * radius**2 / 2.0
-    wrist = _wrist_xml(masses) if masses.has_wrist else ""
+    # with a wrist the tool turns with it: the tip sits on the wrist's body
+    tip = _tip_xml(tip_offset_m)
+    wrist = _wrist_xml(masses, tip) if masses.has_wrist else ""
+    tip = "" if masses.has_wrist else tip
     return f"""
       <body name="platform" pos="{x:.12g} {y:.12g} {z:.12g}">
         <joint name="platform_x" type="slide" axis="1 0 0" ref="{x:.12g}"/>
@@ -153,11 +213,11 @@ def _platform_xml(robot: PerLegRotaryDelta, masses: DeltaMasses, home) -> str:
         <inertial pos="0 0 0" mass="{m_plat:.6g}"
                   diaginertia="{i_plat * 0.51:.6g} {i_plat * 0.51:.6g} {i_plat:.6g}"/>
         <geom type="cylinder" size="{max(radius, 0.01):.6g} 0.003" mass="0" rgba=".8 .4 .2 1"/>
-        <site name="platform_centre" pos="0 0 0"/>{ankles}{wrist}
+        <site name="platform_centre" pos="0 0 0"/>{ankles}{tip}{wrist}
       </body>"""
 
 
-def _wrist_xml(masses: DeltaMasses) -> str:
+def _wrist_xml(masses: DeltaMasses, tip: str = "") -> str:
     """The wrist: horn and tool turning about the platform's z on a hinge (qpos = phi [rad]),
     driven like the legs (the servo's rotor as the hinge's armature)."""
     m = max(masses.wrist_kg, 1e-6)
@@ -168,7 +228,7 @@ def _wrist_xml(masses: DeltaMasses) -> str:
                  armature="{masses.armature_kgm2:.6g}"/>
           <inertial pos="0 0 0" mass="{m:.6g}" diaginertia="{i_z / 2:.6g} {i_z / 2:.6g} {i_z:.6g}"/>
           <geom type="box" size="0.02 0.003 0.003" pos="0.01 0 -0.006" mass="0" rgba=".9 .8 .1 1"/>
-          <site name="wrist_tool" pos="0 0 0"/>
+          <site name="wrist_tool" pos="0 0 0"/>{tip}
         </body>"""
 
 
@@ -176,10 +236,17 @@ def build_mjcf(
     robot: RotaryDelta | PerLegRotaryDelta,
     masses: DeltaMasses = THESIS_MASSES,
     options: SimOptions | None = None,
+    plates: Sequence[Plate] = (),
+    tip_offset_m: Sequence[float] = (0.0, 0.0, 0.0),
 ) -> str:
-    """The MJCF text of `robot` with `masses`, assembled at `options.home_m`.
+    """The MJCF text of `robot` with `masses`, assembled at `options.home_m`, with
+    `plates` (placed in the base frame; the twin may move them) and the tool tip (a
+    sphere of `TIP_RADIUS_M` at `tip_offset_m` [m], the platform frame at wrist angle 0)
+    that touches them.
 
-    A per-leg robot's joint offsets are left out: the hinges' qpos are true angles."""
+    A per-leg robot's joint offsets are left out: the hinges' qpos are true angles.
+    The plates' stiffness and damping hold once scaled by the tip's and the plate's
+    inverse masses (hardware.sim.twin does it; hardware.sim.surfaces explains)."""
     opt = options or SimOptions()
     described = robot
     robot = mechanism(robot)
@@ -193,11 +260,12 @@ def build_mjcf(
     driven = MOTOR_JOINTS + ((WRIST_JOINT,) if masses.has_wrist else ())
     motors = "".join(f'\n    <motor name="{j}" joint="{j}" gear="1"/>' for j in driven)
     timeconst = max(opt.eq_timeconst_s, 2.0 * opt.timestep_s)
-    platform = _platform_xml(robot, masses, opt.home_m)
+    platform = _platform_xml(robot, masses, opt.home_m, tip_offset_m)
     base_r = max(robot.R)
     return f"""<mujoco model="delta">
   <compiler angle="radian" autolimits="true"/>
-  <option timestep="{opt.timestep_s:.9g}" integrator="implicitfast" gravity="0 0 -9.81"/>
+  <option timestep="{opt.timestep_s:.9g}" integrator="implicitfast" gravity="0 0 -9.81"
+          cone="elliptic"/>
   <default>
     <geom contype="0" conaffinity="0"/>
     <equality solref="{timeconst:.6g} 1" solimp="{opt.eq_solimp[0]} {opt.eq_solimp[1]} 0.001"/>
@@ -206,7 +274,7 @@ def build_mjcf(
     <body name="base">
       <inertial pos="0 0 0" mass="{3 * masses.servo_kg + 1e-3:.6g}" diaginertia="1e-3 1e-3 1e-3"/>
       <geom type="cylinder" size="{base_r:.6g} 0.004" mass="0" rgba=".7 .7 .7 .5"/>{legs}{platform}
-    </body>
+    </body>{_plates_xml(plates)}
   </worldbody>
   <equality>{connects}
   </equality>

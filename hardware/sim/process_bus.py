@@ -5,12 +5,13 @@ GIL a few hundred times a second (docs/performance.md, "Control loop"). Here a c
 process owns a `SimBus` and steps it against the wall clock, 2 ms at a time; the loop's
 hot path never waits for it:
 
-- after every step the child publishes the joint state, its simulated time and the
-  platform position into shared memory; `read_state` copies the latest frame (at most one
-  2 ms step old on a quiet machine, where a real bus read is a fraction of a millisecond old
-  by the time it arrives). A starved child publishes late: the state then carries the same
-  `sim_time_s` as the previous read, so the loop knows it is stale (app/control/safety.py
-  `FeedbackFreshness`) instead of taking a frozen arm for a lagging one;
+- after every step the child publishes the joint state, its simulated time, the
+  platform position and the twin's contact force into shared memory; `read_state` copies
+  the latest frame (at most one 2 ms step old on a quiet machine, where a real bus read is
+  a fraction of a millisecond old by the time it arrives). A starved child publishes
+  late: the state then carries the same `sim_time_s` as the previous read, so the loop
+  knows it is stale (app/control/safety.py `FeedbackFreshness`) instead of taking a
+  frozen arm for a lagging one;
 - `write_goal` validates the goal here (the same `goal_ticks` as every bus) and leaves it
   in shared memory; the child applies it before its next step;
 - everything else (torque, gains, profile, reboot, base motion) is a request over a pipe
@@ -40,6 +41,7 @@ from hardware.calibration import goal_ticks
 from hardware.dynamixel.control_table import OperatingMode, hardware_error_names
 from hardware.errors import BusError, NotConnectedError
 from hardware.sim.sim_bus import MAX_CATCH_UP_S, SimBus, SimBusConfig, external_measurement
+from hardware.sim.surfaces import TwinContact
 
 STEP_S = 2e-3  # physics chunk = the most the published state lags (1 ms: 28 % of a core, not 22)
 LOCK_TIMEOUT_S = 0.05
@@ -60,7 +62,25 @@ _POS, _MOVING, _ERR, _TORQUE = (_COLUMN[c] for c in ("position_rad", "moving", "
 _STAMP = _W * len(_COLUMNS)
 _PLATFORM = slice(_STAMP + 1, _STAMP + 4)
 _GOAL_SEQ, _GOAL, _SIM_TIME = _STAMP + 4, slice(_STAMP + 5, _STAMP + 5 + _W), _STAMP + 5 + _W
-_FRAME_SIZE = _SIM_TIME + 1
+# the twin's contact (hardware.sim.surfaces.TwinContact): force [N], point [m] (NaN without
+# contact), in contact (1.0 / 0.0)
+_CONTACT = slice(_SIM_TIME + 1, _SIM_TIME + 8)
+_FRAME_SIZE = _SIM_TIME + 8
+
+
+def _contact_of(values: np.ndarray) -> TwinContact:
+    """The TwinContact held in the frame's contact slots (a copy, shape (7,))."""
+    point = values[3:6]
+    return TwinContact(
+        values[:3].copy(),
+        point.copy() if np.isfinite(point).all() else None,
+        bool(values[6] > 0.5),
+    )
+
+
+def _contact_values(contact: TwinContact) -> list[float]:
+    point = [np.nan] * 3 if contact.point_m is None else list(contact.point_m)
+    return [*contact.force_n, *point, float(contact.in_contact)]
 
 
 class ProcessSimBus:
@@ -84,6 +104,7 @@ class ProcessSimBus:
         self._frame_lock: Any = None
         self._request_lock = threading.Lock()
         self._platform_at_read = np.full(3, np.nan)
+        self._contact_at_read: TwinContact | None = None
 
     # -- ServoBus ------------------------------------------------------------------------
     @property
@@ -149,6 +170,15 @@ class ProcessSimBus:
     def set_operating_mode(self, mode: OperatingMode) -> None:
         self._call("set_operating_mode", OperatingMode(mode))
 
+    def set_goal_current(self, currents_a: Sequence[float]) -> None:
+        """Goal Current per joint [A], as `SimBus.set_goal_current` (in the simulator
+        process; its ValueError comes back as it is)."""
+        self._call("set_goal_current", [float(c) for c in currents_a])
+
+    def read_goal_current(self) -> list[float]:
+        """Each joint's Goal Current [A] as the simulated servo holds it, in joint order."""
+        return self._call("read_goal_current")
+
     def write_goal(self, positions_rad: Sequence[float]) -> None:
         goal_ticks(self.joints, positions_rad)  # refuse bad goals here, with the same errors
         frame = self._require_frame("sync write GOAL_POSITION")
@@ -166,6 +196,7 @@ class ProcessSimBus:
         if time.monotonic() - values[_STAMP] > STALE_S:  # a dead or hung child
             raise BusError(self.ids, instruction, "the simulator process stopped stepping")
         self._platform_at_read = values[_PLATFORM]
+        self._contact_at_read = _contact_of(values[_CONTACT])
         n = self.n
         return JointState(
             position_rad=values[_POS][:n],
@@ -205,9 +236,35 @@ class ProcessSimBus:
                 true = frame[_PLATFORM].copy()
         return external_measurement(self.config, true, self._rng)
 
+    def measure_contact(self, at_last_read: bool = False) -> TwinContact:
+        """The twin's own contact force, as `SimBus.measure_contact`: the latest published
+        step's, or with ``at_last_read`` the one published with the last read's state.
+        Raises NotConnectedError, BusError (the shared frame stays locked)."""
+        if at_last_read and self._contact_at_read is not None:
+            return self._contact_at_read
+        frame = self._require_frame("measure contact")
+        with self._frame_access("measure contact"):
+            values = frame[_CONTACT].copy()
+        return _contact_of(values)
+
     def set_base_motion(self, motion: BaseMotion) -> None:
         """The drone's attitude, acceleration and turning, acting on the arm from now on."""
         self._call("set_base_motion", motion, reply=False)
+
+    def set_plate_pose(
+        self,
+        index: int,
+        point_m: Sequence[float],
+        normal: Sequence[float],
+        velocity_m_s: Sequence[float] = (0.0, 0.0, 0.0),
+        angular_velocity_rad_s: Sequence[float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        """Move the twin's plate `index` in the simulator process, as
+        `SimBus.set_plate_pose`; answered, so its ValueError (naming the index or the
+        field) comes back as it is. Raises NotConnectedError, BusError (the process is
+        gone or did not answer)."""
+        motion = (point_m, normal, velocity_m_s, angular_velocity_rad_s)
+        self._call("set_plate_pose", index, *motion)
 
     def pause(self, paused: bool) -> None:
         """Freeze (True) or resume (False) the simulator, as a starved process freezes: it
@@ -335,6 +392,7 @@ def _publish(bus: SimBus, frame: np.ndarray, lock: Any) -> None:
     state = bus.read_state()
     codes = [float(servo.hardware_error) for servo in bus.twin.servos]
     platform = bus.twin.platform_m
+    contact = _contact_values(bus.twin.contact())
     n = bus.n
     with lock:
         frame[_POS][:n] = state.position_rad
@@ -344,3 +402,4 @@ def _publish(bus: SimBus, frame: np.ndarray, lock: Any) -> None:
         frame[_TORQUE][:n] = state.torque_enabled
         frame[_STAMP], frame[_PLATFORM] = state.stamp_s, platform
         frame[_SIM_TIME] = state.sim_time_s
+        frame[_CONTACT] = contact

@@ -21,9 +21,17 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hardware.base_motion import BaseMotion
-from hardware.bus import BusStats, JointState, PositionGains, ServoInfo, per_joint
+from hardware.bus import (
+    BusStats,
+    JointState,
+    PositionGains,
+    ServoInfo,
+    goal_current_units,
+    per_joint,
+)
 from hardware.calibration import goal_ticks
 from hardware.dynamixel.control_table import (
+    AMPERE_PER_CURRENT_UNIT,
     MODEL_NUMBER_XM430_W210,
     RAD_PER_TICK,
     OperatingMode,
@@ -38,6 +46,7 @@ from hardware.dynamixel.control_table import (
     velocity_to_rad_s,
 )
 from hardware.errors import BusError, HardwareError, NotConnectedError
+from hardware.sim.surfaces import TwinContact
 from hardware.sim.twin import DeltaTwin, TwinConfig
 from kinematics.identification import MeasurementFrame
 
@@ -120,6 +129,7 @@ class SimBus:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self.commands = list(self.twin.commands)
+        self._goals_to_limits()  # Goal Current = Current Limit at power-on, as the firmware
         if not self.config.torque_on_at_start:
             self._update(torque_enabled=[False] * self.n)
 
@@ -170,6 +180,26 @@ class SimBus:
             if on:
                 raise BusError(on, "write OPERATING_MODE", "EEPROM item: turn torque off first")
             self._update(mode=[OperatingMode(mode)] * self.n)
+            self._goals_to_limits()  # as the firmware on a mode change
+
+    def set_goal_current(self, currents_a: Sequence[float]) -> None:
+        """Goal Current (102) per joint [A], shape (n_joints,), as `DynamixelBus`: each
+        rounded to 2.69 mA units and checked against that servo's Current Limit first
+        (nothing changes when one is refused); with torque on or off. In Current-based
+        Position Control Mode the servo model bounds its current by it.
+
+        Raises ValueError naming the joint, the value and the limit, or for a sequence of
+        the wrong length; NotConnectedError.
+        """
+        with self._transaction("write GOAL_CURRENT"):
+            limits = [ampere_to_current(c.current_limit_a) for c in self.commands]
+            units = goal_current_units(currents_a, limits, AMPERE_PER_CURRENT_UNIT)
+            self._update(goal_current_a=[current_to_ampere(u) for u in units])
+
+    def read_goal_current(self) -> list[float]:
+        """Each joint's Goal Current (102) as its servo holds it [A], in joint order."""
+        with self._transaction("read GOAL_CURRENT"):
+            return [c.goal_current_a for c in self.commands]
 
     def write_goal(self, positions_rad: Sequence[float]) -> None:
         ticks = goal_ticks(self.joints, positions_rad)
@@ -181,6 +211,7 @@ class SimBus:
             self._shut_down()
             # the platform at the same instant, for measure_platform(at_last_read=True)
             self._platform_at_read = self.twin.platform_m.copy()
+            self._contact_at_read = self.twin.contact()  # and the contact, the same
             return self._state()
 
     def set_profile(self, velocity_rad_s: float, acceleration_rad_s2: float) -> None:
@@ -250,10 +281,35 @@ class SimBus:
                 true = self._platform_at_read
         return external_measurement(self.config, true, self._rng)
 
+    def measure_contact(self, at_last_read: bool = False) -> TwinContact:
+        """The twin's own contact force: what the tip applies on the plates, base frame
+        (`DeltaTwin.contact`: force [N] (3,), point [m] (3,) or None); with
+        ``at_last_read`` at the instant of the last read_state. The simulator's truth,
+        for tests and benchmarks: no real bus has it."""
+        with self.lock:
+            if at_last_read and getattr(self, "_contact_at_read", None) is not None:
+                return self._contact_at_read
+            return self.twin.contact()
+
     def set_base_motion(self, motion: BaseMotion) -> None:
         """The drone's attitude, acceleration and turning, acting on the arm from now on."""
         with self.lock:
             self.twin.set_base_motion(motion)
+
+    def set_plate_pose(
+        self,
+        index: int,
+        point_m: Sequence[float],
+        normal: Sequence[float],
+        velocity_m_s: Sequence[float] = (0.0, 0.0, 0.0),
+        angular_velocity_rad_s: Sequence[float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        """Move the twin's plate `index` now (`DeltaTwin.set_plate_pose`: its face point
+        [m] and normal, base frame, then moving at [m/s] / turning at [rad/s]). A test's
+        or a demonstration's scene change: no real bus has it. Raises ValueError naming
+        the index or the field."""
+        with self.lock:
+            self.twin.set_plate_pose(index, point_m, normal, velocity_m_s, angular_velocity_rad_s)
 
     # -- internals -----------------------------------------------------------------------
     def _require(self, instruction: str) -> None:
@@ -275,6 +331,12 @@ class SimBus:
         ]
         if kept != on:
             self._update(torque_enabled=kept)
+
+    def _goals_to_limits(self) -> None:
+        """Goal Current := each servo's Current Limit, whole 2.69 mA units (power-on and
+        an Operating Mode change, as the firmware)."""
+        limits = [ampere_to_current(c.current_limit_a) for c in self.commands]
+        self._update(goal_current_a=[current_to_ampere(u) for u in limits])
 
     def _servos(self):
         return zip(self.ids, self.twin.servos, strict=True)
