@@ -45,7 +45,7 @@ import math
 import tomllib
 from contextvars import ContextVar
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from pydantic import (
     BaseModel,
@@ -65,7 +65,11 @@ from pydantic_settings import (
 
 from hardware.bus import PositionGains
 from hardware.calibration import JointCalibration
+from hardware.dynamixel.control_table import Reg, current_to_ampere
 from kinematics import DeltaError, LinearDelta, PerLegRotaryDelta, RotaryDelta, Tool
+
+if TYPE_CHECKING:
+    from hardware.sim.surfaces import Plate
 
 # The file is chosen at run time (``deltadash serve --config FILE``) while the sources are
 # built inside ``Settings()``; a context variable hands the path over without a global.
@@ -79,6 +83,8 @@ class _Section(BaseModel):
 
 
 Triple = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+#: The XM430-W210's factory Current Limit (38) [A]: 1193 units of 2.69 mA = 3.209 A.
+XM430_CURRENT_LIMIT_A = current_to_ampere(Reg.CURRENT_LIMIT.value.default)
 
 # per-leg fields of [robot.legs] and the PerLegRotaryDelta field each one sets
 _LEGS = {
@@ -240,6 +246,68 @@ _TRUE_LEGS = {
 }
 
 
+class PlateSettings(_Section):
+    """``[[hardware.sim.plates]]``: a plate the twin's tool tip can touch (hardware/sim/
+    surfaces.py ``Plate``), fixed in the base frame or (``fixed_in = "world"``) in the
+    world; MuJoCo's contact force on it is the truth the force estimate, touch and the
+    compliant press are measured against.
+
+    Example::
+
+        [[hardware.sim.plates]]
+        point_m = [0.0, 0.0, -0.26]
+        normal = [0.0, 0.0, 1.0]
+        stiffness_n_m = 10000.0
+    """
+
+    point_m: Triple = Field(description="a point of the touched face, base frame [m]")
+    normal: Triple = Field(
+        (0.0, 0.0, 1.0), description="the face's normal, out of the plate towards the robot"
+    )
+    half_size_m: tuple[FiniteFloat, FiniteFloat] = Field(
+        (0.1, 0.1), description="half the face's extent along its x and y [m]"
+    )
+    thickness_m: FiniteFloat = Field(
+        0.02,
+        gt=0,
+        le=1.0,
+        description="[m]; a penetration past half of it pushes the tip out the far side",
+    )
+    stiffness_n_m: FiniteFloat = Field(
+        1.0e4, gt=0, le=1.0e7, description="contact stiffness: force per penetration [N/m]"
+    )
+    damping_n_s_m: FiniteFloat = Field(20.0, ge=0, le=1.0e5, description="contact damping [N s/m]")
+    friction: FiniteFloat = Field(
+        0.5, ge=0, le=5.0, description="Coulomb friction coefficient (0: frictionless)"
+    )
+    fixed_in: Literal["base", "world"] = Field(
+        "base",
+        description='"world": a wall fixed in the world, placed by point_m / normal in the '
+        "base frame as a hold on the simulated drone starts, then staying put while the "
+        "drone drifts (hardware/sim/surfaces.py Plate)",
+    )
+
+    @field_validator("normal")
+    @classmethod
+    def _nonzero(cls, normal: tuple[float, float, float]) -> tuple[float, float, float]:
+        if math.hypot(*normal) < 1e-9:
+            raise ValueError(f"must not be zero (a direction), got {list(normal)}")
+        return normal
+
+    @field_validator("half_size_m")
+    @classmethod
+    def _positive(cls, half: tuple[float, float]) -> tuple[float, float]:
+        if min(half) <= 0.0:
+            raise ValueError(f"must be two positive lengths [m], got {list(half)}")
+        return half
+
+    def build(self) -> Plate:
+        """The twin's plate (hardware.sim.surfaces.Plate)."""
+        from hardware.sim.surfaces import Plate  # here: hardware.sim loads MuJoCo
+
+        return Plate(**self.model_dump())
+
+
 class SimSettings(_Section):
     """``[hardware.sim]``: the twin built wrong on purpose, and its motion capture.
 
@@ -268,6 +336,14 @@ class SimSettings(_Section):
     measurement_noise_m: float = Field(
         0.0, ge=0.0, le=0.1, description="white noise per axis of the measurement [m]"
     )
+    plates: list[PlateSettings] = Field(
+        default_factory=list,
+        description="plates the tool tip can touch ([[hardware.sim.plates]]), none by default",
+    )
+
+    def build_plates(self) -> tuple[Plate, ...]:
+        """The twin's plates, config order."""
+        return tuple(p.build() for p in self.plates)
 
     def true_robot(self, robot: RotaryDelta) -> PerLegRotaryDelta | None:
         """The twin's true geometry around the nominal ``robot``; None for the exact twin.
@@ -340,6 +416,35 @@ class HardwareSettings(_Section):
     )
     joints: list[JointSettings] = Field(default_factory=_default_joints, min_length=3, max_length=3)
     sim: SimSettings = SimSettings()
+    operating_mode: Literal["position", "current_based_position"] = Field(
+        "position",
+        description="the legs' servos' Operating Mode, written with torque off at start: "
+        "position (3), or current_based_position (5: the motor current, and so the torque, "
+        "never above goal_current_a)",
+    )
+    goal_current_a: FiniteFloat | Triple = Field(
+        default=XM430_CURRENT_LIMIT_A,
+        description="Goal Current of the legs' servos [A], one for all or one per leg "
+        f"(0 < value <= {XM430_CURRENT_LIMIT_A:.4g}, the XM430-W210's Current Limit); in "
+        "current_based_position it bounds each joint's torque to Kt * goal_current_a",
+    )
+
+    @field_validator("goal_current_a")
+    @classmethod
+    def _within_current_limit(cls, value: float | tuple[float, ...]) -> float | tuple[float, ...]:
+        for current in value if isinstance(value, tuple) else (value,):
+            if not 0 < current <= XM430_CURRENT_LIMIT_A:
+                raise ValueError(
+                    f"goal_current_a {current} A must be > 0 and <= "
+                    f"{XM430_CURRENT_LIMIT_A:.4g} A (the XM430-W210's Current Limit, "
+                    "1193 units of 2.69 mA)"
+                )
+        return value
+
+    def goal_currents_a(self) -> tuple[float, float, float]:
+        """`goal_current_a` per leg [A], shape (3,)."""
+        value = self.goal_current_a
+        return tuple(value) if isinstance(value, tuple) else (value, value, value)  # type: ignore[return-value]
 
 
 class LoopSettings(_Section):
@@ -564,6 +669,12 @@ class Ros2Settings(_Section):
         "delta/tip_pose_world", pattern=_ROS_NAME, description="the tip in the world while holding"
     )
     diagnostics_topic: str = Field("diagnostics", pattern=_ROS_NAME)
+    tip_wrench_topic: str = Field(
+        "delta/tip_wrench",
+        pattern=_ROS_NAME,
+        description="the tip's contact force estimate, base frame (WrenchStamped; the force "
+        "the tip applies)",
+    )
     tracked_goal_topic: str = Field(
         "delta/goal",
         pattern=_ROS_NAME,
@@ -769,6 +880,74 @@ class ProgramSettings(_Section):
     )
 
 
+class ContactSettings(_Section):
+    """``[contact]``: the tip's force estimate, touch, the compliant press and the force
+    limits (app/control/contact.py, docs/contact.md)."""
+
+    estimate: bool = Field(
+        True,
+        description="estimate the tip's contact force each tick from the servos' currents "
+        "(rotary Deltas whose bus carries a load: the twin, real servos)",
+    )
+    force_limit_n: float = Field(
+        15.0,
+        gt=0,
+        le=60.0,
+        description="the most a touch or a press may push [N]: past it the loop faults "
+        "and holds; no request may ask for more",
+    )
+    collision_stop: bool = Field(
+        False,
+        description="force-limited motion: any motion whose estimated contact force passes "
+        "collision_force_n stops and faults, saying the force and the point",
+    )
+    collision_force_n: float = Field(
+        6.0, gt=0, le=60.0, description="the force that counts as a collision [N]"
+    )
+    detect_force_n: float = Field(
+        0.8,
+        gt=0,
+        le=20.0,
+        description="a touch counts contact from this force along its direction [N] "
+        "(above the estimate's noise while moving slowly)",
+    )
+    touch_speed_m_s: float = Field(
+        0.01, gt=0, le=0.1, description="a touch's default approach speed [m/s]"
+    )
+    touch_force_n: float = Field(2.0, gt=0, le=60.0, description="a touch's default set force [N]")
+    touch_max_travel_m: float = Field(
+        0.05, gt=0, le=0.3, description="a touch's default travel before 'no contact' [m]"
+    )
+    admittance_m_per_n_s: float = Field(
+        0.02,
+        gt=0,
+        le=0.1,
+        description="the compliant press's gain: speed along the pressed direction per N "
+        "of force error [m/(N s)]",
+    )
+    press_travel_m: float = Field(
+        0.02,
+        gt=0,
+        le=0.1,
+        description="how far a press may move its point along the direction to keep the "
+        "force [m]; at the end of it the contact counts as lost",
+    )
+
+    @model_validator(mode="after")
+    def _ordered(self) -> ContactSettings:
+        if self.detect_force_n >= self.force_limit_n:
+            raise ValueError(
+                f"contact.detect_force_n ({self.detect_force_n} N) must be below "
+                f"contact.force_limit_n ({self.force_limit_n} N)"
+            )
+        if self.touch_force_n > self.force_limit_n:
+            raise ValueError(
+                f"contact.touch_force_n ({self.touch_force_n} N) is over "
+                f"contact.force_limit_n ({self.force_limit_n} N)"
+            )
+        return self
+
+
 class Settings(BaseSettings):
     """Everything ``deltadash serve`` can be told."""
 
@@ -791,6 +970,7 @@ class Settings(BaseSettings):
     link: LinkSettings = LinkSettings()
     ros2: Ros2Settings = Ros2Settings()
     foxglove: FoxgloveSettings = FoxgloveSettings()
+    contact: ContactSettings = ContactSettings()
 
     @model_validator(mode="after")
     def _wrist_id_free(self) -> Settings:

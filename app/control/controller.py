@@ -29,15 +29,20 @@ from typing import Any
 import numpy as np
 
 from app.config import Settings
-from app.control import commands, held_jog
+from app.control import commands, contact_commands, held_jog
 from app.control.commands import CommandContext, record_fault
+from app.control.contact import ContactMonitor
 from app.control.errors import GoalRejected, MotionRefused
+from app.control.force import ForceEstimator, force_estimator
 from app.control.gate import Gate
 from app.control.gravity import GravityOffset, gravity_offset, loop_stiffness_nm_rad
 from app.control.joint_offsets import OffsetBus, set_offsets
 from app.control.loop_state import LoopState
 from app.control.model import Robot, RobotModel, dynamics_robot
 from app.control.owner import MotionOwner
+from app.control.servo_current import DEFAULT_GOAL_CURRENT_A, DEFAULT_MODE
+from app.control.servo_current import apply as apply_servo_current
+from app.control.servo_current import check as check_servo_current
 from app.control.sources import GoalSource, JogSource
 from app.control.state import Fault, RobotInfo, Snapshot
 from app.control.tick import TickPorts, phi_commanded, phi_measured, read, tick
@@ -45,6 +50,7 @@ from app.control.timing import TickClock, TimingRecorder
 from app.control.wrist import WristBus, turn_to
 from hardware.bus import BusStats, PositionGains, ServoBus, SimulatedBus
 from hardware.errors import BusError
+from kinematics import RotaryDelta
 
 log = logging.getLogger(__name__)
 Listener = Callable[[Snapshot], None]
@@ -100,6 +106,8 @@ class Controller:
             backend, self.backend_description, tuple(self.servo_ids), self.boot, wrist_id
         )
         self.state = LoopState.initial(settings.safety, self.period_s, info)
+        # the servos' factory mode and power-on Goal Current until start() writes the config's
+        self.state.servo_mode, self.state.goal_current_a = DEFAULT_MODE, DEFAULT_GOAL_CURRENT_A
         # [control] gravity_compensation: servo goals shifted by the predicted sag (the
         # loop's commanded joints stay the goal's, so status and following errors see it);
         # unset: on where the bus carries a load (the twin, real servos; `carries_load`)
@@ -109,6 +117,9 @@ class Controller:
                 settings.control.payload_kg,
                 wrist=settings.wrist.enabled,
             )
+        # [contact]: the tip's force each tick, from the currents of servos that carry the
+        # arm (app/control/contact.py); its limits hold even without an estimate
+        self.state.contact_monitor = ContactMonitor(self._force_estimator(bus), settings.contact)
         self._commands: SimpleQueue[tuple[Callable[[], Any], Future]] = SimpleQueue()
         # who may move the robot: a procedure (calibration, tuning) claims it while it runs
         # and every motion command below asks it (app/control/owner.py)
@@ -130,6 +141,18 @@ class Controller:
         self.thread_setup_result: Any = None
         self._snapshot = self.state.snapshot(0.0, self._bus_stats())
 
+    def _force_estimator(self, bus: ServoBus) -> ForceEstimator | None:
+        """The estimator the loop uses: None when [contact] estimate is off, the servos
+        carry no load (the emulator: their currents say nothing of a force) or the robot
+        has no dynamics model (a linear Delta)."""
+        settings = self.settings
+        if not settings.contact.estimate or not getattr(bus, "carries_load", False):
+            return None
+        robot = dynamics_robot(self.robot)
+        if not isinstance(robot, RotaryDelta):
+            return None
+        return force_estimator(robot, settings.control.payload_kg, wrist=settings.wrist.enabled)
+
     # ---- lifecycle ----
     def start(self) -> None:
         """Write the config's position gains, when a leg has some (the others get the
@@ -140,6 +163,14 @@ class Controller:
             self._use_gains(
                 [j.gains.position_gains() if j.gains else PositionGains() for j in legs]
             )
+        # [hardware] operating_mode / goal_current_a, when not the servos' factory state:
+        # the mode is an EEPROM item, so torque goes off first (app/control/servo_current.py)
+        hardware = self.settings.hardware
+        mode, currents = hardware.operating_mode, hardware.goal_currents_a()
+        if (mode, currents) != (DEFAULT_MODE, DEFAULT_GOAL_CURRENT_A):
+            self.servos.torque(False)
+            self.state.torque = False
+            apply_servo_current(self.state, self.servos, mode, currents)
         read(self.state, self._ctx, self._ports, self._now)
         self._publish()
         self._thread = threading.Thread(target=self._run, name="deltadash-control", daemon=True)
@@ -325,6 +356,31 @@ class Controller:
 
         return self.submit(stop)
 
+    def touch(self, direction: Any, **values: Any) -> Future:
+        """Start a touch (app/control/contact_commands.py ``touch``: ``speed_m_s``,
+        ``force_n``, ``max_travel_m``, ``retract_m``); the Future holds its source id and
+        ends; errors name the field."""
+        contact = self.settings.contact
+        return self.submit_motion(
+            lambda: contact_commands.touch(self.state, self.ctx, contact, direction, **values)
+        )
+
+    def press(
+        self,
+        direction: Any,
+        force_n: Any,
+        inner: GoalSource | None = None,
+        frame: str = "base",
+        duration_s: Any = None,
+    ) -> Future:
+        """Start a compliant press (app/control/contact_commands.py ``press``)."""
+        contact = self.settings.contact
+        return self.submit_motion(
+            lambda: contact_commands.press(
+                self.state, self.ctx, contact, direction, force_n, inner, frame, duration_s
+            )
+        )
+
     def set_torque(self, enabled: bool) -> Future:
         return self.submit(
             lambda: commands.torque_to(self.state, self.ctx, self.joint_bus, enabled)
@@ -436,6 +492,28 @@ class Controller:
             self.state.notice = "position gains changed"
             written = dict(zip(self.servo_ids, ordered, strict=True))
             return written if wrist_gains is None else {**written, wrist_id: wrist_gains}
+
+        return self.submit_motion(write)
+
+    def set_servo_current(self, mode: str, currents_a: Any) -> Future:
+        """The legs' servos' operating mode ("position" | "current_based_position") and
+        Goal Current per leg [A] (3,), written in the control thread
+        (app/control/servo_current.py). Refused at once with ValueError naming the field
+        (an unknown mode, a current not > 0 and <= 3.209 A); in the Future with
+        TorqueOnError (a MotionRefused) while torque is on, MotionRefused while a motion
+        runs, and what the bus raises. The Future holds what is now in use:
+        {"operating_mode": str, "goal_current_a": [A] (3,)}."""
+        currents = check_servo_current(mode, currents_a)
+
+        def write() -> dict[str, Any]:
+            if (moving := self._moving()) is not None:
+                raise MotionRefused(f"a {moving} is running: the servo mode changes at rest")
+            apply_servo_current(self.state, self.servos, mode, currents)
+            self.state.notice = f"servo mode {mode}, goal current {list(currents)} A"
+            return {
+                "operating_mode": self.state.servo_mode,
+                "goal_current_a": [float(c) for c in self.state.goal_current_a],
+            }
 
         return self.submit_motion(write)
 

@@ -7,15 +7,24 @@ threads see is the immutable :class:`~app.control.state.Snapshot` made from it e
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from app.config import SafetySettings
+from app.control.contact import NOT_ESTIMATED, ContactMonitor
 from app.control.gravity import GravityOffset
 from app.control.safety import FeedbackFreshness, FollowingError, MissCounter
 from app.control.sources import GoalSource
-from app.control.state import Fault, RobotInfo, Snapshot, WristReading, unread
+from app.control.state import (
+    ContactReading,
+    Fault,
+    RobotInfo,
+    Snapshot,
+    TouchResult,
+    WristReading,
+    unread,
+)
 from app.control.timing import TickTiming, TimingRecorder
 from hardware.bus import BusStats, JointState, PositionGains
 
@@ -86,10 +95,17 @@ class LoopState:
     wrist: WristReading | None = None
     settle_rad: np.ndarray | None = None
     gains: tuple[PositionGains, ...] = (PositionGains(),) * 3
+    servo_mode: str = "position"  # the legs' operating mode (app/control/servo_current.py)
+    goal_current_a: tuple[float, ...] = ()  # their Goal Current [A] as last written
     gravity: GravityOffset | None = None
     recorder: TimingRecorder = field(default_factory=lambda: TimingRecorder(200.0))
     info: RobotInfo = field(default_factory=RobotInfo)
     finished_source_id: str | None = None  # the last source (with an id) that ran to its end
+    # the tip's contact force: the monitor that estimates and checks it each tick (None: no
+    # estimate), this tick's reading, and the last touch's result (app/control/contact.py)
+    contact_monitor: ContactMonitor | None = None
+    contact: ContactReading = NOT_ESTIMATED
+    touch: TouchResult | None = None
 
     @classmethod
     def initial(
@@ -175,6 +191,8 @@ class LoopState:
             wrist_servo=self.wrist,
             info=self.info,
             gains=self.gains,
+            servo_mode=self.servo_mode,
+            goal_current_a=self.goal_current_a,
             loop_total=self.recorder.since_start(),
             loop_window=self.recorder.last_window(),
             bus_stats=bus_stats or BusStats(),
@@ -183,7 +201,20 @@ class LoopState:
             source_line=getattr(self.source, "program_line", None),
             source_feed=getattr(self.source, "feed_state", None),
             finished_source_id=self.finished_source_id,
+            contact=self.contact,
+            touch=self._touch(),
         )
+
+    def _touch(self) -> TouchResult | None:
+        """The last touch's result; one still "touching" whose source no longer runs (a
+        fault, a stop, an e-stop took it) reads "stopped"."""
+        touch = self.touch
+        if touch is None or touch.outcome != "touching":
+            return touch
+        if getattr(self.source, "source_id", None) == touch.source_id and self.source is not None:
+            return touch
+        self.touch = replace(touch, outcome="stopped")
+        return self.touch
 
     def _servos_hold(self) -> bool:
         """No servo (legs, wrist) reads its Torque Enable off at the last read: one whose

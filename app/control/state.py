@@ -96,6 +96,50 @@ class WristReading:
 
 
 @dataclass(frozen=True)
+class ContactReading:
+    """The tip's contact force as the loop estimates it each tick (app/control/contact.py).
+
+    force_n: the force the tip applies on what it touches, base frame [N], (3,) (NaN when
+    not known); std_n: its 1-sigma uncertainty per axis [N], (3,); valid: the estimate
+    could be made this tick (every leg's current read, the Jacobian usable); reason: why
+    not, when it could not (None otherwise).
+    """
+
+    force_n: np.ndarray = field(default_factory=lambda: _NAN3)
+    std_n: np.ndarray = field(default_factory=lambda: _NAN3)
+    valid: bool = False
+    reason: str | None = "not estimated"
+
+    @property
+    def magnitude_n(self) -> float:
+        """|force_n| [N] (NaN when not known)."""
+        return float(np.linalg.norm(self.force_n))
+
+
+@dataclass(frozen=True)
+class TouchResult:
+    """How a touch (app/control/touch.py) ended. outcome: "contact" (stopped at the set
+    force), "no contact" (its travel ended first) or "stopped" (a fault, a stop, e-stop);
+    contact_point_m: where the surface is along the touch's direction, base frame [m]
+    (the tip where the force, extrapolated along its rise, is zero; NaN without contact);
+    force_n: the contact force it stood at (before a retract) [N] (3,); peak_force_n: the
+    largest force along the direction seen [N]; travel_m: how far the tip went along it
+    [m]; direction: the
+    unit direction moved along (3,); source_id: the touch's id; joints_at_contact_rad: the
+    legs' joints as read at the tick contact was seen (3,) [rad] (NaN without contact): a
+    probe calibration's touch (the contact point itself comes from the model)."""
+
+    outcome: str
+    contact_point_m: np.ndarray
+    force_n: np.ndarray
+    peak_force_n: float
+    travel_m: float
+    direction: np.ndarray
+    source_id: str | None = None
+    joints_at_contact_rad: np.ndarray = field(default_factory=lambda: _NAN3)
+
+
+@dataclass(frozen=True)
 class FeedState:
     """How a path plays (app/link/paths.py ``Playback``): ``rate`` its time's rate now
     (0: standing, 1: as planned), ``override`` the feed override set (0.1 to 1.0: the
@@ -175,6 +219,10 @@ class Snapshot:
     # ticks before this one), and the bus's transaction counters
     info: RobotInfo = field(default_factory=RobotInfo)
     gains: tuple[PositionGains, ...] = ()
+    # the legs' servos' operating mode ("position" | "current_based_position") and Goal
+    # Current per leg [A] (joint order), as last written (app/control/servo_current.py)
+    servo_mode: str = "position"
+    goal_current_a: tuple[float, ...] = ()
     loop_total: TimingStats = _NO_TIMING
     loop_window: TimingStats = _NO_TIMING
     bus_stats: BusStats = field(default_factory=BusStats)
@@ -187,6 +235,10 @@ class Snapshot:
     # a path's playback (app/link/paths.py Playback): feed override, pause, time left
     source_feed: FeedState | None = None
     finished_source_id: str | None = None
+    # the tip's contact force estimated this tick (app/control/contact.py), and how the
+    # last touch ended (None: none since the loop started)
+    contact: ContactReading = field(default_factory=ContactReading)
+    touch: TouchResult | None = None
 
     @property
     def velocity_rad_s(self) -> np.ndarray:

@@ -19,6 +19,7 @@ import numpy as np
 
 from app.control import commands, held_jog
 from app.control.commands import CommandContext, record_fault
+from app.control.contact import observe
 from app.control.errors import GoalRejected
 from app.control.joint_offsets import OffsetBus
 from app.control.loop_state import LoopState
@@ -29,6 +30,7 @@ from app.control.wrist import WristBus, next_phi
 from hardware.errors import BusError
 
 Clock = Callable[[], float]  # loop time [s]
+LEVEL_GRAVITY = np.array([0.0, 0.0, -9.81])  # in the world [m/s^2] (kinematics.dynamics')
 
 
 @dataclass(frozen=True)
@@ -54,7 +56,29 @@ def tick(state: LoopState, ctx: CommandContext, ports: TickPorts, now: Clock) ->
         errors = (wrist.hardware_errors,)
         for fault in servo_faults((wrist.servo_id,), errors, now()):
             record_fault(state, fault)
+    if joints is not None:
+        _check_contact(state, ctx, ports, now)
     advance(state, ctx, ports, now)
+
+
+def _check_contact(state: LoopState, ctx: CommandContext, ports: TickPorts, now: Clock) -> None:
+    """This tick's contact force (app/control/contact.py); past a limit, or lost while a
+    source presses, the motion stops with the joints commanded where they were measured
+    (the servos stop pushing into what was hit) and the loop faults."""
+    monitor = state.contact_monitor
+    if monitor is None or state.joints is None:
+        return
+    # gravity in the base frame: turned by the drone's attitude while a source knows it
+    # (a hold in the world, a press on one), else the level base's
+    base = getattr(state.source, "base_pose", None)
+    monitor.gravity = None if base is None else np.asarray(base.rotation).T @ LEVEL_GRAVITY
+    state.contact = monitor.read(state.joints)
+    source = state.source if commands.motion_allowed(state) else None
+    fault = monitor.check(state.contact, source, state.point_m, now())
+    if fault is None:
+        return
+    write(state, ctx, ports, now, state.joints.position_rad)
+    record_fault(state, fault)
 
 
 def read(state: LoopState, ctx: CommandContext, ports: TickPorts, now: Clock) -> bool:
@@ -109,7 +133,11 @@ def advance(state: LoopState, ctx: CommandContext, ports: TickPorts, now: Clock)
         return
     state.settle_rad = None  # a new source starts from the command
     held_jog.tick(state, ctx, now())  # a held jog whose heartbeat is late stops
+    observe(source, state.contact, state.point_m, state.joints.position_rad)  # touch, press
     setpoint = source.next(state.dt_s)
+    touch = getattr(source, "touch_result", None)
+    if touch is not None:
+        state.touch = touch
     state.phase, state.extra = setpoint.phase, setpoint.extra
     if setpoint.fault is not None:
         reason = f"{source.name}: {setpoint.fault}"

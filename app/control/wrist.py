@@ -17,6 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from app.config import XM430_CURRENT_LIMIT_A
 from app.control.commands import require_motion
 from app.control.loop_state import LoopState
 from app.control.state import WristReading
@@ -38,6 +39,7 @@ class WristBus:
         self.bus = bus
         self.wrist_gains = PositionGains()
         self.wrist_gains_read: PositionGains | None = None  # as the wrist's registers said
+        self.wrist_goal_current_a: float | None = None  # [A]; read when first needed
         self.servo_id = servo_id
         self.phi_rad: float | None = None
         self.reading: WristReading | None = None
@@ -59,6 +61,19 @@ class WristBus:
 
     def set_operating_mode(self, mode: OperatingMode) -> None:
         self.bus.set_operating_mode(mode)
+
+    def set_goal_current(self, currents_a: Sequence[float]) -> None:
+        """The legs' Goal Current [A], shape (3,); the wrist keeps its own
+        (`wrist_goal_current_a`: as its servo held it when first asked, the full XM430
+        Current Limit on a bus that cannot say). Raises ValueError (not three legs), and
+        what the bus's set_goal_current raises."""
+        if len(currents_a) != N_LEGS:
+            raise ValueError(f"{len(currents_a)} leg goal currents for {N_LEGS} legs")
+        if self.wrist_goal_current_a is None:
+            read = getattr(self.bus, "read_goal_current", None)
+            held = read()[N_LEGS] if read is not None else None
+            self.wrist_goal_current_a = XM430_CURRENT_LIMIT_A if held is None else float(held)
+        self.bus.set_goal_current([*currents_a, self.wrist_goal_current_a])
 
     def write_goal(self, positions_rad: Sequence[float]) -> None:
         """The legs' goals [rad], shape (3,), and the wrist's `phi_rad`, in one sync write.

@@ -41,6 +41,7 @@ from app.control.commands import (
 from app.control.errors import MotionRefused
 from app.control.model import Robot, RobotModel
 from app.control.owner import MotionOwner
+from app.control.servo_current import check as check_servo_current
 from app.control.state import Snapshot
 from app.link import robots
 from app.link.codec import plain
@@ -495,6 +496,35 @@ class RobotClient:
         args["joints_rad" if point is None else "point_m"] = target
         return self._motion("move", args)
 
+    def touch(self, direction: Any, **values: Any) -> Future:
+        """Start a touch on the node (app/control/contact_commands.py ``touch``):
+        ``direction`` (3,) and the optional ``speed_m_s``, ``force_n``, ``max_travel_m``,
+        ``retract_m`` (None: the node's [contact] defaults)."""
+        args = {"direction": check_vector(direction, "direction"), **values}
+        return self._motion("touch", args)
+
+    def press(
+        self,
+        direction: Any,
+        force_n: float,
+        frame: str = "base",
+        duration_s: float | None = None,
+        hold: dict[str, Any] | None = None,
+    ) -> Future:
+        """Start a compliant press on the node (app/control/press.py): ``force_n`` [N]
+        along ``direction`` (3,) in ``frame``; "world" presses on a hold in the world built
+        from ``hold`` (the hold op's arguments)."""
+        args: dict[str, Any] = {
+            "direction": check_vector(direction, "direction"),
+            "force_n": force_n,
+            "frame": frame,
+            "duration_s": duration_s,
+            "model_version": self.model.version,
+        }
+        if hold is not None:
+            args["hold"] = hold
+        return self._motion("press", args)
+
     def run_source(
         self,
         source: Any,
@@ -571,6 +601,14 @@ class RobotClient:
         ordered_gains(legs, tuple(self.servo_ids))  # refused here naming the ids
         wire = {str(sid): g for sid, g in gains.items()}
         return then(self._motion("set_gains", {"gains": wire}), _gains_in)
+
+    def set_servo_current(self, mode: str, currents_a: Any) -> Future:
+        """The legs' operating mode and Goal Current [A] (3,) on the node (torque off):
+        checked here first (ValueError naming the field), then as the node's
+        Controller.set_servo_current; a Future of {"operating_mode", "goal_current_a"}."""
+        currents = check_servo_current(mode, currents_a)
+        args = {"operating_mode": mode, "goal_current_a": list(currents)}
+        return self._motion("set_servo_current", args)
 
     def read_gains(self) -> Future:
         return then(self._call("read_gains", {}), _gains_in)

@@ -438,6 +438,13 @@ class RobotNode:
             raise ValueError(f"gains: {exc}") from None
         return then(self.controller.set_gains(gains), _gains_out)
 
+    def _op_set_servo_current(self, station: str, args: dict[str, Any]) -> Future:
+        """The legs' operating mode and Goal Current [A] (3,) (Controller.set_servo_current);
+        ValueError naming the field, TorqueOnError (refused) while torque is on."""
+        mode = _text(args, "operating_mode", 40)
+        currents = _vector(args, "goal_current_a")
+        return then(self.controller.set_servo_current(mode, currents), plain)
+
     def _op_read_gains(self, station: str, args: dict[str, Any]) -> Future:
         return then(self.controller.read_gains(), _gains_out)
 
@@ -474,6 +481,32 @@ class RobotNode:
 
     def _op_restart_inputs(self, station: str, args: dict[str, Any]) -> None:
         self.world.restart(args)
+
+    def _op_touch(self, station: str, args: dict[str, Any]) -> Future:
+        """A touch (app/control/touch.py): ``direction`` and optional ``speed_m_s``,
+        ``force_n``, ``max_travel_m``, ``retract_m``; errors name the field."""
+        names = ("speed_m_s", "force_n", "max_travel_m", "retract_m")
+        values = {name: _optional_number(args, name) for name in names}
+        given = {name: value for name, value in values.items() if value is not None}
+        return self.controller.touch(_vector(args, "direction"), **given)
+
+    def _op_press(self, station: str, args: dict[str, Any]) -> Future:
+        """A compliant press (app/control/press.py): ``force_n`` along ``direction`` in
+        ``frame`` ("base": from where the tip is; "world": on a hold in the world built
+        from ``hold``, as the hold op's arguments), for ``duration_s`` (None: until
+        stopped)."""
+        frame = _text(args, "frame", 10) if "frame" in args else "base"
+        direction = _vector(args, "direction")
+        force = _number(args, "force_n")
+        duration = _optional_number(args, "duration_s")
+        inner = None
+        if frame == "world":
+            hold = args.get("hold") or {}
+            if not isinstance(hold, dict):
+                raise ValueError("hold: expected an object (the hold's arguments)")
+            self._model(args)
+            inner = self.world.hold_source(hold)
+        return self.controller.press(direction, force, inner, frame, duration)
 
     def _op_hold(self, station: str, args: dict[str, Any]) -> Future:
         model = self._model(args)

@@ -36,6 +36,7 @@ from app.scene import start_scene
 from app.server.api import (
     calibration,
     compare,
+    contact,
     dashboard,
     mav,
     programs,
@@ -138,6 +139,7 @@ def create_app(
                 settings.runs.folder_path / "calibration",
                 config_path=config_path,
                 probe=_twin_probe(live, controller),
+                plates=live.hardware.sim.build_plates() if live.hardware.backend == "sim" else (),
                 pose_measure=pose_input(app.state.world.platform),
             )
             app.state.tuning = TuningManager(
@@ -193,6 +195,7 @@ def create_app(
     app.include_router(tuning.router, prefix="/api", dependencies=reads)
     app.include_router(servos.router, prefix="/api", dependencies=reads)
     app.include_router(ros2.router, prefix="/api", dependencies=reads)
+    app.include_router(contact.router, prefix="/api", dependencies=reads)
     # /api/info (the page asks it whether to prompt for the token), sinusoid check, /vendor
     app.include_router(dashboard.router)
     if (STATIC_DIR / "index.html").exists():

@@ -76,12 +76,21 @@ class SimulatedDroneProvider:
 
     ``feel`` (optional) receives the drone's true attitude, acceleration [m/s^2, world],
     body rate [rad/s] and its rate of change [rad/s^2, body frame] each tick, so a simulated
-    arm's base moves with the drone (gravity and base motion act on it).
+    arm's base moves with the drone (gravity and base motion act on it); with ``pose``
+    also its true position [m] and velocity [m/s] (world), two more arguments (a twin's
+    plates fixed in the world follow them).
     """
 
-    def __init__(self, drone: SimulatedDrone, feel: Callable[..., None] | None = None) -> None:
+    def __init__(
+        self,
+        drone: SimulatedDrone,
+        feel: Callable[..., None] | None = None,
+        *,
+        pose: bool = False,
+    ) -> None:
         self.drone = drone
         self.feel = feel
+        self.pose = pose
 
     def observe(self, t_s: float) -> Observation:
         if self.feel is not None:
@@ -102,7 +111,10 @@ class SimulatedDroneProvider:
         rate_after = angular_velocity(now.quaternion, after.quaternion, h)
         omega = 0.5 * (rate_before + rate_after)
         omega_dot = (rate_after - rate_before) / h
-        self.feel(now.quaternion, self.drone.acceleration(t_s), omega, omega_dot)
+        felt = (now.quaternion, self.drone.acceleration(t_s), omega, omega_dot)
+        if self.pose:
+            felt += (now.position, self.drone.true_state(t_s)[1])
+        self.feel(*felt)
 
 
 class TrackerProvider:
@@ -168,6 +180,7 @@ class HoldSource:
         self.measured_phi = measured_phi if measured_phi is not None else lambda: 0.0
         self._start_phi: float | None = None
         self._phi: float | None = None  # the last wrist angle commanded
+        self.base_pose: Pose | None = None
 
     def progress(self) -> Progress:
         """How far a timed hold (a run) is (app/control/sources.py's ``Progressing``)."""
@@ -196,6 +209,7 @@ class HoldSource:
             ahead = seen.age_s + self.lead_s
             pose = predict(pose, seen.velocity_m_s, seen.angular_velocity_rad_s, ahead)
         base = pose @ self.mount
+        self.base_pose = base  # the base's pose this tick (a world press turns with it)
         goal_base = base.apply_inverse(self.goal_world)
         phi, limited = self._wrist_angle(seen.pose @ self.mount, base)
         at = 0.0 if phi is None else phi

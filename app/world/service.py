@@ -25,10 +25,15 @@ def base_motion(
     drone_acceleration: np.ndarray,
     omega_body: np.ndarray,
     omega_dot_body: np.ndarray,
+    drone_position: np.ndarray | None = None,
+    drone_velocity: np.ndarray | None = None,
 ):
     """The Delta base's motion from the drone's: attitude R_d R_m, the acceleration of the
     base origin (the drone's plus the lever arm's: R_d (w' x p_m + w x (w x p_m))), and the
-    turning rates in the base frame (R_m^T w, R_m^T w'), as hardware.sim.BaseMotion."""
+    turning rates in the base frame (R_m^T w, R_m^T w'), as hardware.sim.BaseMotion. With
+    the drone's position [m] (world) also the base origin p_d + R_d p_m and its velocity
+    v_d + R_d (w x p_m) [m/s] (``drone_velocity`` world, None: still): the base pose
+    drone @ mount, which moves a twin's plates fixed in the world."""
     from hardware.sim import BaseMotion
 
     drone = Pose(np.zeros(3), np.asarray(drone_wxyz, dtype=float))
@@ -37,11 +42,18 @@ def base_motion(
     arm = np.asarray(mount.position, dtype=float)
     lever = np.cross(w_dot, arm) + np.cross(w, np.cross(w, arm))
     to_base = mount.rotation.T
+    position, velocity = None, (0.0, 0.0, 0.0)
+    if drone_position is not None:
+        position = tuple(np.asarray(drone_position, dtype=float) + drone.rotation @ arm)
+        moving = np.zeros(3) if drone_velocity is None else np.asarray(drone_velocity, float)
+        velocity = tuple(moving + drone.rotation @ np.cross(w, arm))
     return BaseMotion(
         tuple(base.quaternion),
         tuple(np.asarray(drone_acceleration, dtype=float) + drone.rotation @ lever),
         tuple(to_base @ w),
         tuple(to_base @ w_dot),
+        position_m=position,
+        velocity_m_s=velocity,
     )
 
 
@@ -128,18 +140,25 @@ class WorldService:
     def provider(self, simulated: DroneSimParams | None) -> PoseProvider:
         self.level_base()
         if simulated is not None:
-            return SimulatedDroneProvider(SimulatedDrone(simulated), self._feel_hook())
+            hook = self._feel_hook()
+            drone = SimulatedDrone(simulated)
+            return SimulatedDroneProvider(drone, hook, pose=hook is not None)
         return TrackerProvider(self.tracker)
 
     def _feel_hook(self):
-        """On the simulated robot, the drone's motion moves the twin's base (else None)."""
+        """On the simulated robot, the drone's motion moves the twin's base (else None):
+        its attitude, acceleration and turning, and its pose (the twin's plates fixed in
+        the world stay put)."""
         bus = self.controller.bus
         if not isinstance(bus, SimulatedBus):
             return None
         mount = self.mount
 
-        def feel(quaternion, acceleration, omega, omega_dot) -> None:
-            bus.set_base_motion(base_motion(mount, quaternion, acceleration, omega, omega_dot))
+        def feel(quaternion, acceleration, omega, omega_dot, position, velocity) -> None:
+            motion = base_motion(
+                mount, quaternion, acceleration, omega, omega_dot, position, velocity
+            )
+            bus.set_base_motion(motion)
 
         return feel
 

@@ -18,13 +18,16 @@ import numpy as np
 import pytest
 
 from app.config import load_settings
-from app.control import commands
+from app.control import commands, contact_commands
 from app.control.commands import CommandContext
+from app.control.contact import ContactMonitor
 from app.control.controller import Controller
 from app.control.errors import MotionRefused
 from app.control.loop_state import LoopState
+from app.control.press import PressSource
 from app.control.sources import JogSource, MoveSource, Setpoint
-from app.control.state import Fault
+from app.control.state import ContactReading, Fault
+from app.control.touch import TouchSource
 from tests.support.fake_bus import HOME_M, HOME_RAD, NO_ERRORS, FakeBus
 
 SETTINGS = load_settings()
@@ -62,6 +65,7 @@ class Given:
     errors: tuple[tuple[str, ...], ...] = NO_ERRORS
     estop_action: str = "hold"
     bus_fails: bool = False
+    estimate: bool = False  # a contact force estimate (a valid one, 0 N) on this robot
 
 
 def arrange(given: Given) -> tuple[LoopState, CommandContext, FakeBus]:
@@ -86,8 +90,22 @@ def arrange(given: Given) -> tuple[LoopState, CommandContext, FakeBus]:
         state.source = MoveSource(HOME_M, HOME_M + [0, 0.01, 0], ctx.jog_limits, None, False)
     elif given.source == "run":
         state.source = RunSource()
+    elif given.source == "touch":
+        state.source = TouchSource(HOME_M, [0, 0, -1], 0.01, 2.0, 0.8, 0.02)
+    elif given.source == "press":
+        state.source = PressSource(None, HOME_M, [0, 0, -1], 2.0, 0.01, 0.02)
+    if given.estimate:
+        state.contact_monitor = ContactMonitor(ZeroForce(), SETTINGS.contact)
+        state.contact = ContactReading(np.zeros(3), np.full(3, 0.1), True, None)
     bus.fail_reads = bus.fail_writes = given.bus_fails
     return state, ctx, bus
+
+
+class ZeroForce:
+    """A force estimator that reads no force."""
+
+    def estimate(self, joints, **_):
+        return ContactReading(np.zeros(3), np.full(3, 0.1), True, None)
 
 
 @dataclass(frozen=True)
@@ -164,6 +182,14 @@ def stop_active(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
 
 def fault(state: LoopState, ctx: CommandContext, bus: FakeBus) -> None:
     commands.record_fault(state, FAULT)
+
+
+def touch(state: LoopState, ctx: CommandContext, bus: FakeBus) -> str:
+    return contact_commands.touch(state, ctx, SETTINGS.contact, [0, 0, -1])["end_m"][2]
+
+
+def press(state: LoopState, ctx: CommandContext, bus: FakeBus) -> bool:
+    return "source_id" in contact_commands.press(state, ctx, SETTINGS.contact, [0, 0, -1], 2.0)
 
 
 def settle(state: LoopState, bus: FakeBus, joints_rad) -> None:
@@ -405,6 +431,46 @@ TABLE = [  # given, command, then: one row per transition
         Given(**ON, source="run"), stop_active, Then("idle", True, (), True),
         id="stop the active source: holds",
     ),
+    # contact (issue 33): touch and press start only with a force estimate and authority
+    pytest.param(
+        Given(**ON, estimate=True), touch, Then("touch", True, (), pytest.approx(HOME_M[2] - 0.05)),
+        id="touch from idle: down the default travel",
+    ),
+    pytest.param(
+        Given(**ON), touch, Then("idle", True, (), refused="no contact force estimate"),
+        id="touch without a force estimate: refused",
+    ),
+    pytest.param(
+        Given(estimate=True), touch, Then("idle", False, (), refused="torque is off"),
+        id="touch with torque off: refused",
+    ),
+    pytest.param(
+        Given(**ON, estimate=True, faulted=True), press,
+        Then("fault", True, (), refused="fault: joint 2", faults=1),
+        id="press while faulted: refused",
+    ),
+    pytest.param(
+        Given(**ON, estimate=True, source="jog"), press,
+        Then("press", True, (), True, same_source=False),
+        id="a press replaces a jog",
+    ),
+    pytest.param(
+        Given(**ON, source="touch"), estop, Then("estop", True, HOLD, "hold"),
+        id="e-stop (hold) during a touch: holds",
+    ),
+    pytest.param(
+        Given(**ON, source="press", estop_action="release"), estop,
+        Then("estop", False, RELEASE, "release"),
+        id="e-stop (release) during a press: torque off",
+    ),
+    pytest.param(
+        Given(**ON, source="press"), torque_off, Then("idle", False, RELEASE, False),
+        id="torque off stops a press",
+    ),
+    pytest.param(
+        Given(**ON, source="touch"), fault, Then("fault", True, (), None, faults=1),
+        id="fault during a touch: source dropped",
+    ),
 ]
 # fmt: on
 
@@ -635,3 +701,54 @@ def test_estop_without_the_loop_acts_at_once_and_other_commands_are_refused() ->
     assert loop.state.estopped and bus.calls == [("write_goal", HOME_RAD)]
     with pytest.raises(RuntimeError, match="not running"):
         loop.set_torque(True).result(timeout=0)
+
+
+class Pushing:
+    """A force estimator that reads ``force_n`` along -z, or an invalid estimate."""
+
+    def __init__(self, force_n: float, valid: bool = True) -> None:
+        self.force_n, self.valid = force_n, valid
+
+    def estimate(self, joints, **_):
+        if not self.valid:
+            return ContactReading(reason="current of joint 3 not read")
+        return ContactReading(np.array([0.0, 0.0, -self.force_n]), np.full(3, 0.1), True, None)
+
+
+@pytest.mark.parametrize(
+    ("source", "estimator", "collision_stop", "kind"),
+    [
+        ("touch", Pushing(16.0), False, "force limit"),
+        ("press", Pushing(0.0, valid=False), False, "estimate"),
+        ("move", Pushing(7.0), True, "collision"),
+        ("move", Pushing(7.0), False, None),  # force-limited motion off: a move goes on
+        ("touch", Pushing(14.0), False, None),  # under the limit: the touch goes on
+        ("move", Pushing(0.0, valid=False), False, None),  # no estimate needed to move
+    ],
+)
+def test_a_tick_past_a_contact_limit_faults_and_holds_where_measured(
+    source, estimator, collision_stop, kind
+) -> None:
+    bus = FakeBus()
+    loop = controller(bus, contact={"collision_stop": collision_stop})
+    loop.step()
+    commands.torque_to(loop.state, loop.ctx, bus, True)
+    loop.state.contact_monitor = ContactMonitor(estimator, loop.settings.contact)
+    if source == "move":
+        commands.move(loop.state, loop.ctx, HOME_M + np.array([0.0, 0.0, -0.04]), 0.5, False)
+    else:
+        loop.state.source = arrange(Given(**ON, source=source))[0].source
+    bus.position = np.array(HOME_RAD) + 0.001  # the arm measured a little off its command
+    bus.calls.clear()
+    loop.step()
+    if kind is None:
+        assert loop.state.mode != "fault" and loop.state.source is not None
+        return
+    assert loop.state.mode == "fault" and loop.state.faults[0].kind == kind
+    assert loop.state.source is None
+    # the one goal written: the joints where they were measured (nothing pushes further)
+    goals = [call[1] for call in bus.calls if call[0] == "write_goal"]
+    assert len(goals) == 1
+    np.testing.assert_allclose(goals[0], bus.position, atol=1e-12)
+    loop.step()
+    assert writes(bus) == 1  # and nothing after it

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from app.control.state import Fault, RobotInfo, Snapshot, unread
+from app.control.state import ContactReading, Fault, RobotInfo, Snapshot, TouchResult, unread
 from app.control.timing import TimingStats
 from app.link.codec import CodecError, decode, encode
 from hardware.bus import BusStats, PositionGains
@@ -28,6 +28,10 @@ def same(a, b) -> bool:
         return isinstance(b, float) and (a == b or (math.isnan(a) and math.isnan(b)))
     if isinstance(a, dict):
         return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if dataclasses.is_dataclass(a) and not isinstance(a, type):
+        return type(a) is type(b) and all(
+            same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a)
+        )
     return a == b
 
 
@@ -60,6 +64,26 @@ def snapshots(draw) -> Snapshot:
         source_id=draw(st.none() | st.text("abcdef0123", min_size=1, max_size=12)),
         source_t_s=draw(st.none() | st.floats(0, 1e6)),
         source_line=draw(st.none() | st.integers(1, 10**6)),
+        contact=ContactReading(
+            draw(vectors),
+            draw(vectors),
+            draw(st.booleans()),
+            draw(st.none() | st.text(max_size=20)),
+        ),
+        touch=draw(
+            st.none()
+            | st.builds(
+                TouchResult,
+                st.sampled_from(["touching", "contact", "no contact", "stopped"]),
+                vectors,
+                vectors,
+                floats,
+                floats,
+                vectors,
+                st.none() | st.text("abcdef0123", min_size=1, max_size=12),
+                vectors,
+            )
+        ),
     )
 
 

@@ -219,6 +219,55 @@ class ServoRole(_Out):
     joint: int | None = Field(description="1..3 for a leg (joint order); null for the wrist")
 
 
+class ContactStatus(_Out):
+    """The tip's contact force this tick (docs/contact.md): the force the tip applies on
+    what it touches, base frame [N], from the servos' currents through the model."""
+
+    force_n: MaybeVector3 = Field(description="contact force, base frame [N]")
+    std_n: MaybeVector3 = Field(description="its 1-sigma error per axis [N]")
+    magnitude_n: MaybeFloat = Field(description="|force_n| [N]")
+    valid: bool = Field(description="the estimate could be made this tick")
+    reason: str | None = Field(description="why not, when not valid")
+
+
+class TouchOut(_Out):
+    """How the last touch ended (app/control/touch.py)."""
+
+    outcome: Literal["touching", "contact", "no contact", "stopped"]
+    contact_point_m: MaybeVector3 = Field(description="where the surface starts, base frame [m]")
+    force_n: MaybeVector3 = Field(description="the contact force at its end [N]")
+    peak_force_n: MaybeFloat = Field(description="the largest force along its direction [N]")
+    travel_m: MaybeFloat = Field(description="how far it went along its direction [m]")
+    direction: MaybeVector3 = Field(description="the unit direction it moved along")
+    source_id: str | None
+    joints_at_contact_rad: MaybeVector3 = Field(
+        description="the legs' joints as read when contact was seen [rad]"
+    )
+
+
+class ContactLimitsOut(_Out):
+    force_limit_n: float = Field(description="the most a touch or press may push [N]")
+    collision_stop: bool = Field(description="force-limited motion is on")
+    collision_force_n: float = Field(description="the force that counts as a collision [N]")
+    detect_force_n: float = Field(description="a touch sees contact from this force [N]")
+    press_travel_m: float = Field(description="how far a press may shift its point [m]")
+
+
+class ContactDefaultsOut(_Out):
+    speed_m_s: float
+    force_n: float
+    max_travel_m: float
+
+
+class ContactOut(_Out):
+    """GET /api/contact: the estimate now, the last touch, the limits and touch defaults."""
+
+    estimate: ContactStatus
+    touch: TouchOut | None
+    limits: ContactLimitsOut
+    defaults: ContactDefaultsOut
+
+
 class WristServoStatus(_Out):
     """The wrist's servo (the fourth on the bus): phi as read and as last written [rad],
     and its readings as the legs' servos have them in ``joints``."""
@@ -275,6 +324,15 @@ class StatusOut(_Out):
         description="the position gains in use per leg servo id, register units: p, i, d, "
         "ff1, ff2 (POST /api/tuning/{run_id}/apply changes them)"
     )
+    servo_mode: Literal["position", "current_based_position"] = Field(
+        description="the legs' servos' operating mode: position (Dynamixel mode 3) or "
+        "current_based_position (mode 5: each joint's motor current, and so its torque, "
+        "bounded by goal_current_a); PUT /api/servos/current changes it with torque off"
+    )
+    goal_current_a: list[float] = Field(
+        description="the legs' Goal Current per leg in joint order [A], as last written "
+        "(a bound on the motor current in current_based_position; XM430-W210 up to 3.209)"
+    )
     servos: list[ServoRole] = Field(
         description="every servo on the bus in bus order with its role: the legs (as "
         "joints.servo_ids lists them, which stays the legs'), then the wrist's if fitted"
@@ -283,6 +341,7 @@ class StatusOut(_Out):
         description="the wrist's servo as last read (null figures before its first read); "
         "null without a wrist"
     )
+    contact: ContactStatus = Field(description="the tip's contact force estimate this tick")
 
 
 class TelemetryLoop(_Out):
@@ -340,6 +399,7 @@ class TelemetryMessage(_Out):
     loop: TelemetryLoop
     faults: list[FaultOut]
     world: WorldFrame | None
+    contact: ContactStatus = Field(description="the tip's contact force estimate this tick")
 
 
 class AxisStats(_Out):

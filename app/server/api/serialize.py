@@ -69,8 +69,43 @@ def status(
         "gains": {
             str(sid): g.as_dict() for sid, g in zip(snap.info.servo_ids, snap.gains, strict=True)
         },
+        "servo_mode": snap.servo_mode,
+        "goal_current_a": [float(c) for c in snap.goal_current_a],
         "servos": servos(snap),
         "wrist_servo": wrist_servo(snap),
+        "contact": contact(snap),
+    }
+
+
+def contact(snap: Snapshot) -> dict[str, Any]:
+    """The tip's contact force this tick (app/control/contact.py): ``force_n`` the force
+    the tip applies, base frame [N], ``std_n`` its 1-sigma error [N], ``valid``, ``reason``
+    (why not valid), ``magnitude_n`` [N]."""
+    reading = snap.contact
+    return {
+        "force_n": floats(reading.force_n),
+        "std_n": floats(reading.std_n),
+        "magnitude_n": _maybe(reading.magnitude_n),
+        "valid": reading.valid,
+        "reason": reading.reason,
+    }
+
+
+def touch(snap: Snapshot) -> dict[str, Any] | None:
+    """The last touch (app/control/touch.py): outcome, contact point [m], force [N], peak
+    force along its direction [N], travel [m], direction, id; None: none yet."""
+    result = snap.touch
+    if result is None:
+        return None
+    return {
+        "outcome": result.outcome,
+        "contact_point_m": floats(result.contact_point_m),
+        "force_n": floats(result.force_n),
+        "peak_force_n": _maybe(result.peak_force_n),
+        "travel_m": _maybe(result.travel_m),
+        "direction": floats(result.direction),
+        "source_id": result.source_id,
+        "joints_at_contact_rad": floats(result.joints_at_contact_rad),
     }
 
 
@@ -166,6 +201,7 @@ def telemetry(snap: Snapshot) -> dict[str, Any]:
         },
         "faults": [f.as_dict() for f in snap.faults],
         "world": world_frame(snap),
+        "contact": contact(snap),  # the tip's force estimate (the plots' "tip force")
     }
 
 

@@ -14,10 +14,12 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, HTTPException, Request
 from pydantic import BaseModel, ConfigDict, Field
 
+from app.config import XM430_CURRENT_LIMIT_A
 from app.control.errors import GoalRejected, MotionRefused
 from app.runs.logs import read_csv_rows
 from app.server.api.deps import (
     CalibrationDep,
+    CommandWait,
     ControlClient,
     ControllerDep,
     RunsDep,
@@ -193,6 +195,61 @@ def _joint(controller: Any, servo_id: int) -> int:
 async def _read(controller: Any, servo_id: int) -> PositionGains:
     read = await asyncio.to_thread(lambda: controller.read_gains().result(READ_TIMEOUT_S))
     return read[servo_id]
+
+
+class ServoCurrentRequest(BaseModel):
+    """The legs' servos' operating mode and Goal Current (Dynamixel Goal Current, 102)."""
+
+    model_config = ConfigDict(extra="forbid")
+    operating_mode: Literal["position", "current_based_position"] = Field(
+        description="position (Dynamixel mode 3), or current_based_position (mode 5: each "
+        "joint's motor current, and so its torque, bounded by goal_current_a)"
+    )
+    goal_current_a: list[Annotated[float, Field(gt=0, le=XM430_CURRENT_LIMIT_A)]] = Field(
+        min_length=3,
+        max_length=3,
+        description="Goal Current per leg in joint order [A], each > 0 and <= 3.209 (the "
+        "XM430-W210's Current Limit)",
+    )
+
+
+class ServoCurrentOut(BaseModel):
+    operating_mode: Literal["position", "current_based_position"]
+    goal_current_a: list[float] = Field(description="per leg in joint order [A], as written")
+
+
+@router.put(
+    "/servos/current",
+    response_model=ServoCurrentOut,
+    responses={
+        **CONTROL,
+        409: {
+            "model": ErrorBody,
+            "description": "torque is on (the mode is an EEPROM item: turn torque off "
+            "first), a motion, a calibration or a tuning runs, or another client holds "
+            "control",
+        },
+    },
+)
+async def put_servo_current(
+    body: ServoCurrentRequest,
+    controller: ControllerDep,
+    tuning: TuningDep,
+    calibration: CalibrationDep,
+    wait_s: CommandWait,
+    _: ControlClient,
+) -> dict[str, Any]:
+    """Write the legs' operating mode (with torque off) and then their Goal Current, and
+    answer what is in use (GET /api/status shows it as servo_mode and goal_current_a).
+    422 naming the field for a bad value (nothing is written); 409 while torque is on or
+    while a motion, a run, a calibration or a tuning runs. Not written to the config file:
+    [hardware] operating_mode and goal_current_a set it at start."""
+    if calibration.running():
+        raise MotionRefused("a calibration run is in progress: the servo mode changes once it ends")
+    if tuning.running():
+        raise MotionRefused("a tuning run is in progress: the servo mode changes once it ends")
+    future = controller.set_servo_current(body.operating_mode, body.goal_current_a)
+    return await asyncio.wait_for(asyncio.wrap_future(future), wait_s)
 
 
 @router.get(
