@@ -69,6 +69,13 @@ TRACKING_SCHEMA: dict[str, Any] = {
         "goal_m": _XYZ,
         "platform_m": _XYZ,
         "phi_rad": _NUMBER,
+        "contact_force_n": {
+            **_XYZ,
+            "description": "the tip's contact force estimate, the force it applies [N] "
+            "(docs/contact.md); null while not valid",
+        },
+        "contact_std_n": _XYZ,
+        "contact_valid": {"type": "boolean"},
     },
 }
 LOOP_SCHEMA: dict[str, Any] = {
@@ -218,6 +225,9 @@ def tracking(snap: Snapshot) -> dict[str, Any]:
         "goal_m": xyz(snap.goal_m),
         "platform_m": xyz(snap.platform_measured_m),
         "phi_rad": number(snap.tool_phi_rad),
+        "contact_force_n": xyz(snap.contact.force_n) if snap.contact.valid else None,
+        "contact_std_n": xyz(snap.contact.std_n) if snap.contact.valid else None,
+        "contact_valid": snap.contact.valid,
     }
 
 

@@ -29,6 +29,7 @@ JOINT_STATE = "sensor_msgs/msg/JointState"
 TF = "tf2_msgs/msg/TFMessage"
 POSE = "geometry_msgs/msg/PoseStamped"
 DIAGNOSTICS = "diagnostic_msgs/msg/DiagnosticArray"
+WRENCH = "geometry_msgs/msg/WrenchStamped"
 
 
 ODOMETRY = "nav_msgs/msg/Odometry"
@@ -183,6 +184,22 @@ class Messages:
         return self._pose(
             stamp_s, self.ros.base_frame, tip, (math.cos(phi / 2), 0, 0, math.sin(phi / 2))
         )
+
+    def tip_wrench(self, snap: Snapshot, stamp_s: float) -> Any | None:
+        """The tip's contact force as estimated this tick (docs/contact.md): the force the
+        tip applies on what it touches, base frame [N], no torque; None while the estimate
+        is not valid."""
+        reading = snap.contact
+        force = np.asarray(reading.force_n, dtype=float)
+        if not reading.valid or not np.isfinite(force).all():
+            return None
+        t = self.types
+        vector = t["geometry_msgs/msg/Vector3"]
+        wrench = t["geometry_msgs/msg/Wrench"](
+            force=vector(x=float(force[0]), y=float(force[1]), z=float(force[2])),
+            torque=vector(x=0.0, y=0.0, z=0.0),
+        )
+        return t[WRENCH](header=self._header(stamp_s, self.ros.base_frame), wrench=wrench)
 
     def tip_world(self, snap: Snapshot, stamp_s: float, frame: str | None = None) -> Any | None:
         """The measured tip in the world while holding in it, in ``frame`` (None: ``[ros2]

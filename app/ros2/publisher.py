@@ -2,7 +2,8 @@
 
 A ROS 2 node (``[ros2] node_name`` in ``namespace``) with publishers of
 ``sensor_msgs/JointState``, ``/tf``, ``/tf_static``, the tip's ``PoseStamped`` in the base
-frame and in the world while holding, and ``diagnostic_msgs/DiagnosticArray``
+frame and in the world while holding, its contact force (``geometry_msgs/WrenchStamped``,
+docs/contact.md) and ``diagnostic_msgs/DiagnosticArray``
 (app/ros2/messages.py), on rmw_zenoh's keys with its liveliness tokens and attachments
 (app/ros2/graph.py), or on zenoh-bridge-ros2dds's keys (``form`` bridge).
 
@@ -33,6 +34,7 @@ from app.ros2.messages import (
     JOINT_STATE,
     POSE,
     TF,
+    WRENCH,
     Messages,
     diagnostic_level,
     type_hash,
@@ -96,6 +98,7 @@ class RosPublisher:
         self.tip_pose = self._declare(ros.tip_pose_topic, POSE)
         self.tip_world = self._declare(ros.tip_world_topic, POSE)
         self.diagnostics = self._declare(ros.diagnostics_topic, DIAGNOSTICS)
+        self.tip_wrench = self._declare(ros.tip_wrench_topic, WRENCH)
         self._thread = threading.Thread(target=self._run, name="ros2-publish", daemon=True)
         self._thread.start()
 
@@ -108,6 +111,7 @@ class RosPublisher:
             self.tip_pose,
             self.tip_world,
             self.diagnostics,
+            self.tip_wrench,
         ]
 
     def _declare(self, name: str, typename: str, transient_local: bool = False) -> Topic:
@@ -194,6 +198,11 @@ class RosPublisher:
                     and (world := messages.tip_world(snap, stamp, self._world_frame())) is not None
                 ):
                     self._put(self.tip_world, world, stamp)
+                if (
+                    self._wanted(self.tip_wrench)
+                    and (wrench := messages.tip_wrench(snap, stamp)) is not None
+                ):
+                    self._put(self.tip_wrench, wrench, stamp)
                 now_level = diagnostic_level(snap)[0]
                 due = now - diagnostics_at >= DIAGNOSTICS_EVERY_S or now_level != level
                 if due and self._wanted(self.diagnostics):

@@ -15,7 +15,7 @@ import pytest
 from foxglove.messages import FrameTransforms, JointStates, LogLevel
 
 from app.config import load_settings
-from app.control.state import Fault, Snapshot
+from app.control.state import ContactReading, Fault, Snapshot
 from app.foxglove import messages
 from app.foxglove.live import RunWatch
 from app.ros2.messages import Messages
@@ -76,6 +76,16 @@ def test_the_error_is_null_without_a_setpoint_and_the_frames_still_drawn():
     assert tracking["measured_m"] == {"x": 0.01, "y": -0.02, "z": pytest.approx(-0.26)}
     on = messages.tracking(_moving())
     assert on["error_mm"]["x"] == pytest.approx(1.0) and on["error_norm_mm"] == pytest.approx(1.0)
+
+
+def test_the_tracking_carries_the_contact_estimate_only_while_valid():
+    assert messages.tracking(Snapshot())["contact_force_n"] is None
+    reading = ContactReading(np.array([0.5, 0.0, -2.0]), np.array([0.1, 0.1, 0.2]), True, None)
+    tracking = messages.tracking(replace(Snapshot(), contact=reading))
+    json.dumps(tracking, allow_nan=False)
+    assert tracking["contact_force_n"] == {"x": 0.5, "y": 0.0, "z": -2.0}
+    assert tracking["contact_std_n"]["z"] == 0.2 and tracking["contact_valid"] is True
+    assert set(tracking) <= set(messages.TRACKING_SCHEMA["properties"])
 
 
 @pytest.mark.parametrize("phi", [0.0, 0.7])

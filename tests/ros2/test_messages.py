@@ -5,6 +5,7 @@ kinematics' tool."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,7 +16,7 @@ from zenoh_ros2_sdk.qos import QosDurability, QosProfile, QosReliability
 from zenoh_ros2_sdk.utils import get_type_hash, load_dependencies_recursive
 
 from app.config import Settings
-from app.control.state import Fault, Snapshot
+from app.control.state import ContactReading, Fault, Snapshot
 from app.ros2 import graph
 from app.ros2.messages import (
     DIAGNOSTICS,
@@ -25,6 +26,7 @@ from app.ros2.messages import (
     POSE,
     PX4_ODOMETRY,
     TF,
+    WRENCH,
     Messages,
     type_hash,
 )
@@ -32,7 +34,7 @@ from kinematics import THESIS_DELTA
 from kinematics.tool import Tool
 from tests.ros2.definitions import MSG, decoder, text
 
-TYPES = [JOINT_STATE, TF, POSE, POINT, DIAGNOSTICS, ODOMETRY, PX4_ODOMETRY]
+TYPES = [JOINT_STATE, TF, POSE, POINT, DIAGNOSTICS, ODOMETRY, PX4_ODOMETRY, WRENCH]
 
 
 @pytest.mark.parametrize("typename", TYPES)
@@ -114,6 +116,20 @@ def test_the_tip_poses_in_the_base_and_the_world(messages: Messages) -> None:
     assert [p.x, p.y, p.z] == [1.0, 2.0, 0.5]
     assert 2 * math.atan2(q.z, q.w) == pytest.approx(0.25)
     assert messages.tip_world(Snapshot(), 5.0) is None  # not holding: nothing to say
+
+
+def test_the_tip_wrench_is_the_contact_estimate_in_the_base_frame(messages: Messages) -> None:
+    snap = dataclasses.replace(
+        Snapshot(),
+        contact=ContactReading(np.array([0.25, -1.5, -2.0]), np.full(3, 0.1), True, None),
+    )
+    out = _decode(messages, messages.tip_wrench(snap, 7.25), WRENCH)
+    assert out.header.frame_id == "delta_base"
+    assert (out.header.stamp.sec, out.header.stamp.nanosec) == (7, 250_000_000)
+    f, t = out.wrench.force, out.wrench.torque
+    assert [f.x, f.y, f.z] == [0.25, -1.5, -2.0]
+    assert [t.x, t.y, t.z] == [0.0, 0.0, 0.0]
+    assert messages.tip_wrench(Snapshot(), 7.0) is None  # no valid estimate: nothing sent
 
 
 def test_diagnostics_say_error_on_an_e_stop_and_name_the_fault(messages: Messages) -> None:

@@ -144,7 +144,7 @@ def test_an_independent_peer_sees_the_robots_topics(tmp_path: Path) -> None:
 
         def listed() -> dict[str, list[str]] | None:
             found = dict(peer.ask(op="topics")["topics"])
-            return found if len(found) >= 6 else None
+            return found if len(found) >= 7 else None
 
         topics = wait_for(listed, "deltadash's topics in the graph")
         assert topics == {
@@ -154,6 +154,7 @@ def test_an_independent_peer_sees_the_robots_topics(tmp_path: Path) -> None:
             "/delta/tip_pose": ["geometry_msgs/msg/PoseStamped"],
             "/delta/tip_pose_world": ["geometry_msgs/msg/PoseStamped"],
             "/diagnostics": ["diagnostic_msgs/msg/DiagnosticArray"],
+            "/delta/tip_wrench": ["geometry_msgs/msg/WrenchStamped"],
         }
         for topic, typename in (
             ("/joint_states", JOINT_STATE),
