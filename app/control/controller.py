@@ -459,6 +459,11 @@ class Controller:
             self._ctx = dataclasses.replace(self._ctx, model=new)
             if (gravity := self.state.gravity) is not None:
                 self.state.gravity = dataclasses.replace(gravity, robot=dynamics_robot(robot))
+            monitor = self.state.contact_monitor  # the force estimate: the new geometry
+            if monitor is not None and isinstance(monitor.estimator, ForceEstimator):
+                rotary = dynamics_robot(robot)
+                if isinstance(rotary, RotaryDelta):
+                    monitor.estimator = monitor.estimator.with_robot(rotary)
             self.state.notice = f"robot model from {origin}; " + (self.state.notice or "")
             return new
 

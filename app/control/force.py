@@ -184,6 +184,11 @@ class ForceEstimator:
         self.budget = budget or ForceErrorBudget()
         self.min_dexterity = float(min_dexterity)
 
+    def with_robot(self, robot: RotaryDelta) -> ForceEstimator:
+        """The same estimator on ``robot`` (a calibration's geometry); TypeError for a
+        robot that is not a RotaryDelta."""
+        return ForceEstimator(robot, self.mass, self.kt, self.budget, self.min_dexterity)
+
     def torques_nm(self, current_a: Any) -> np.ndarray:
         """Joint torques [N m] (3,) of currents [A] (3,), signed in the joints' direction."""
         return self.kt * np.asarray(current_a, dtype=float)

@@ -17,6 +17,7 @@ from app.config import load_settings
 from app.control import commands
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
+from app.control.force import force_estimator
 from app.control.sources import MoveSource
 from kinematics import THESIS_DELTA, PerLegRotaryDelta, RotaryDelta
 from tests.support.fake_bus import HOME_RAD, FakeBus
@@ -244,3 +245,16 @@ def test_refused_while_the_arm_still_settles_onto_a_moves_goal() -> None:
         future.result(timeout=0)
     assert loop.model.version == 0
     np.testing.assert_array_equal(loop.joint_offsets_rad, 0.0)
+
+
+def test_the_force_estimate_takes_the_applied_geometry() -> None:
+    """A calibration's geometry reaches the contact force estimate too (its Jacobian and
+    dynamics): the estimator's robot is the new model's symmetric mean after the apply."""
+    loop, _, _ = _holding()
+    monitor = loop.state.contact_monitor
+    monitor.estimator = force_estimator(THESIS_DELTA)  # as on a bus that carries the arm
+    _apply(loop, LONG_RODS)
+    robot = monitor.estimator.robot
+    assert isinstance(robot, RotaryDelta)
+    assert robot.l == pytest.approx(np.mean([0.2450, 0.2445, 0.2455]))
+    assert robot.l != THESIS_DELTA.l
