@@ -126,7 +126,7 @@ class PressSource:
         f = float(np.dot(reading.force_n, d)) if reading is not None and reading.valid else math.nan
         self.f = f
         wanted = self.set_force_n()
-        if math.isfinite(f):
+        if math.isfinite(f) and reading is not None and reading.fresh:
             self.in_contact = f >= CONTACT_FRACTION * self.force
             self.had_contact = self.had_contact or self.in_contact
             self.s += self.gain * (wanted - f) * dt_s

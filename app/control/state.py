@@ -102,13 +102,16 @@ class ContactReading:
     force_n: the force the tip applies on what it touches, base frame [N], (3,) (NaN when
     not known); std_n: its 1-sigma uncertainty per axis [N], (3,); valid: the estimate
     could be made this tick (every leg's current read, the Jacobian usable); reason: why
-    not, when it could not (None otherwise).
+    not, when it could not (None otherwise); fresh: the read was news (False: a simulator
+    that did not step since the last read; a touch and a press then wait, commanding
+    nothing new from an old force).
     """
 
     force_n: np.ndarray = field(default_factory=lambda: _NAN3)
     std_n: np.ndarray = field(default_factory=lambda: _NAN3)
     valid: bool = False
     reason: str | None = "not estimated"
+    fresh: bool = True  # the read it came from was news (a lagging simulator's is not)
 
     @property
     def magnitude_n(self) -> float:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -72,7 +72,8 @@ def _check_contact(state: LoopState, ctx: CommandContext, ports: TickPorts, now:
     # (a hold in the world, a press on one), else the level base's
     base = getattr(state.source, "base_pose", None)
     monitor.gravity = None if base is None else np.asarray(base.rotation).T @ LEVEL_GRAVITY
-    state.contact = monitor.read(state.joints)
+    reading = monitor.read(state.joints)
+    state.contact = reading if not state.freshness.stale else replace(reading, fresh=False)
     source = state.source if commands.motion_allowed(state) else None
     fault = monitor.check(state.contact, source, state.point_m, now())
     if fault is None:

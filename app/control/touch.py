@@ -136,10 +136,15 @@ class TouchSource:
 
     def next(self, dt_s: float) -> Setpoint:
         self.t_s += dt_s
+        if self._reading is not None and not self._reading.fresh:
+            return self._setpoint()  # an old force: command nothing new from it, wait
         x = float(np.dot(self._point - self.start, self.d))
         f = self._f - self.tare_n
         if self.phase == "approach":
-            if math.isfinite(f) and f >= self.detect:
+            # contact is judged on the tared force only once the tare is taken (a touch
+            # started while the arm settles reads its deceleration as a force)
+            tared = len(self._tare_f) >= TARE_SETTLE
+            if math.isfinite(f) and (f >= self.detect and tared or self._f >= self.force):
                 self.phase = "press"
                 self._at_contact = self._point.copy()
                 if self._joints is not None:

@@ -91,3 +91,41 @@ def test_bad_values_are_refused_naming_the_field(values, field) -> None:
 def test_a_direction_must_be_three_finite_numbers_not_zero(direction) -> None:
     with pytest.raises(ValueError, match="direction"):
         unit_direction(direction)
+
+
+def test_an_old_reading_commands_nothing_new() -> None:
+    """A lagging simulator's stale read: the touch waits (the command does not advance
+    on a force that is not news), then goes on."""
+    touch = TouchSource(START, D, 0.01, 2.0, 0.8, 0.05)
+    fresh = ContactReading(np.zeros(3), np.full(3, 0.1), True, None)
+    for _ in range(50):
+        touch.observe_contact(fresh, START, np.zeros(3))
+        touch.next(PERIOD_S)
+    moved = touch.s
+    stale = ContactReading(np.zeros(3), np.full(3, 0.1), True, None, fresh=False)
+    for _ in range(50):
+        touch.observe_contact(stale, START, np.zeros(3))
+        setpoint = touch.next(PERIOD_S)
+    assert touch.s == moved
+    assert float(np.dot(setpoint.point_m - START, D)) == pytest.approx(moved, abs=1e-15)
+    touch.observe_contact(fresh, START, np.zeros(3))
+    touch.next(PERIOD_S)
+    assert touch.s > moved
+
+
+def test_a_touch_started_while_the_arm_settles_does_not_see_contact_at_once() -> None:
+    """1.1 N read at the start (the arm decelerating from a move), fading over 50 ms: no
+    contact before the tare is taken; the surface 10 mm on is found."""
+    touch = TouchSource(START, D, 0.01, 2.0, 0.8, 0.05)
+    for k in range(10_000):
+        setpoint = touch.next(PERIOD_S)
+        s = float(np.dot(setpoint.point_m - START, D))
+        pressed = max(0.0, s - 0.01)
+        force = 1.1 * max(0.0, 1.0 - k * PERIOD_S / 0.05) + 600.0 * pressed
+        reading = ContactReading(D * force, np.full(3, 0.1), True, None)
+        touch.observe_contact(reading, START + D * min(s, 0.01), np.zeros(3))
+        if setpoint.finished:
+            break
+    result = touch.touch_result
+    assert result.outcome == "contact"
+    assert float(np.dot(result.contact_point_m - START, D)) == pytest.approx(0.01, abs=1e-4)

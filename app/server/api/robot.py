@@ -90,6 +90,14 @@ async def post_move(
     return await _outcome(future, wait_s)
 
 
+@router.post("/stop", response_model=Accepted, responses=CONTROL)
+async def post_stop(controller: ControllerDep, wait_s: CommandWait, _: ControlClient):
+    """Stop the active motion (a move, a run, a touch, a press): the arm holds where it is
+    commanded, torque stays on, nothing to reset (not an e-stop). ``result``: whether a
+    motion was running."""
+    return await _outcome(controller.stop_any(), wait_s)
+
+
 @router.post("/torque", response_model=Accepted, responses=CONTROL)
 async def post_torque(
     body: TorqueRequest, controller: ControllerDep, wait_s: CommandWait, _: ControlClient

@@ -136,3 +136,15 @@ def test_a_press_over_the_force_limit_is_refused(client) -> None:
         "/api/contact/press", json={"direction": [0, 0, -1], "force_n": 2.0, "hold": {}}
     )
     assert answer.status_code == 422 and "hold" in answer.text, answer.text
+
+
+def test_stop_ends_a_press_and_the_arm_holds_without_a_reset(client) -> None:
+    _go(client, [0.0, 0.0, -0.255])
+    ok_json(client.post("/api/contact/press", json={"direction": [0, 0, -1], "force_n": 2.0}))
+    wait_for(lambda: _status(client)["mode"] == "press", "the press running")
+    answer = ok_json(client.post("/api/stop"))
+    assert answer["result"] is True
+    status = _status(client)
+    assert status["mode"] == "idle" and not status["estopped"] and status["torque"]
+    assert ok_json(client.post("/api/stop"))["result"] is False  # nothing left to stop
+    _go(client, [0.0, 0.0, -0.24])
