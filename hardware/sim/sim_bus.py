@@ -71,6 +71,9 @@ class SimBusConfig:
     measurement_frame_position_m, measurement_frame_rpy_rad: the measurement's frame in the
     base frame (origin [m]; roll, pitch, yaw [rad], Rz Ry Rx): the measurement is
     Rm^T (P + marker - tm) + noise (kinematics.identification.MeasurementFrame).
+    current_noise_a: white noise on each Present Current read, before it is rounded to
+    the register's 2.69 mA [A] (0: none; a real XM430 reads a few units of noise), from
+    its own generator (seed + 1) so the measurement's noise stays as it was.
     """
 
     twin: TwinConfig = TwinConfig()
@@ -81,6 +84,12 @@ class SimBusConfig:
     torque_on_at_start: bool = False
     measurement_frame_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     measurement_frame_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    current_noise_a: float = 0.0
+
+    def __post_init__(self) -> None:
+        noise = self.current_noise_a
+        if not (isinstance(noise, int | float) and np.isfinite(noise) and 0.0 <= noise <= 1.0):
+            raise ValueError(f"current_noise_a = {noise!r}: must be within 0 .. 1 A")
 
     @property
     def measurement_frame(self) -> MeasurementFrame:
@@ -124,6 +133,7 @@ class SimBus:
         self.n = len(self.ids)  # three legs, and a wrist when the twin has one
         self.lock = threading.RLock()  # the twin has one owner at a time
         self._rng = np.random.default_rng(self.config.seed)
+        self._current_rng = np.random.default_rng(self.config.seed + 1)
         self._stats = BusStats()
         self._connected = False
         self._thread: threading.Thread | None = None
@@ -355,7 +365,10 @@ class SimBus:
         outputs = twin.outputs
         velocity_units = [rad_s_to_velocity(v) for v in twin.shaft_rad_s]
         velocity = [velocity_to_rad_s(v) for v in velocity_units]
-        current = [current_to_ampere(ampere_to_current(o.current_a)) for o in outputs]
+        raw = np.array([o.current_a for o in outputs])
+        if self.config.current_noise_a:
+            raw = raw + self._current_rng.normal(0.0, self.config.current_noise_a, raw.shape)
+        current = [current_to_ampere(ampere_to_current(float(a))) for a in raw]
         # Present Velocity's Moving flag: above Moving Threshold (10 units by default)
         moving = [abs(v) > MOVING_THRESHOLD_UNITS for v in velocity_units]
         return JointState(

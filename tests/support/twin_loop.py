@@ -25,14 +25,18 @@ from hardware.sim.twin import TwinConfig
 
 
 class TwinLoop:
-    """A controller on the twin with ``plates`` (hardware/sim/surfaces.py), ``settings``
-    overrides as load_settings takes them (sections as dicts)."""
+    """A controller on the twin with ``plates`` (hardware/sim/surfaces.py), ``bus``:
+    SimBusConfig's other fields (e.g. current_noise_a), ``settings`` overrides as
+    load_settings takes them (sections as dicts)."""
 
-    def __init__(self, plates: Sequence[Plate] = (), **overrides: Any) -> None:
+    def __init__(
+        self, plates: Sequence[Plate] = (), bus: dict[str, Any] | None = None, **overrides: Any
+    ) -> None:
         self.settings: Settings = load_settings(**overrides)
         tool = self.settings.tool.offset_m
         twin = TwinConfig(plates=tuple(plates), tip_offset_m=tool)
-        self.bus = SimBus(SimBusConfig(twin=twin, realtime=False, torque_on_at_start=True))
+        options = {"realtime": False, "torque_on_at_start": True, **(bus or {})}
+        self.bus = SimBus(SimBusConfig(twin=twin, **options))
         self.bus.connect()
         self.now_s = 0.0
         self.controller = Controller(self.settings, self.bus, "sim", clock=lambda: self.now_s)
