@@ -2,7 +2,8 @@
 
 ``serve`` (serve.py), ``robot`` (robot.py), ``run`` (run.py), ``runs`` (runs.py),
 ``design`` (design/), ``home`` (home.py), ``ik`` and ``fk`` (kinematics.py); ``emulate``
-(emulate.py); ``gcode`` (gcode.py); ``calibrate`` (calibrate.py); ``tune`` (tune.py).
+(emulate.py); ``gcode`` (gcode.py); ``calibrate`` (calibrate.py); ``tune`` (tune.py);
+``touch`` (touch.py).
 
 Building the parser imports no heavy library (fastapi, uvicorn, mujoco, matplotlib, scipy,
 viser, pydantic): each handler imports what it needs, so ``deltadash --help``, ``ik`` and
@@ -26,6 +27,7 @@ from app.cli import (
     run,
     runs,
     serve,
+    touch,
     tune,
 )
 from app.cli.numbers import allow_negative_numbers
@@ -46,6 +48,7 @@ examples:
   deltadash fk 30 30 30                    platform point for joint angles in degrees
   deltadash design size                    motor sizing, and why it differs from the thesis
   deltadash gcode check examples/circle.ngc  a G-code program checked offline
+  deltadash touch --direction 0,0,-1 --force 2  touch a surface on a running server
 
 Run "deltadash COMMAND --help" for a command's options."""
 
@@ -70,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     gcode.add_parser(commands)
     calibrate.add_parser(commands)
     tune.add_parser(commands)
+    touch.add_parser(commands)
     kinematics.add_parsers(commands)
     allow_negative_numbers(parser)  # -0,5 and -2e-3 are values, as -5 is
     return parser

@@ -105,6 +105,12 @@ COLUMNS = [
     # words (app/link/paths.py Playback); empty while it runs. Standing, one row a second
     # is kept (app/runs/recorder.py)
     "paused",
+    # the tip's contact force estimate (app/control/contact.py): the force the tip applies,
+    # base frame [N], empty when not known; contact_valid: the estimate could be made
+    "contact_force_x_n",
+    "contact_force_y_n",
+    "contact_force_z_n",
+    "contact_valid",
 ]
 
 SCHEMA = {

@@ -82,6 +82,9 @@ def row_of(snap: Snapshot, t_s: float) -> dict[str, Any]:
     row["world_heading_measured_rad"] = extra.get("measured_heading_world_rad")
     row["heading_limited"] = extra.get("heading_limited")
     row["paused"] = None  # a program standing or braking to: set by the recorder
+    for name, value in zip("xyz", _values(snap.contact.force_n), strict=True):
+        row[f"contact_force_{name}_n"] = value  # NaN (not known) is logged empty
+    row["contact_valid"] = bool(snap.contact.valid)
     return row
 
 

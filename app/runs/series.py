@@ -29,6 +29,7 @@ SIGNALS = (
     "phi_goal_rad",
     "phi_measured_rad",
     "lateness_ms",
+    *(f"contact_force_{a}_n" for a in AXES),
 )
 
 

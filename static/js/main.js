@@ -3,6 +3,7 @@
 import { get } from "./api.js";
 import { startCalibration } from "./calibration.js";
 import { startControl } from "./control.js";
+import { onContactStatus, startContact } from "./contact.js";
 import { startHold } from "./hold.js";
 import { renderHealth } from "./health.js";
 import { startPlotsFrame } from "./plotshost.js";
@@ -28,7 +29,7 @@ async function boot() {
   startScene(info);
   startStatus();
   state.listeners.push(onStatus, renderWrist, sceneStatus);
-  state.listeners.push(renderHealth, onWorkspaceStatus, onServoStatus);
+  state.listeners.push(renderHealth, onWorkspaceStatus, onServoStatus, onContactStatus);
   startControl(info);
   startRuns();
   startPlotsFrame(info);
@@ -40,6 +41,7 @@ async function boot() {
   startCalibration();
   startTuning();
   startHold();
+  startContact();
 }
 
 boot();

@@ -17,7 +17,8 @@
 // - Snapshot: the plots as a PNG file (Plotly.toImage), as shown (paused, zoomed).
 // - The time window: 5 s to 5 min. The signals: position (goal, measured, error per axis),
 //   joints (commanded, measured, error per joint), servos (current and PWM per leg servo),
-//   the drone's pose in a hold (position and attitude). y zoom: fit, or 2-10 times closer.
+//   the drone's pose in a hold (position and attitude), the tip force (the contact force
+//   estimate per axis and its 1-sigma, telemetry "contact"). y zoom: fit, or 2-10 times closer.
 // - Replay: a recorded run (GET /api/runs/{id}/series) in the same plots, against run time;
 //   live samples are dropped meanwhile, "Live" goes back.
 // - The XY path (plotsxy.js): the tool's path seen from above over the window.
@@ -64,6 +65,10 @@ const SETS = {
     label: "drone pose", columns: ["x", "y", "z"], names: [null, "position", "attitude"],
     top: (c) => `drone ${c} [mm]`, bottom: (c, i) => `drone ${["roll", "pitch", "yaw"][i]} [°]`,
     unit: "mm, °", minSpan: [2, 0.5],
+  },
+  force: {
+    label: "tip force", columns: ["x", "y", "z"], names: [null, "force", "1σ"],
+    top: (c) => `tip force ${c} [N]`, bottom: (c) => `1σ ${c} [N]`, unit: "N", minSpan: [1, 0.1],
   },
 };
 let set = "position";
@@ -354,6 +359,7 @@ function liveValues(raw) {
   const joint = (v, i) => (v ? v[i] : null);
   const pose = raw.world && raw.world.drone_pose;
   const turn = pose && pose.length === 7 ? attitude(pose[3], pose[4], pose[5], pose[6]) : null;
+  const force = raw.contact || {}; // the force the tip applies, base frame [N] (null: unknown)
   for (let i = 0; i < 3; i++) {
     const mm = (v) => round(v ? v[i] : null, 1000, 1000); // [m] -> mm, 1 um steps
     out[`position_0_${i}`] = mm(m.goal_m);
@@ -367,6 +373,8 @@ function liveValues(raw) {
     out[`servos_2_${i}`] = round(joint(raw.pwm, i), 100, 100);
     out[`drone_1_${i}`] = round(pose ? pose[i] : null, 1000, 1000);
     out[`drone_2_${i}`] = round(turn ? turn[i] : null, DEG, 1000);
+    out[`force_1_${i}`] = round(joint(force.force_n, i), 1, 1000);
+    out[`force_2_${i}`] = round(joint(force.std_n, i), 1, 1000);
   }
   return out;
 }
@@ -395,7 +403,8 @@ function onMessage(message) {
 }
 
 // A recorded run in the plots (GET /api/runs/{id}/series): the log's values, in the same
-// units as live; what the log does not have (servo current and PWM, the drone's pose) is
+// units as live; what the log does not have (servo current and PWM, the drone's pose, the
+// tip force's 1σ) is
 // left empty. Live samples are dropped until liveAgain().
 export async function replayRun(runId) {
   const state = document.getElementById("plot-state");
@@ -433,6 +442,8 @@ export async function replayRun(runId) {
       values[`joints_1_${i}`] = round(measured, DEG, 1000);
       values[`joints_2_${i}`] = commanded === null || measured === null ? NaN : round(commanded - measured, DEG, 1000);
       for (const key of [`servos_1_${i}`, `servos_2_${i}`, `drone_1_${i}`, `drone_2_${i}`]) values[key] = NaN;
+      values[`force_1_${i}`] = round(at(`contact_force_${a}_n`, j), 1, 1000); // the log has no 1σ
+      values[`force_2_${i}`] = NaN;
     });
     pushSample(values);
   }

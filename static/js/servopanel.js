@@ -289,9 +289,20 @@ function chooseServo(id) {
   read({ quiet: true });
 }
 
+// The legs' operating mode and Goal Current per leg [A], read-only: in current-based
+// position (Dynamixel mode 5) each joint's current, and so its torque, stays under it.
+function modeText(s) {
+  if (!s.servo_mode || !Array.isArray(s.goal_current_a)) return "";
+  const mode = s.servo_mode === "current_based_position" ? "current-based position (mode 5)"
+    : "position (mode 3)";
+  const currents = s.goal_current_a.map((a) => `${a.toFixed(3)}`).join(", ");
+  return `mode: ${mode} · goal current per leg: ${currents} A`;
+}
+
 // Each status: the servo list (every servo on the bus with its role: the legs', then the
 // wrist's), once; the first servo is read at once.
 export function onServoStatus(s) {
+  setText("sp-mode", modeText(s));
   const select = el("sp-servo");
   const servos = s.servos || s.joints.servo_ids.map((id, k) => ({ id, role: "leg", joint: k + 1 }));
   if (select.options.length !== servos.length) {

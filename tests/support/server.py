@@ -74,7 +74,10 @@ class Server:
             status = self.get("/api/status")
         except (urllib.error.URLError, OSError) as exc:
             return {"status": f"unreadable: {exc}"}
-        mm = lambda v: None if v is None else [round(1e3 * c, 2) for c in v]  # noqa: E731
+
+        def mm(v: list | None) -> list | None:
+            return None if v is None else [None if c is None else round(1e3 * c, 2) for c in v]
+
         return {
             "mode": status["mode"],
             "torque": status["torque"],
