@@ -30,7 +30,9 @@ data cannot see stay where the nominal model puts them instead of drifting.
 
 ``probe_points`` and ``simulate_touches`` make the touches of the twin built wrong on
 purpose from its true model (no contact physics: the joint values at which the true
-platform's z equals the plate's height, with trigger noise).
+platform's z equals the plate's height, with trigger noise): a probe run's "model" mode.
+Its "touch" mode (``PROBE_MODES``; app/calibration/procedure.py) touches a real plate, the
+twin's (MuJoCo contact) or the robot's, with the controller's force-guided touch.
 """
 
 from __future__ import annotations
@@ -402,6 +404,37 @@ def twin_probe(
         return simulate_touches(here, model(), xy, plate_z, noise_m, seed)
 
     return touch
+
+
+# ---- touches of a real plate (the twin's or the robot's) with the force-guided touch ----
+PROBE_MODES = ("touch", "model")
+"""How a probe run gets its touches: "touch", the arm moved onto the plate with the
+controller's touch (app/control/touch.py, a probe without a probe switch); "model", computed
+from the twin's true model (``twin_probe``; the arm is not moved)."""
+TOUCH_CLEARANCE_M = 0.005
+"""A touch starts this far above the plate's stated height [m] (the tool tip), and moves
+between points there: more than the model's and the plate's height errors, less than the
+1 cm above the plate that ``probe_points`` keeps reachable."""
+TOUCH_BEYOND_M = 0.01
+"""A touch goes this far below the plate's stated height [m] before it ends "no contact"."""
+
+
+def plate_under(plates: Any, plate_z_m: float, xy: Any) -> bool:
+    """Whether one of ``plates`` (hardware/sim/surfaces.py ``Plate``-s: ``point_m``,
+    ``normal``, ``half_size_m``, ``frame()``) faces up (normal within 2.6 deg of +z) with
+    its face within ``PLATE_BOUND_M`` of ``plate_z_m`` [m] and under every point of ``xy``
+    (N, 2) [m] (base frame): the twin has a plate there to touch."""
+    points = np.asarray(xy, dtype=float).reshape(-1, 2)
+    for plate in plates:
+        frame = np.asarray(plate.frame(), dtype=float)  # columns: face x, face y, normal
+        normal, centre = frame[:, 2], np.asarray(plate.point_m, dtype=float)
+        if normal[2] < 0.999 or abs(centre[2] - plate_z_m) > PLATE_BOUND_M:
+            continue
+        offsets = np.column_stack([points - centre[:2], np.zeros(len(points))])
+        along = offsets @ frame[:, :2]  # (N, 2): along the face's x and y
+        if (np.abs(along) <= np.asarray(plate.half_size_m, dtype=float)).all():
+            return True
+    return False
 
 
 def write_touches(path: Any, joints: np.ndarray, plate_z: np.ndarray, holdout: int) -> None:

@@ -25,9 +25,21 @@ translation.
 
 A probe run (``source="probe"``, app/calibration/probe.py) instead touches a flat plate at
 ``plate_z_m`` at points spread over it and fits what z-only heights can observe. Its
-touches come from ``probe(xy, plate_z, seed)``: on the twin, computed from its true model
-(``probe.twin_probe``; the arm is not moved); a backend without one refuses probe runs.
-It writes ``touches.csv`` in place of ``pairs.csv``.
+``probe`` mode says where the touches come from. "touch": the arm really touches the
+plate, a probe without a probe switch: for each point the tool tip moves to
+``TOUCH_CLEARANCE_M`` above the plate's stated height, the controller's touch
+(app/control/touch.py) goes straight down (direction (0, 0, -1), the run's speed and set
+force or the ``[contact]`` defaults, ``TOUCH_BEYOND_M`` past the stated height at most)
+until the force estimate says contact, and back up; the legs' joints as read at the tick
+contact was seen (``TouchResult.joints_at_contact_rad``) are the touch. A touch that ends
+otherwise (no plate there, a fault) fails the run naming the point. Here ``plate_z_m`` is
+the height of the tool tip ([tool] offset_m) at contact; the fit's platform height is
+``plate_z_m`` less the tip's z offset. "model": computed from the twin's true model
+(``probe(xy, plate_z, seed)``, ``probe.twin_probe``; the arm is not moved). By default a
+run touches where the robot has a force estimate and, on the twin, a plate at
+``plate_z_m`` under every point (``plates``), else uses the model where there is one; a
+backend with neither refuses probe runs. It writes ``touches.csv`` in place of
+``pairs.csv``.
 
 States: planned -> moving -> fitting -> done | refused (the fit is worse than the current
 model on the held-out poses: never applied) | failed (a fault, e-stop, torque off, no
@@ -46,7 +58,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
@@ -57,14 +69,19 @@ from app.calibration.fit import CalibrationError, FitResult, Plan, fit, plan
 from app.calibration.pairs import write_pairs
 from app.calibration.probe import (
     MIN_TOUCHES,
+    PROBE_MODES,
+    TOUCH_BEYOND_M,
+    TOUCH_CLEARANCE_M,
     ProbeModel,
     ProbeResult,
     Touch,
+    plate_under,
     probe_fit,
     probe_points,
     write_touches,
 )
 from app.config import LegSettings
+from app.control.contact_commands import check_force
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
 from app.control.state import Snapshot
@@ -159,6 +176,10 @@ class CalibrationRun(ProcedureRun):
     plate_z_m: float | None = None
     fit_plate_z: bool = False
     probe_xy: np.ndarray | None = field(default=None, repr=False)  # (poses, 2) [m]
+    probe: str | None = None  # a probe run's mode (PROBE_MODES)
+    touch_speed_m_s: float | None = None  # a touch run's speed and set force (None: [contact])
+    touch_force_n: float | None = None
+    tip_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)
     # what the run is fitted against: the controller's model and joint offsets at its start
     nominal: PerLegRotaryDelta | None = field(default=None, repr=False)
     model_version: int = 0
@@ -209,6 +230,7 @@ class CalibrationRun(ProcedureRun):
             "source": self.source,
             "measurement": self.measurement if self.source == "motion" else None,
             "plate_z_m": self.plate_z_m,
+            "probe": self.probe,
             "plate_error_m": (
                 result.plate_error_m
                 if isinstance(result, ProbeResult) and result.plate_free
@@ -239,9 +261,12 @@ class CalibrationManager(ProcedureManager[CalibrationRun]):
         measure: Measure = external,
         probe: Touch | None = None,
         pose_measure: Measure | None = None,
+        plates: Sequence[Any] = (),
     ) -> None:
         super().__init__(controller, folder)
         self.config_path, self.probe = config_path, probe
+        # the plates the backend knows are there (the twin's: hardware/sim/surfaces.py)
+        self.plates = tuple(plates)
         # the measurements a motion run may use, by name (MEASUREMENTS)
         self.measures: dict[str, Measure] = {"external": measure}
         if pose_measure is not None:
@@ -277,6 +302,9 @@ class CalibrationManager(ProcedureManager[CalibrationRun]):
         plate_z_m: float | None = None,
         fit_plate_z: bool = False,
         measurement: str = "external",
+        probe: str | None = None,
+        touch_speed_m_s: float | None = None,
+        touch_force_n: float | None = None,
     ) -> CalibrationRun:
         """Plan and start a run (returns at once; the thread moves the arm, or probes).
 
@@ -284,7 +312,11 @@ class CalibrationManager(ProcedureManager[CalibrationRun]):
         flat plate at ``plate_z_m`` [m], base frame; ``fit_plate_z``: fit an error of that
         height too). measurement (motion runs): "external" (the backend's own, the twin's)
         or "pose-input" (a motion-capture marker on the platform, streamed to the pose
-        input as body "platform").
+        input as body "platform"). probe (probe runs): "touch" (the arm touches the plate
+        with the force-guided touch, at ``touch_speed_m_s`` [m/s] up to ``touch_force_n``
+        [N], None: the ``[contact]`` defaults) or "model" (the twin's computed touches);
+        None: "touch" where the robot has a force estimate and, on the twin, a plate at
+        ``plate_z_m`` under the points, else "model" (module doc).
 
         Raises:
             CalibrationError: poses, parameters, source, measurement or plate that cannot be
@@ -302,7 +334,17 @@ class CalibrationManager(ProcedureManager[CalibrationRun]):
                 self._require_measurement(measurement, snap)
                 chosen = plan(nominal, poses, parameters, allowed=self._allowed)
             elif source == "probe":
-                chosen, xy = self._plan_probe(poses, parameters, plate_z_m, fit_plate_z)
+                if probe is not None and probe not in PROBE_MODES:
+                    raise CalibrationError(
+                        f"probe: {probe!r} is not one of {', '.join(map(repr, PROBE_MODES))}"
+                    )
+                mode = self._probe_mode(probe, snap, plate_z_m, poses)
+                tip = self._tip_offset() if mode == "touch" else np.zeros(3)
+                if mode == "touch":
+                    self._check_touch(touch_speed_m_s, touch_force_n)
+                chosen, xy = self._plan_probe(
+                    poses, parameters, plate_z_m, fit_plate_z, mode, tip[2]
+                )
             else:
                 raise CalibrationError(f"source: {source!r} is not 'motion' or 'probe'")
 
@@ -315,6 +357,9 @@ class CalibrationManager(ProcedureManager[CalibrationRun]):
                     xy,
                 )
                 run.measurement = measurement
+                if source == "probe":
+                    run.probe, run.tip_offset_m = mode, tip
+                    run.touch_speed_m_s, run.touch_force_n = touch_speed_m_s, touch_force_n
                 run.nominal, run.model_version = nominal, model.version
                 run.offsets_at_start_rad = offsets
                 return run
@@ -333,18 +378,95 @@ class CalibrationManager(ProcedureManager[CalibrationRun]):
         if not np.isfinite(measure(snap)).all():
             raise MotionRefused(_NO_MEASUREMENT[measurement])
 
+    def _tip_offset(self) -> np.ndarray:
+        """The tool tip in the platform frame at wrist angle 0 [m] (3,): [tool] offset_m."""
+        tool = getattr(getattr(self.controller, "settings", None), "tool", None)
+        return np.asarray(getattr(tool, "offset_m", (0.0, 0.0, 0.0)), dtype=float)
+
+    def _probe_mode(
+        self, mode: str | None, snap: Snapshot, plate_z_m: float | None, poses: int
+    ) -> str:
+        """The probe mode a run of ``poses`` touches at ``plate_z_m`` [m] uses: ``mode``
+        when it can, else the default (module doc), before anything is planned.
+
+        Raises:
+            CalibrationError: "touch" without a force estimate now, "model" (or neither)
+                on a backend without a model probe (422).
+        """
+        contact = getattr(snap, "contact", None)
+        estimate = contact is not None and bool(contact.valid)
+        if mode == "model" and self.probe is None:
+            raise CalibrationError(
+                "probe: 'model' computes the touches from the twin's true model, and this "
+                "backend has none: use 'touch'"
+            )
+        if mode is None:
+            on_plate = self.probe is None
+            if estimate and not on_plate and plate_z_m is not None and math.isfinite(plate_z_m):
+                tip = self._tip_offset()
+                try:  # the points a touch run would touch (with the tool tip)
+                    tips = probe_points(self.nominal(), plate_z_m - tip[2], poses) + tip[:2]
+                except CalibrationError:
+                    tips = None  # the plan says why
+                on_plate = tips is not None and plate_under(self.plates, plate_z_m, tips)
+            mode = "touch" if estimate and on_plate else "model"
+        if mode == "touch" and not estimate:
+            reason = contact.reason if contact is not None else "none on this backend"
+            raise CalibrationError(
+                f"probe: 'touch' needs the contact force estimate, not valid now: {reason}"
+            )
+        if mode == "model" and self.probe is None:
+            raise CalibrationError(
+                "source: this backend has no probe (the simulated robot has one) nor a "
+                "contact force estimate to touch with; use 'motion' with an external "
+                "measurement"
+            )
+        return mode
+
+    def _check_touch(self, speed_m_s: float | None, force_n: float | None) -> None:
+        """A touch run's own speed [m/s] and set force [N], checked as the touch will.
+
+        Raises:
+            CalibrationError: naming the field: not a finite number > 0, a speed over
+                0.1 m/s, a force not above contact.detect_force_n or over
+                contact.force_limit_n (422).
+        """
+        contact = getattr(getattr(self.controller, "settings", None), "contact", None)
+        try:
+            if speed_m_s is not None and not (math.isfinite(speed_m_s) and 0.0 < speed_m_s <= 0.1):
+                raise ValueError(f"touch_speed_m_s: {speed_m_s!r} m/s is not within 0 .. 0.1")
+            if force_n is not None and contact is not None:
+                check_force(force_n, contact, "touch_force_n")
+                if force_n <= contact.detect_force_n:
+                    raise ValueError(
+                        f"touch_force_n: {force_n:g} N is not above the contact threshold "
+                        f"{contact.detect_force_n:g} N (contact.detect_force_n)"
+                    )
+        except ValueError as exc:
+            raise CalibrationError(str(exc)) from None
+
     def _plan_probe(
-        self, poses: int, parameters: str, plate_z_m: float | None, fit_plate_z: bool
+        self,
+        poses: int,
+        parameters: str,
+        plate_z_m: float | None,
+        fit_plate_z: bool,
+        mode: str | None = "model",
+        tip_z_m: float = 0.0,
     ) -> tuple[Plan, np.ndarray]:
         """Probe points over the plate (fit ones, then every fourth held out), the joints
-        the nominal model would touch them with, and what those touches can tell."""
-        if self.probe is None:
+        the nominal model would touch them with, and what those touches can tell. A touch
+        (``mode`` not "model") touches with the tool tip, ``tip_z_m`` [m] from the
+        platform along z: the platform is at plate_z_m - tip_z_m; the points are the
+        platform's."""
+        if mode == "model" and self.probe is None:
             raise CalibrationError(
                 "source: this backend has no probe (the simulated robot has one); use "
                 "'motion' with an external measurement"
             )
         if plate_z_m is None or not math.isfinite(plate_z_m):
             raise CalibrationError("plate_z_m: a probe run needs the plate's height [m]")
+        plate_z_m = plate_z_m - tip_z_m  # the platform's height at contact
         nominal = self.nominal()
         model = ProbeModel(nominal, parameters, fit_plate_z)
         xy = probe_points(nominal, plate_z_m, poses)
@@ -392,15 +514,21 @@ class CalibrationManager(ProcedureManager[CalibrationRun]):
         return _judge(result)
 
     def _steps_probe(self, run: CalibrationRun) -> Ending:
-        """A probe run's steps: the touches (the arm is not moved on the twin), the fit."""
-        assert self.probe is not None and run.probe_xy is not None and run.plate_z_m is not None
+        """A probe run's steps: the touches (the arm touches the plate, or, in "model"
+        mode, they are computed and it is not moved), the fit."""
+        assert run.probe_xy is not None and run.plate_z_m is not None
         run.advance(State.MOVING)
-        joints = self.probe(run.probe_xy, run.plate_z_m, 0)
-        run.joints = list(joints)
-        run.pose = len(joints)
+        if run.probe == "touch":
+            joints = self._touches(run)
+        else:
+            assert self.probe is not None
+            joints = self.probe(run.probe_xy, run.plate_z_m, 0)
+            run.joints = list(joints)
+            run.pose = len(joints)
         run.advance(State.FITTING)
         holdout = len(run.plan.holdout_joints)
-        plate = np.full(len(joints), run.plate_z_m)
+        # the platform's height at each touch (the tool tip's is plate_z_m)
+        plate = np.full(len(joints), run.plate_z_m - run.tip_offset_m[2])
         write_touches(run.folder / "touches.csv", joints, plate, holdout)
         assert run.nominal is not None
         result = probe_fit(run.nominal, joints, plate, holdout, run.parameters, run.fit_plate_z)
@@ -411,8 +539,73 @@ class CalibrationManager(ProcedureManager[CalibrationRun]):
         write_report(run.folder / "report.png", result, title)
         return _judge(result)
 
+    def _touches(self, run: CalibrationRun) -> np.ndarray:
+        """Touch the plate at each of the run's points (module doc); the legs' joints as
+        read at each contact (poses, 3) [rad].
+
+        Raises:
+            Stopped: naming the point: a touch ended without contact, a move or touch
+                refused, a fault, e-stop, torque off, an abort, a timeout.
+        """
+        assert run.probe_xy is not None and run.plate_z_m is not None
+        tips = run.probe_xy + run.tip_offset_m[:2]
+        above = run.plate_z_m + TOUCH_CLEARANCE_M
+        for k, (x, y) in enumerate(tips):
+            where = f"touch {k + 1} of {len(tips)} at ({x * 1e3:.1f}, {y * 1e3:.1f}) mm"
+            try:
+                run.joints.append(self._touch_once(run, np.array([x, y, above])))
+            except (Stopped, GoalRejected, MotionRefused, ValueError) as exc:
+                raise Stopped(f"{where}: {exc}") from None
+            run.pose += 1
+        return np.array(run.joints)
+
+    def _touch_once(self, run: CalibrationRun, above_m: np.ndarray) -> np.ndarray:
+        """Move the tip to ``above_m`` (3,) [m], touch straight down and back up; the legs'
+        joints as read when contact was seen (3,) [rad]."""
+        ctl = self.controller
+        ctl.move(point=above_m).result(timeout=MOVE_TIMEOUT_S)
+        self._wait(run, "the move above the plate to end", _idle, MOVE_TIMEOUT_S)
+        values: dict[str, Any] = {
+            "max_travel_m": TOUCH_CLEARANCE_M + TOUCH_BEYOND_M,
+            "retract_m": TOUCH_CLEARANCE_M,
+        }
+        if run.touch_speed_m_s is not None:
+            values["speed_m_s"] = run.touch_speed_m_s
+        if run.touch_force_n is not None:
+            values["force_n"] = run.touch_force_n
+        started = ctl.touch([0.0, 0.0, -1.0], **values).result(timeout=MOVE_TIMEOUT_S)
+        source_id = started["source_id"]
+
+        def ended(snap: Snapshot) -> bool:
+            touch = snap.touch
+            return (
+                touch is not None
+                and touch.source_id == source_id
+                and touch.outcome != "touching"
+                and snap.mode == "idle"
+            )
+
+        snap = self._wait(run, "the touch to end", ended, TOUCH_TIMEOUT_S)
+        touch = snap.touch
+        assert touch is not None
+        joints = np.asarray(touch.joints_at_contact_rad, dtype=float)
+        if touch.outcome != "contact" or not np.isfinite(joints).all():
+            raise Stopped(
+                f"the touch ended {touch.outcome!r} (travel {touch.travel_m * 1e3:.1f} mm, "
+                f"peak force {touch.peak_force_n:.2f} N): no plate at "
+                f"plate_z_m = {run.plate_z_m:g} m there, or the touch was stopped"
+            )
+        return joints
+
     def _ended_early(self, run: CalibrationRun) -> None:
         _keep_measured(run)  # a probe run has no measured pairs: nothing to keep
+        path = run.folder / "touches.csv"
+        if run.source == "probe" and run.joints and not path.exists() and run.plate_z_m:
+            plate = np.full(len(run.joints), run.plate_z_m - run.tip_offset_m[2])
+            try:  # the touches made so far, all as fit rows
+                write_touches(path, np.array(run.joints), plate, 0)
+            except Exception:  # never hides why the run ended
+                log.exception("calibration run %s: its touches could not be kept", run.run_id)
 
     def _fresh(self, after: int) -> Callable[[Snapshot], bool]:
         return lambda snap: snap.tick > after
@@ -533,6 +726,11 @@ class CalibrationManager(ProcedureManager[CalibrationRun]):
 
 
 APPLY_TIMEOUT_S = 5.0
+TOUCH_TIMEOUT_S = 60.0  # a touch, its dwell and its retract [s]
+
+
+def _idle(snap: Snapshot) -> bool:
+    return snap.mode == "idle"
 
 
 def per_leg(robot: Any) -> PerLegRotaryDelta:

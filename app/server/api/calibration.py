@@ -56,6 +56,24 @@ class CalibrationRequest(BaseModel):
     fit_plate_z: bool = Field(
         False, description="probe: also fit an error of the plate's stated height"
     )
+    probe: Literal["touch", "model"] | None = Field(
+        None,
+        description="probe: where the touches come from. touch: the arm touches the plate "
+        "with the force-guided touch (straight down from 5 mm above plate_z_m, then back "
+        "up; plate_z_m is then the tool tip's height at contact); model: computed from the "
+        "twin's true model, the arm not moved (the twin only). Default: touch where the "
+        "robot has a contact force estimate and, on the twin, a plate at plate_z_m under "
+        "the points; else model",
+    )
+    touch_speed_m_s: float | None = Field(
+        None, gt=0, le=0.1, description="probe by touch: the touch's speed [m/s] ([contact])"
+    )
+    touch_force_n: float | None = Field(
+        None,
+        gt=0,
+        description="probe by touch: the force each touch stops at [N] (default [contact] "
+        "touch_force_n; at most contact.force_limit_n)",
+    )
 
     @model_validator(mode="after")
     def _probe_fields(self) -> CalibrationRequest:
@@ -68,8 +86,14 @@ class CalibrationRequest(BaseModel):
                 )
             if self.measurement != "external":
                 raise ValueError("measurement: a probe run measures by its touches")
+            if self.probe == "model" and (
+                self.touch_speed_m_s is not None or self.touch_force_n is not None
+            ):
+                raise ValueError("touch_speed_m_s, touch_force_n: only for probe 'touch'")
         elif self.plate_z_m is not None or self.fit_plate_z:
             raise ValueError("plate_z_m, fit_plate_z: only for source 'probe'")
+        elif self.probe is not None or self.touch_speed_m_s or self.touch_force_n:
+            raise ValueError("probe, touch_speed_m_s, touch_force_n: only for source 'probe'")
         return self
 
 
@@ -127,6 +151,9 @@ class CalibrationOut(BaseModel):
         "external", description="motion: external or pose-input (null for a probe run)"
     )
     plate_z_m: float | None = Field(None, description="probe: the plate's stated height [m]")
+    probe: str | None = Field(
+        None, description="probe: touch (the arm touched the plate) or model (null: motion)"
+    )
     plate_error_m: float | None = Field(
         None, description="probe with fit_plate_z: the fitted error of the plate's height [m]"
     )
@@ -179,6 +206,9 @@ async def start_calibration(
             body.plate_z_m,
             body.fit_plate_z,
             body.measurement,
+            body.probe,
+            body.touch_speed_m_s,
+            body.touch_force_n,
         )
     except CalibrationError as exc:
         raise HTTPException(422, str(exc)) from None
