@@ -912,7 +912,7 @@ class ContactSettings(_Section):
         "(above the estimate's noise while moving slowly)",
     )
     touch_speed_m_s: float = Field(
-        0.01, gt=0, le=0.1, description="a touch's default approach speed [m/s]"
+        0.01, ge=1e-4, le=0.1, description="a touch's default approach speed [m/s]"
     )
     touch_force_n: float = Field(2.0, gt=0, le=60.0, description="a touch's default set force [N]")
     touch_max_travel_m: float = Field(
@@ -944,6 +944,11 @@ class ContactSettings(_Section):
             raise ValueError(
                 f"contact.touch_force_n ({self.touch_force_n} N) is over "
                 f"contact.force_limit_n ({self.force_limit_n} N)"
+            )
+        if self.touch_force_n <= self.detect_force_n:  # a touch would stop before contact
+            raise ValueError(
+                f"contact.touch_force_n ({self.touch_force_n} N) must be above "
+                f"contact.detect_force_n ({self.detect_force_n} N)"
             )
         return self
 

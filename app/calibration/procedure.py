@@ -81,7 +81,7 @@ from app.calibration.probe import (
     write_touches,
 )
 from app.config import LegSettings
-from app.control.contact_commands import check_force
+from app.control.contact_commands import check_force, check_touch_speed
 from app.control.controller import Controller
 from app.control.errors import GoalRejected, MotionRefused
 from app.control.state import Snapshot
@@ -433,8 +433,8 @@ class CalibrationManager(ProcedureManager[CalibrationRun]):
         """
         contact = getattr(getattr(self.controller, "settings", None), "contact", None)
         try:
-            if speed_m_s is not None and not (math.isfinite(speed_m_s) and 0.0 < speed_m_s <= 0.1):
-                raise ValueError(f"touch_speed_m_s: {speed_m_s!r} m/s is not within 0 .. 0.1")
+            if speed_m_s is not None:
+                check_touch_speed(speed_m_s, "touch_speed_m_s")
             if force_n is not None and contact is not None:
                 check_force(force_n, contact, "touch_force_n")
                 if force_n <= contact.detect_force_n:

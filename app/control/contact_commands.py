@@ -20,6 +20,20 @@ from app.control.press import PressSource
 from app.control.sources import GoalSource
 from app.control.touch import TouchSource, unit_direction
 
+#: A touch's speed bounds [m/s]: below the least, a touch of its longest travel (0.3 m)
+#: would hold the robot for more than 50 min (1e-320 m/s: for ever).
+MIN_TOUCH_SPEED_M_S = 1e-4
+MAX_TOUCH_SPEED_M_S = 0.1
+
+
+def check_touch_speed(speed_m_s: Any, name: str = "speed_m_s") -> float:
+    """A touch's speed [m/s]: finite, within MIN_TOUCH_SPEED_M_S .. MAX_TOUCH_SPEED_M_S
+    (ValueError naming ``name`` otherwise)."""
+    speed = _positive(speed_m_s, name, MAX_TOUCH_SPEED_M_S, " m/s")
+    if speed < MIN_TOUCH_SPEED_M_S:
+        raise ValueError(f"{name}: {speed:g} m/s is below the least of {MIN_TOUCH_SPEED_M_S:g} m/s")
+    return speed
+
 
 def _positive(value: Any, name: str, most: float | None = None, unit: str = "") -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
@@ -64,9 +78,7 @@ def touch(
     Returns {"source_id", "start_m", "end_m"}. ValueError / GoalRejected naming the field,
     MotionRefused when the robot may not move or has no force estimate."""
     d = unit_direction(direction)
-    speed = _positive(
-        settings.touch_speed_m_s if speed_m_s is None else speed_m_s, "speed_m_s", 0.1, " m/s"
-    )
+    speed = check_touch_speed(settings.touch_speed_m_s if speed_m_s is None else speed_m_s)
     force = check_force(settings.touch_force_n if force_n is None else force_n, settings)
     if force <= settings.detect_force_n:
         raise ValueError(

@@ -84,7 +84,10 @@ def _check_contact(state: LoopState, ctx: CommandContext, ports: TickPorts, now:
     fault = monitor.check(state.contact, source, state.point_m, now())
     if fault is None:
         return
-    write(state, ctx, ports, now, state.joints.position_rad)
+    # hold where measured, within the joint limits: an arm pushed past one gets no goal there
+    gate = ctx.model.gate
+    held = np.clip(state.joints.position_rad, gate.joint_min_rad, gate.joint_max_rad)
+    write(state, ctx, ports, now, held)
     record_fault(state, fault)
 
 

@@ -52,10 +52,14 @@ def unit_direction(direction: object, name: str = "direction") -> np.ndarray:
         raise ValueError(f"{name}: expected three finite numbers, got {direction!r}") from None
     if d.shape != (3,) or not np.isfinite(d).all():
         raise ValueError(f"{name}: expected three finite numbers, got {direction!r}")
-    size = float(np.linalg.norm(d))
+    largest = float(np.abs(d).max())
+    if largest == 0.0:
+        raise ValueError(f"{name}: a direction cannot be zero")
+    scaled = d / largest  # the norm of a huge direction (1e200 each) would overflow
+    size = largest * float(np.linalg.norm(scaled))
     if size < 1e-9:
         raise ValueError(f"{name}: a direction cannot be zero")
-    return d / size
+    return scaled / float(np.linalg.norm(scaled))
 
 
 class TouchSource:

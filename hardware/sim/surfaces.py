@@ -84,7 +84,7 @@ class Plate:
             raise ValueError(f"plate fixed_in: must be 'base' or 'world', got {self.fixed_in!r}")
         point = _triple("point_m", self.point_m)
         normal = np.array(_triple("normal", self.normal))
-        length = float(np.linalg.norm(normal))
+        length = math.hypot(*normal)  # np.linalg.norm overflows to inf past ~1e154 each
         if length < 1e-9:
             raise ValueError(f"plate normal: must not be zero, got {normal.tolist()}")
         half = _triple("half_size_m", self.half_size_m, 2)

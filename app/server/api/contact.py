@@ -14,9 +14,10 @@ from app.control.errors import GoalRejected
 from app.fields import Vector3
 from app.server.api import serialize
 from app.server.api.deps import CommandWait, ControlClient, ControllerDep, SettingsDep, WorldDep
+from app.server.api.mav import check_external, check_goal
 from app.server.api.models import Accepted
 from app.server.errors import CONTROL, UNAVAILABLE
-from app.world.drone_sim import DroneSimParams
+from app.world.drone_sim import DroneSimParams, SimulatedDrone
 
 router = APIRouter(tags=["contact"])
 
@@ -119,8 +120,13 @@ async def post_press(
     hold_args = None
     if body.frame == "world":
         hold = body.hold or PressHold()
-        goal = None if hold.position_m is None else np.asarray(hold.position_m)
+        goal = None if hold.position_m is None else np.asarray(hold.position_m, dtype=float)
         simulated = DroneSimParams() if hold.source == "simulated" else None
+        if simulated is None:  # as POST /api/tests/hold: a fresh pose, the goal inside
+            check_external(await asyncio.to_thread(world.pose_status, "drone"), goal, controller)
+        elif goal is not None:  # the simulated drone starts at its pose at t = 0
+            start = SimulatedDrone(simulated).true_state(0.0)[0]
+            check_goal(start, goal, controller, "at the simulated drone's start")
         hold_args = world.hold(goal, simulated, hold.latency_compensation).remote_args()
     elif body.hold is not None:
         raise GoalRejected("hold: only with frame 'world'")

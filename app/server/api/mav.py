@@ -250,12 +250,12 @@ async def post_hold(
     simulated = DroneSimParams() if body.source == "simulated" else None
     if goal is not None and simulated is not None:  # as /tests/hold: at the drone's start
         start = SimulatedDrone(simulated).true_state(0.0)[0]
-        _check_goal(start, goal, controller, "at the simulated drone's start")
+        check_goal(start, goal, controller, "at the simulated drone's start")
     elif goal is not None:  # on the pose input: against its latest pose, where there is one
         seen = await asyncio.to_thread(world.pose_status, "drone")
         if seen.get("state") == "ok" and seen.get("position_m") is not None:
             drone = Pose.from_arrays(seen["position_m"], seen["quaternion"])
-            _check_goal(drone, goal, controller, "at the drone's pose now")
+            check_goal(drone, goal, controller, "at the drone's pose now")
     hold = world.hold(goal, simulated, body.latency_compensation, body.heading_rad)
     model = controller.model  # the hold is checked on it (refused if it changes meanwhile)
     # the hold mode blends in from wherever the robot is: no start point to check
@@ -264,7 +264,7 @@ async def post_hold(
     return Accepted(result={"goal_world_m": answer["goal_world_m"]})
 
 
-def _check_external(seen: dict[str, Any], goal: np.ndarray | None, controller: Any) -> None:
+def check_external(seen: dict[str, Any], goal: np.ndarray | None, controller: Any) -> None:
     """Refuse a hold on the pose input unless its latest pose is fresh (MotionRefused,
     409) and, for a world ``goal`` [m], unless the goal is inside the workspace through
     that pose and the mount (GoalRejected naming ``position_m``, 422)."""
@@ -277,10 +277,10 @@ def _check_external(seen: dict[str, Any], goal: np.ndarray | None, controller: A
         )
     if goal is not None:
         drone = Pose.from_arrays(seen["position_m"], seen["quaternion"])
-        _check_goal(drone, goal, controller, "at the drone's pose now")
+        check_goal(drone, goal, controller, "at the drone's pose now")
 
 
-def _check_goal(drone: Pose, goal: np.ndarray, controller: Any, when: str) -> None:
+def check_goal(drone: Pose, goal: np.ndarray, controller: Any, when: str) -> None:
     """GoalRejected (422, naming ``position_m``) unless the world ``goal`` [m] is inside
     the workspace through the drone's pose ``drone`` and the mount (``when``: which pose)."""
     world = controller.settings.world
@@ -306,10 +306,10 @@ async def post_hold_test(body: HoldTestRequest, world: WorldDep, runs: RunsDep, 
     simulated = body.drone() if body.source == "simulated" else None
     if simulated is None:
         seen = await asyncio.to_thread(world.pose_status, "drone")
-        _check_external(seen, goal, runs.controller)
+        check_external(seen, goal, runs.controller)
     elif goal is not None:  # the simulated drone starts at its pose at t = 0
         start = SimulatedDrone(simulated).true_state(0.0)[0]
-        _check_goal(start, goal, runs.controller, "at the simulated drone's start")
+        check_goal(start, goal, runs.controller, "at the simulated drone's start")
     hold = world.hold(
         goal, simulated, body.latency_compensation, body.heading_rad, duration_s=body.duration_s
     )

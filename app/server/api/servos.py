@@ -200,7 +200,7 @@ async def _read(controller: Any, servo_id: int) -> PositionGains:
 class ServoCurrentRequest(BaseModel):
     """The legs' servos' operating mode and Goal Current (Dynamixel Goal Current, 102)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)  # "1" and true are no currents
     operating_mode: Literal["position", "current_based_position"] = Field(
         description="position (Dynamixel mode 3), or current_based_position (mode 5: each "
         "joint's motor current, and so its torque, bounded by goal_current_a)"
