@@ -5,10 +5,12 @@ limit and a lost estimate."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from app.config import load_settings
 from app.control import commands, contact_commands
 from app.control.sources import Setpoint
 from hardware.sim.surfaces import TIP_RADIUS_M, Plate
@@ -162,3 +164,23 @@ def test_a_press_holds_its_set_force_against_the_twin(home) -> None:
     assert home.state.source is not None and not home.state.faults
     assert np.sqrt(np.mean((true - 3.0) ** 2)) < 0.3, true
     commands.stop_source(home.state, home.state.source)
+
+
+def test_the_example_config_s_plate_and_wall_are_where_a_touch_finds_them() -> None:
+    """examples/contact.toml (docs/contact.md's "try it"): a touch down finds the plate's
+    face plus the tip's radius, a touch along +x the wall's."""
+    settings = load_settings(Path(__file__).parents[2] / "examples" / "contact.toml")
+    loop = TwinLoop(settings.hardware.sim.build_plates())
+    try:
+        found = []
+        for start, direction in (((0.0, 0.0, -0.24), [0, 0, -1]), ((0.07, 0.0, -0.22), [1, 0, 0])):
+            loop.move_to(start)
+            contact_commands.touch(loop.state, loop.ctx, loop.settings.contact, direction)
+            loop.run_until(lambda t: t.state.source is None, 10.0)
+            touch = loop.snapshot.touch
+            assert touch.outcome == "contact", touch
+            found.append(touch.contact_point_m)
+        assert found[0][2] == pytest.approx(-0.26 + TIP_RADIUS_M, abs=3e-4)
+        assert found[1][0] == pytest.approx(0.09 - TIP_RADIUS_M, abs=3e-4)
+    finally:
+        loop.close()
