@@ -20,7 +20,10 @@ map to the covariance
 
 A pure moment on the platform loads no motor (the parallelograms carry it), so only the
 force is observable: a tip off the platform centre gives the same F. Pure NumPy, vectorised
-over (*, 3) like dynamics.py; no I/O.
+over (*, 3) like dynamics.py; no I/O. The control tick's one sample has a float twin of
+eq. 2 and 3 (``_joint_to_tip_force_floats``, ``_tip_force_covariance_floats``, on
+differential._leg_frame_floats): NumPy's per-call overhead on (3,) arrays costs ten times
+the arithmetic (app/control/force.py).
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from ._arrays import as_vectors
-from .differential import _leg_frame
+from .differential import _leg_frame, _LegFrameFloats
 from .dynamics import STANDARD_GRAVITY, MassModel, _check, inverse_dynamics_joints
 from .errors import NonFiniteError
 from .rotary import RotaryDelta
@@ -134,3 +137,30 @@ def tip_force_covariance(robot: RotaryDelta, q: Any, torque_std_nm: Any) -> np.n
         scaled = frame.w * (s / frame.v)[..., None]  # rows s_i w_i / v_i = (S V^-1 M)_i
         cov = np.einsum("...ki,...kj->...ij", scaled, scaled)
     return _finite_or_nan(cov, (-2, -1))
+
+
+def _joint_to_tip_force_floats(
+    frame: _LegFrameFloats, torques_nm: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """:func:`joint_to_tip_force` of one sample in floats: F = M^T V^-1 tau [N] from the
+    legs' frame at q (differential._leg_frame_floats) and torques [N m]."""
+    w, v = frame.w, frame.v
+    per_leg = [torques_nm[i] / v[i] for i in range(3)]
+    force = [w[0][k] * per_leg[0] + w[1][k] * per_leg[1] + w[2][k] * per_leg[2] for k in range(3)]
+    return force[0], force[1], force[2]
+
+
+def _tip_force_covariance_floats(
+    frame: _LegFrameFloats, torque_std_nm: tuple[float, float, float]
+) -> list[list[float]]:
+    """:func:`tip_force_covariance` of one sample in floats: M^T diag(s^2 / v^2) M [N^2]
+    (3 x 3 rows) from the legs' frame at q and torque errors s [N m] (>= 0, unchecked)."""
+    w, v = frame.w, frame.v
+    scaled = [[w[i][k] * (torque_std_nm[i] / v[i]) for k in range(3)] for i in range(3)]
+    return [
+        [
+            scaled[0][a] * scaled[0][b] + scaled[1][a] * scaled[1][b] + scaled[2][a] * scaled[2][b]
+            for b in range(3)
+        ]
+        for a in range(3)
+    ]

@@ -15,6 +15,7 @@ with its adjugate, so a singular M gives inf/NaN instead of an exception.
 
 from __future__ import annotations
 
+import math
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -87,6 +88,74 @@ def _jacobian_single(robot: Any, q: tuple[float, float, float]) -> np.ndarray | 
     if det == 0.0:
         return None
     return np.array([[adjugate[i][j] / det * speeds[j] for j in range(3)] for i in range(3)])
+
+
+_Triple = tuple[float, float, float]
+_Rows = tuple[_Triple, _Triple, _Triple]
+
+
+class _LegFrameFloats(NamedTuple):
+    """_LegFrame of one joint triple in Python floats, with P and M's inverse (the
+    contact force estimate's per-tick path, kinematics/contact.py)."""
+
+    point: _Triple  # P = FK(q) [m]
+    w: _Rows  # rows of M: P - C_i
+    d1: _Rows  # dC_i/dq_i
+    d2: _Rows  # d2C_i/dq_i^2
+    v: _Triple  # diagonal of V: w_i . d1_i
+    adjugate: _Rows  # M's adjugate, [i][j] = (w_j+1 x w_j+2)[i]: M^-1 = adjugate / det
+    det: float  # det M
+
+
+def _leg_frame_floats(robot: Any, q: _Triple) -> _LegFrameFloats | None:
+    """_leg_frame of one joint triple (floats) as :func:`_jacobian_single` computes it;
+    None where FK fails, M is singular or a value is not finite (the array path answers)."""
+    point = robot.fk(q).points.tolist()
+    if not all(math.isfinite(p) for p in point):
+        return None
+    w, d1, d2 = [], [], []
+    for leg in range(3):
+        centre = robot._leg_centre(leg, q[leg], FLOATS)
+        first, second = robot._leg_centre_derivatives(leg, q[leg])
+        w.append((point[0] - centre[0], point[1] - centre[1], point[2] - centre[2]))
+        d1.append((float(first[0]), float(first[1]), float(first[2])))
+        d2.append((float(second[0]), float(second[1]), float(second[2])))
+    v = [r[0] * f[0] + r[1] * f[1] + r[2] * f[2] for r, f in zip(w, d1, strict=True)]
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = w
+    adjugate = (
+        (b1 * c2 - b2 * c1, c1 * a2 - c2 * a1, a1 * b2 - a2 * b1),
+        (b2 * c0 - b0 * c2, c2 * a0 - c0 * a2, a2 * b0 - a0 * b2),
+        (b0 * c1 - b1 * c0, c0 * a1 - c1 * a0, a0 * b1 - a1 * b0),
+    )
+    det = a0 * adjugate[0][0] + a1 * adjugate[1][0] + a2 * adjugate[2][0]
+    # one sum is finite iff every term is (or it overflows: then the array path answers)
+    total = sum(v) + det + sum(d1[0]) + sum(d1[1]) + sum(d1[2]) + sum(d2[0]) + sum(d2[1])
+    if det == 0.0 or not math.isfinite(total + sum(d2[2])):
+        return None
+    return _LegFrameFloats(
+        (point[0], point[1], point[2]),
+        (w[0], w[1], w[2]),
+        (d1[0], d1[1], d1[2]),
+        (d2[0], d2[1], d2[2]),
+        (v[0], v[1], v[2]),
+        adjugate,
+        det,
+    )
+
+
+def _jacobian_floats(frame: _LegFrameFloats) -> list[list[float]]:
+    """J = M^-1 V of a float frame, [i][j] = dP_i/dq_j, as :func:`_jacobian_single`."""
+    adjugate, det, speeds = frame.adjugate, frame.det, frame.v
+    return [[adjugate[i][j] / det * speeds[j] for j in range(3)] for i in range(3)]
+
+
+def _dexterity_floats(jac: list[list[float]]) -> float:
+    """:func:`dexterity` of one Jacobian from :func:`_jacobian_floats`: its singular
+    values' ratio, 0 where it is not finite (as the array path gives where FK holds)."""
+    if not all(math.isfinite(x) for row in jac for x in row):
+        return 0.0
+    singular_values = np.linalg.svd(np.array(jac), compute_uv=False)
+    return float(singular_values[-1] / singular_values[0])
 
 
 def joint_velocity(robot: Any, joints: Any, point_velocity: Any) -> np.ndarray:

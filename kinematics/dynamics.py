@@ -37,7 +37,7 @@ import numpy as np
 
 from ._arrays import as_vectors
 from ._xp import LEG_COS, LEG_SIN
-from .differential import _inverse_rows
+from .differential import _inverse_rows, _jacobian_floats, _LegFrameFloats
 from .errors import InvalidGeometryError
 from .rotary import RotaryDelta
 
@@ -263,6 +263,50 @@ def inverse_dynamics_joints(
         )
         pdd = np.einsum("...ij,...j->...i", _inverse_rows(w), rhs)
     return _torques(robot, mass, p, pdd, JointMotion(q, qd, qdd), g)
+
+
+def _inverse_dynamics_floats(
+    mass: MassModel,
+    frame: _LegFrameFloats,
+    qd: tuple[float, float, float],
+    qdd: tuple[float, float, float],
+    gravity: tuple[float, float, float],
+) -> tuple[float, float, float]:
+    """:func:`inverse_dynamics_joints` of one sample in Python floats [N m], from the legs'
+    frame at its q (differential._leg_frame_floats), speeds [rad/s], accelerations
+    [rad/s^2] and gravity [m/s^2]: the same steps, no per-call NumPy overhead (the
+    control tick's contact force estimate). Finite inputs and frame assumed (not checked)."""
+    w, c1, c2, v = frame.w, frame.d1, frame.d2, frame.v
+    adj, det = frame.adjugate, frame.det
+    jac = _jacobian_floats(frame)
+    pd = [jac[i][0] * qd[0] + jac[i][1] * qd[1] + jac[i][2] * qd[2] for i in range(3)]
+    rhs = []
+    for i in range(3):
+        rel = [pd[k] - c1[i][k] * qd[i] for k in range(3)]
+        wc2 = w[i][0] * c2[i][0] + w[i][1] * c2[i][1] + w[i][2] * c2[i][2]
+        rel2 = rel[0] * rel[0] + rel[1] * rel[1] + rel[2] * rel[2]
+        rhs.append(v[i] * qdd[i] - rel2 + wc2 * qd[i] ** 2)
+    w_inv = [[adj[i][j] / det for j in range(3)] for i in range(3)]  # M^-1, rows
+    pdd = [w_inv[i][0] * rhs[0] + w_inv[i][1] * rhs[1] + w_inv[i][2] * rhs[2] for i in range(3)]
+    knee_acc = [[c1[i][k] * qdd[i] + c2[i][k] * qd[i] ** 2 for k in range(3)] for i in range(3)]
+    m_p, m_u, inertia, m_l = mass.platform_kg, mass.upper_kg, mass.upper_inertia_kgm2, mass.lower_kg
+    force = [
+        m_p * pdd[k]
+        + m_l * ((knee_acc[0][k] + knee_acc[1][k] + knee_acc[2][k]) / 6.0 + pdd[k])
+        - (m_p + 1.5 * m_l) * gravity[k]
+        for k in range(3)
+    ]
+    torques = []
+    for i in range(3):
+        # lambda_i = (W^-T f)_i / 2; along = (P - C_i) . C_i' = v_i
+        lam = 0.5 * (w_inv[0][i] * force[0] + w_inv[1][i] * force[1] + w_inv[2][i] * force[2])
+        a = c1[i]
+        inertial = sum(a[k] * (2.0 * knee_acc[i][k] + pdd[k]) for k in range(3))
+        weight = a[0] * gravity[0] + a[1] * gravity[1] + a[2] * gravity[2]
+        torques.append(
+            inertia * qdd[i] + m_l / 6.0 * inertial - 0.5 * (m_u + m_l) * weight + 2.0 * lam * v[i]
+        )
+    return torques[0], torques[1], torques[2]
 
 
 class Energy(NamedTuple):

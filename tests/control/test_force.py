@@ -8,16 +8,20 @@ import math
 import numpy as np
 import pytest
 
+import app.control.force
 from app.control.force import (
     GEARBOX_FRICTION_NM,
     TORQUE_CONSTANT_NM_A,
     ForceErrorBudget,
+    ForceEstimate,
     ForceEstimator,
     force_estimator,
 )
 from hardware.bus import JointState
 from hardware.dynamixel.control_table import AMPERE_PER_CURRENT_UNIT
-from kinematics import THESIS_DELTA, LinearDelta
+from kinematics import THESIS_DELTA, LinearDelta, RotaryDelta
+from kinematics.contact import joint_to_tip_force, tip_force_covariance
+from kinematics.differential import dexterity
 from kinematics.dynamics import THESIS_MASS, inverse_dynamics_joints, joint_motion
 
 POINTS = (
@@ -179,6 +183,97 @@ def test_bad_arguments_are_named():
         ForceEstimator(THESIS_DELTA, torque_constant_nm_a=0.0)
     with pytest.raises(ValueError, match="rotary"):
         force_estimator(LinearDelta(l=0.3, R=0.15, r=0.03))
+
+
+def _array_estimate(est: ForceEstimator, q, qd, current, gravity, qdd) -> ForceEstimate:
+    """The estimate from the kinematics' array functions on a batch of one (1, 3) (their
+    vectorised code, not their one-triple paths) and the estimator's NumPy budget: the
+    reference the tick's float path must equal."""
+    robot, b = est.robot, est.budget
+    d = float(dexterity(robot, q[None])[0])
+    if not math.isfinite(d):
+        return ForceEstimate(reason="joints out of the model's reach (no forward kinematics)")
+    if d < est.min_dexterity:
+        reason = f"too near a singularity: dexterity {d:.3f} below {est.min_dexterity:g}"
+        return ForceEstimate(reason=reason)
+    measured = est.kt * current
+    friction = np.where(np.abs(qd) > b.moving_rad_s, np.sign(qd) * b.friction_nm, 0.0)
+    model = inverse_dynamics_joints(robot, est.mass, q[None], qd[None], qdd[None], gravity)[0]
+    force = joint_to_tip_force(robot, q[None], (measured - friction - model)[None])[0]
+    std = est.torque_std_nm(measured, model, qd, qdd)
+    cov = tip_force_covariance(robot, q[None], std[None])[0]
+    return ForceEstimate(force, np.sqrt(np.diag(cov)), True, None, cov)
+
+
+def test_the_tick_path_is_the_array_path(monkeypatch):
+    """estimate() (Python floats, one sample) against the array functions, over 600 seeded
+    states of two robots: joints from IK of points over the workspace and random ones
+    (some out of reach, some near singularities), speeds with joints at rest and moving,
+    accelerations given or not, tilted gravity, and the dexterity gate set a hair above and
+    below the state's own. The same outcome and reason; force, std and covariance to 1e-12
+    of their size. The float path answers them all (the array fallback is never taken)."""
+
+    def no_fallback(*args, **kwargs):
+        raise AssertionError("the array path answered")
+
+    monkeypatch.setattr(ForceEstimator, "_estimate_arrays", no_fallback)
+    rng = np.random.default_rng(33)
+    other = RotaryDelta(L=0.1, l=0.25, R=0.08, r=0.02)
+    outcomes: dict[str, int] = {}
+    for base in (force_estimator(THESIS_DELTA, payload_kg=0.1, wrist=True), ForceEstimator(other)):
+        robot = base.robot
+        for k in range(300):
+            if k % 3 == 2:
+                q = rng.uniform(-2.5, 3.1, 3)
+            else:
+                point = rng.uniform((-0.1, -0.1, -0.8 * robot.l), (0.1, 0.1, -0.6 * robot.l))
+                q = robot.ik(point).joints
+                if not np.isfinite(q).all():
+                    continue
+            qd = rng.uniform(-2.0, 2.0, 3) * np.where(rng.random(3) < 0.3, 0.01, 1.0)
+            qdd = None if k % 2 else rng.uniform(-15.0, 15.0, 3)
+            tilt = rng.normal(size=3)
+            gravity = 9.81 * tilt / np.linalg.norm(tilt)
+            current = rng.uniform(-1.5, 1.5, 3)
+            est = base
+            d = float(dexterity(robot, q))
+            if k % 5 == 0 and math.isfinite(d):  # the gate a hair either side of this state
+                est = ForceEstimator(robot, base.mass, min_dexterity=d * (1 + 1e-9 * (-1) ** k))
+            got = est.estimate(_state(q, qd, current), gravity=tuple(gravity), qdd=qdd)
+            acc = np.zeros(3) if qdd is None else qdd
+            want = _array_estimate(est, q, qd, current, gravity, acc)
+            assert (got.valid, got.reason) == (want.valid, want.reason)
+            key = "valid" if got.valid else (got.reason or "")[:12]
+            outcomes[key] = outcomes.get(key, 0) + 1
+            if not got.valid:
+                assert np.isnan(got.force_n).all() and np.isnan(got.covariance_n2).all()
+                continue
+            for fast, batch in (
+                (got.force_n, want.force_n),
+                (got.std_n, want.std_n),
+                (got.covariance_n2, want.covariance_n2),
+            ):
+                assert isinstance(fast, np.ndarray) and fast.shape == batch.shape
+                size = np.abs(batch).max()
+                np.testing.assert_allclose(fast, batch, rtol=1e-12, atol=1e-12 * size)
+    assert outcomes["valid"] >= 300
+    assert outcomes["joints out o"] >= 10 and outcomes["too near a s"] >= 40, outcomes
+
+
+def test_where_the_float_path_declines_the_array_path_answers(monkeypatch):
+    """A state the float path gives up on (a singular M, an overflow: mocked here) gets the
+    array path's estimate, the same as the float path's where both answer."""
+    q = THESIS_DELTA.ik(np.array([0.03, -0.02, -0.25])).joints
+    state = _state(q, [0.3, -0.2, 0.0], [0.2, -0.1, 0.3])
+    est = ForceEstimator(THESIS_DELTA)
+    fast = est.estimate(state, qdd=(1.0, -2.0, 0.5))
+    monkeypatch.setattr(app.control.force, "_leg_frame_floats", lambda robot, q: None)
+    slow = est.estimate(state, qdd=(1.0, -2.0, 0.5))
+    assert fast.valid and slow.valid
+    np.testing.assert_allclose(slow.force_n, fast.force_n, rtol=1e-12)
+    np.testing.assert_allclose(slow.covariance_n2, fast.covariance_n2, rtol=1e-12)
+    far = est.estimate(_state([3.0, 0.0, 0.0], ZERO, [0.1, 0.1, 0.1]))
+    assert not far.valid and "out of the model's reach" in (far.reason or "")
 
 
 # -- against the twin: a force applied to the platform in MuJoCo, the servos holding ------

@@ -1,6 +1,6 @@
 """The tip's contact force from joint torques (kinematics/contact.py): the Jacobian against
 finite differences of FK, virtual work, round trips through J^T, the covariance against
-sampling."""
+sampling, and the one-sample float path against the array functions."""
 
 from __future__ import annotations
 
@@ -10,9 +10,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from kinematics import THESIS_DELTA, LinearDelta, NonFiniteError, RotaryDelta, ShapeError
-from kinematics.contact import joint_to_tip_force, tip_force, tip_force_covariance
-from kinematics.differential import jacobian
-from kinematics.dynamics import THESIS_MASS, inverse_dynamics_joints
+from kinematics.contact import (
+    _joint_to_tip_force_floats,
+    _tip_force_covariance_floats,
+    joint_to_tip_force,
+    tip_force,
+    tip_force_covariance,
+)
+from kinematics.differential import (
+    _dexterity_floats,
+    _jacobian_floats,
+    _leg_frame_floats,
+    dexterity,
+    jacobian,
+)
+from kinematics.dynamics import THESIS_MASS, _inverse_dynamics_floats, inverse_dynamics_joints
 from tests.support.strategies import BATCH_SHAPES
 
 ROBOTS = (THESIS_DELTA, RotaryDelta(L=0.1, l=0.25, R=0.08, r=0.02))
@@ -142,3 +154,44 @@ def test_bad_inputs_are_named():
         tip_force(LinearDelta(l=0.3, R=0.15, r=0.03), MASS, q, zero, zero, zero)
     with pytest.raises(TypeError, match="RotaryDelta"):
         tip_force_covariance(LinearDelta(l=0.3, R=0.15, r=0.03), q, zero)
+
+
+def test_one_sample_in_floats_is_the_array_path():
+    """The control tick's float path (differential._leg_frame_floats and the helpers on
+    it, app/control/force.py) gives the array functions' answers to 1e-12 of each result's
+    size, over 300 seeded states per robot with joints over and past the workspace; near a
+    singularity both lose digits alike (tolerance x 0.05 / dexterity below 0.05). It
+    declines (None) exactly where FK fails."""
+    rng = np.random.default_rng(33)
+    declined = compared = near_singular = 0
+    for robot in ROBOTS:
+        q = rng.uniform(-2.5, 3.1, (300, 3))
+        qd, qdd = rng.uniform(-3.0, 3.0, q.shape), rng.uniform(-20.0, 20.0, q.shape)
+        gravity = 9.81 * rng.normal(size=q.shape)
+        tau, std = rng.normal(scale=0.5, size=q.shape), rng.uniform(0.0, 0.1, q.shape)
+        dex, jac = dexterity(robot, q), jacobian(robot, q)
+        model = inverse_dynamics_joints(robot, MASS, q, qd, qdd, gravity)
+        force, cov = joint_to_tip_force(robot, q, tau), tip_force_covariance(robot, q, std)
+        fk_ok = robot.fk(q).ok
+        for k in range(len(q)):
+            q_k, qd_k, qdd_k, g_k, tau_k, std_k = (
+                tuple(a[k].tolist()) for a in (q, qd, qdd, gravity, tau, std)
+            )
+            frame = _leg_frame_floats(robot, q_k)
+            assert (frame is None) == (not fk_ok[k])
+            if frame is None:
+                declined += 1
+                continue
+            compared += 1
+            near_singular += bool(dex[k] < 0.05)
+            rtol = 1e-12 * max(1.0, 0.05 / dex[k])
+            for fast, batch in (
+                (_jacobian_floats(frame), jac[k]),
+                (_dexterity_floats(_jacobian_floats(frame)), dex[k]),
+                (_inverse_dynamics_floats(MASS, frame, qd_k, qdd_k, g_k), model[k]),
+                (_joint_to_tip_force_floats(frame, tau_k), force[k]),
+                (_tip_force_covariance_floats(frame, std_k), cov[k]),
+            ):
+                size = np.abs(batch).max()
+                np.testing.assert_allclose(fast, batch, rtol=rtol, atol=rtol * size)
+    assert declined >= 20 and near_singular >= 20 and compared >= 400, (declined, near_singular)
