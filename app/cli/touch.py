@@ -5,8 +5,8 @@ Takes control of the server at ``--url`` (the lease), starts the touch (``POST
 /api/contact/touch``), follows it (``GET /api/contact`` and ``GET /api/status``) until it has
 ended and any retract is done, gives control back and prints the result. Lengths are mm and
 speeds mm/s as for the other commands (``--si``: m and m/s); forces are N. Torque must be on
-(a touch starts from where the arm is held). Ctrl-C e-stops the robot (``POST /api/estop``:
-nothing else stops a touch at once); Reset clears it.
+(a touch starts from where the arm is held). Ctrl-C e-stops the robot (``POST /api/estop``;
+Reset clears it): the command line's way out; the page's Stop is ``POST /api/stop``.
 """
 
 from __future__ import annotations
@@ -171,8 +171,8 @@ def _vector(values: list[float | None] | None, scale: float, digits: int) -> str
 
 
 def format_touch(touch: dict[str, Any], body: dict[str, Any], si: bool) -> str:
-    """The touch's result in words: outcome, contact point [mm or m], the force at the end
-    and the peak along the direction [N], the travel."""
+    """The touch's result in words: outcome (and why it stopped), contact point [mm or m],
+    the force it stood at and the peak along the direction [N], the furthest travel."""
     scale, unit, digits = (1.0, "m", 6) if si else (1e3, "mm", 3)
     force = touch.get("force_n")
     known = _known(force)
@@ -180,14 +180,16 @@ def format_touch(touch: dict[str, Any], body: dict[str, Any], si: bool) -> str:
     peak = touch.get("peak_force_n")
     travel = touch.get("travel_m")
     set_force = body.get("force_n")
+    reason = touch.get("reason")
     lines = [
-        f"touch: {touch['outcome']}",
+        f"touch: {touch['outcome']}" + (f" ({reason})" if reason else ""),
         f"contact point: {_vector(touch.get('contact_point_m'), scale, digits)} {unit}",
-        f"force at the end: {_vector(force, 1.0, 2)} N{magnitude}",
+        f"force at the stop (before any retract): {_vector(force, 1.0, 2)} N{magnitude}",
         "peak force along the direction: "
         + ("(none)" if peak is None else f"{peak:.2f} N")
         + ("" if set_force is None else f" (set {set_force:g} N)"),
-        "travel: " + ("(none)" if travel is None else f"{travel * scale:.{digits}f} {unit}"),
+        "travel (furthest commanded): "
+        + ("(none)" if travel is None else f"{travel * scale:.{digits}f} {unit}"),
     ]
     return "\n".join(lines)
 

@@ -35,6 +35,9 @@ def check_touch_speed(speed_m_s: Any, name: str = "speed_m_s") -> float:
     return speed
 
 
+AT_REST_RAD_S = 0.05  # every leg slower than this: the arm rests (its force is no inertia)
+
+
 def _positive(value: Any, name: str, most: float | None = None, unit: str = "") -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ValueError(f"{name}: expected a finite number, got {value!r}")
@@ -96,6 +99,15 @@ def touch(
         raise ValueError(f"retract_m: must be within 0 .. max_travel_m ({travel:g} m)")
     require_motion(state)
     _require_estimate(state)
+    along = float(np.dot(state.contact.force_n, d))
+    still = state.joints is not None and bool(
+        (np.abs(state.joints.velocity_rad_s[:3]) < AT_REST_RAD_S).all()
+    )
+    if still and along >= settings.detect_force_n:  # (moving, it may be the arm's inertia)
+        raise MotionRefused(
+            f"the tip already pushes {along:.1f} N along the direction: it is in contact "
+            "(a touch tares the force it starts with); move away from the surface first"
+        )
     start = start_point(state).copy()
     end = start + d * travel
     phi = state.phi_rad

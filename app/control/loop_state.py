@@ -213,7 +213,13 @@ class LoopState:
             return touch
         if getattr(self.source, "source_id", None) == touch.source_id and self.source is not None:
             return touch
-        self.touch = replace(touch, outcome="stopped")
+        if self.estopped:
+            why = "e-stop"
+        elif self.faults:
+            why = f"fault: {self.faults[-1].reason}"
+        else:  # a stop, another motion, torque off, a lost link (the notice says which)
+            why = self.notice or "stopped by a command (a stop, another motion, torque off)"
+        self.touch = replace(touch, outcome="stopped", reason=why)
         return self.touch
 
     def _servos_hold(self) -> bool:

@@ -126,8 +126,8 @@ class TouchResult:
     contact_point_m: where the surface is along the touch's direction, base frame [m]
     (the tip where the force, extrapolated along its rise, is zero; NaN without contact);
     force_n: the contact force it stood at (before a retract) [N] (3,); peak_force_n: the
-    largest force along the direction seen [N]; travel_m: how far the tip went along it
-    [m]; direction: the
+    largest force along the direction seen [N]; travel_m: the furthest the command went
+    along it [m]; reason: why it was "stopped" (None otherwise); direction: the
     unit direction moved along (3,); source_id: the touch's id; joints_at_contact_rad: the
     legs' joints as read at the tick contact was seen (3,) [rad] (NaN without contact): a
     probe calibration's touch (the contact point itself comes from the model)."""
@@ -140,6 +140,7 @@ class TouchResult:
     direction: np.ndarray
     source_id: str | None = None
     joints_at_contact_rad: np.ndarray = field(default_factory=lambda: _NAN3)
+    reason: str | None = None  # why a touch was "stopped" (the fault, the command)
 
 
 @dataclass(frozen=True)

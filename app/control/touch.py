@@ -7,7 +7,9 @@ estimate (app/control/contact.py); with f = F . d the force the tip pushes along
 - approach: until f >= ``detect_n`` (contact), or the travel ends (outcome "no contact");
 - press: on at the same speed, logging (x, f) with x the measured tip along d, until
   f >= ``force_n``; then the point is held (the force stays, the servos hold position);
-- dwell ``DWELL_S`` for the force to settle, then retract ``retract_m`` (0: stay pressed).
+- dwell ``DWELL_S`` for the force to settle, then retract to ``retract_m`` short of the
+  surface found (0: stay pressed; the command stands past the surface by the servos'
+  give under the force, so backing off the command by retract_m would not lift the tip).
 
 Contact is seen on the force tared while the tip moves freely: the mean force along d over
 the approach at full speed (the gearboxes' friction and the unmodelled accelerations read
@@ -106,7 +108,8 @@ class TouchSource:
         self.v = 0.0  # commanded speed along d [m/s]
         self.t_s = 0.0
         self._dwell_s = 0.0
-        self._back_s = 0.0  # retracted so far [m]
+        self._back_to = 0.0  # the travel the retract ends at [m]
+        self.reached_m = 0.0  # the furthest travel commanded [m]
         self._f = 0.0  # this tick's force along d [N]
         self._reading: ContactReading | None = None
         self._point = np.full(3, np.nan)
@@ -177,21 +180,27 @@ class TouchSource:
         if self.phase in ("approach", "press"):
             self.v = min(self.speed, self.v + ACCELERATION_M_S2 * dt_s)
             self.s = min(self.max_travel, self.s + self.v * dt_s)
+            self.reached_m = self.s
         elif self.phase == "dwell":
             self._dwell_s += dt_s
             if self._dwell_s >= DWELL_S:
                 self.outcome = "contact"
                 if self._reading is not None:  # the force it stood at, before any retract
                     self._held_force = np.asarray(self._reading.force_n, dtype=float).copy()
+                self.reached_m = self.s
                 if self.retract <= 0:
                     return self._setpoint(finished=True)
                 self.phase = "retract"
+                # back to retract_m short of the surface (the command stands past it by the
+                # servos' give under the force), not retract_m short of the command
+                surface = float(np.dot(self.contact_point() - self.start, self.d))
+                if not math.isfinite(surface):
+                    surface = self.s
+                self._back_to = max(0.0, min(self.s, surface - self.retract))
         if self.phase == "retract":
             self.v = min(self.speed, self.v + ACCELERATION_M_S2 * dt_s)
-            step = min(self.v * dt_s, self.retract - self._back_s)
-            self._back_s += step
-            self.s -= step
-            if self._back_s >= self.retract - 1e-12:
+            self.s = max(self._back_to, self.s - self.v * dt_s)
+            if self.s <= self._back_to + 1e-12:
                 return self._setpoint(finished=True)
         return self._setpoint()
 
@@ -258,7 +267,7 @@ class TouchSource:
             contact_point_m=self.contact_point(),
             force_n=np.asarray(force, dtype=float),
             peak_force_n=self.peak_n,
-            travel_m=self.s,
+            travel_m=max(self.reached_m, self.s),
             direction=self.d,
             source_id=self.source_id,
             joints_at_contact_rad=self._joints_at_contact,

@@ -18,7 +18,7 @@ const MAX_DURATION_S = 3600; // ... and on a press's duration
 const el = (id) => document.getElementById(id);
 // what the page knows: GET /api/contact's limits and defaults, the last touch, the touch this
 // tab started (followed until it ends), whether a GET /api/contact is on its way
-export const contact = { limits: null, defaults: null, touch: null, following: null, asking: false };
+export const contact = { limits: null, defaults: null, touch: null, following: null, asking: false, estimate: null };
 
 // ---- the live estimate (each status poll) ----
 // ``value`` to ``digits`` decimals, "0.00" (not "-0.00") for a value that rounds to zero
@@ -32,6 +32,7 @@ const triple = (v, digits = 2, scale = 1) => (v && v.every((c) => c !== null) ? 
 export function onContactStatus(status) {
   const c = status && status.contact;
   if (!c) return;
+  contact.estimate = c;
   const live = el("contact-live");
   live.dataset.valid = c.valid ? "true" : "false";
   if (c.valid) {
@@ -160,7 +161,10 @@ async function send(what, path, body) {
 async function stopMotion(event) {
   event.preventDefault();
   const answer = await send("Stop", "/api/stop", {});
-  if (answer) showMessage(answer.result ? "Stopped: the arm holds where it is." : "Nothing was moving.");
+  if (!answer) return;
+  const pushing = contact.estimate && contact.estimate.valid ? contact.estimate.magnitude_n : 0;
+  const still = answer.result && pushing > detectForce() ? ` It still pushes ${fixed(pushing, 1)} N: touch or jog away from the surface to release it.` : "";
+  showMessage(answer.result ? `Stopped: the arm holds where it is.${still}` : "Nothing was moving.");
 }
 
 // ---- touch ----

@@ -12,6 +12,7 @@ import pytest
 
 from app.config import load_settings
 from app.control import commands, contact_commands
+from app.control.errors import MotionRefused
 from app.control.sources import Setpoint
 from hardware.sim.surfaces import TIP_RADIUS_M, Plate
 from tests.support.twin_loop import TwinLoop
@@ -69,7 +70,10 @@ def test_touches_repeat_to_a_tenth_of_a_millimetre(home) -> None:
         touch, _ = _touch(home, force_n=2.0, retract_m=0.002)
         assert touch.outcome == "contact"
         assert -touch.force_n[2] >= 2.0  # the force it stood at, not after the retract
-        assert home.snapshot.contact.magnitude_n < 1.0  # retracted: off the plate
+        # retracted to 2 mm short of the surface found: off the plate, MuJoCo says
+        home.step(int(0.3 / home.period_s))  # the arm settles on the retract's end
+        assert home.snapshot.point_measured_m[2] == pytest.approx(SURFACE_Z_M + 0.002, abs=3e-4)
+        assert not home.bus.measure_contact().in_contact
         points.append(touch.contact_point_m[2])
     assert np.ptp(points) < 1e-4, points
 
@@ -184,3 +188,20 @@ def test_the_example_config_s_plate_and_wall_are_where_a_touch_finds_them() -> N
         assert found[1][0] == pytest.approx(0.09 - TIP_RADIUS_M, abs=3e-4)
     finally:
         loop.close()
+
+
+def test_a_touch_that_starts_pressing_is_refused_and_moves_nothing(home) -> None:
+    """At rest on the plate, 1-2 N on it: a touch would tare that away and find nothing;
+    refused, the command unchanged. Sideways (nothing along +x) it may start."""
+    home.move_to((0.0, 0.0, SURFACE_Z_M - 0.002))  # 2 mm into the plate's spring
+    assert home.snapshot.contact.force_n[2] < -1.0
+    held = home.state.commanded_rad.copy()
+    with pytest.raises(MotionRefused, match="already pushes"):
+        contact_commands.touch(home.state, home.ctx, home.settings.contact, [0, 0, -1])
+    home.step()
+    assert np.array_equal(home.state.commanded_rad, held) and home.state.source is None
+    contact_commands.touch(
+        home.state, home.ctx, home.settings.contact, [1, 0, 0], max_travel_m=0.002
+    )
+    assert home.state.source is not None
+    commands.stop_source(home.state, home.state.source)

@@ -237,12 +237,13 @@ class TouchOut(_Out):
     contact_point_m: MaybeVector3 = Field(description="where the surface starts, base frame [m]")
     force_n: MaybeVector3 = Field(description="the contact force at its end [N]")
     peak_force_n: MaybeFloat = Field(description="the largest force along its direction [N]")
-    travel_m: MaybeFloat = Field(description="how far it went along its direction [m]")
+    travel_m: MaybeFloat = Field(description="the furthest the command went along it [m]")
     direction: MaybeVector3 = Field(description="the unit direction it moved along")
     source_id: str | None
     joints_at_contact_rad: MaybeVector3 = Field(
         description="the legs' joints as read when contact was seen [rad]"
     )
+    reason: str | None = Field(None, description="why it was 'stopped' (null otherwise)")
 
 
 class ContactLimitsOut(_Out):

@@ -106,6 +106,7 @@ def touch(snap: Snapshot) -> dict[str, Any] | None:
         "direction": floats(result.direction),
         "source_id": result.source_id,
         "joints_at_contact_rad": floats(result.joints_at_contact_rad),
+        "reason": result.reason,
     }
 
 

@@ -100,7 +100,10 @@ def test_a_touch_prints_where_the_plate_is(app, served, capsys) -> None:
     assert lines["contact point"].endswith(" mm")
     assert point == pytest.approx([1e3 * c for c in touch["contact_point_m"]], abs=6e-4)
     assert point[2] == pytest.approx(SURFACE_Z_MM, abs=0.3)  # the twin's own plate
-    force = [float(v) for v in re.findall(r"-?\d+\.\d+", lines["force at the end"])[:3]]
+    force = [
+        float(v)
+        for v in re.findall(r"-?\d+\.\d+", lines["force at the stop (before any retract)"])[:3]
+    ]
     assert force == pytest.approx(touch["force_n"], abs=0.006)
     peak = float(lines["peak force along the direction"].split()[0])
     assert peak == pytest.approx(touch["peak_force_n"], abs=0.006) and 2.0 <= peak < 15.0
@@ -135,7 +138,7 @@ def test_nothing_under_it_is_no_contact_exit_1(app, served, capsys) -> None:
     out, _ = capsys.readouterr()
     assert code == 1
     assert "touch: no contact" in out and "contact point: (none) mm" in out
-    assert "travel: 10.000 mm" in out
+    assert "travel (furthest commanded): 10.000 mm" in out
 
 
 @pytest.mark.parametrize(
