@@ -31,7 +31,6 @@ from hardware.errors import BusError
 
 Clock = Callable[[], float]  # loop time [s]
 LEVEL_GRAVITY = np.array([0.0, 0.0, -9.81])  # in the world [m/s^2] (kinematics.dynamics')
-DISPLAY_EVERY = 4  # the force estimate's period in ticks while no limit rests on it (50 Hz)
 
 
 @dataclass(frozen=True)
@@ -74,12 +73,7 @@ def _check_contact(state: LoopState, ctx: CommandContext, ports: TickPorts, now:
     base = getattr(state.source, "base_pose", None)
     monitor.gravity = None if base is None else np.asarray(base.rotation).T @ LEVEL_GRAVITY
     source = state.source if commands.motion_allowed(state) else None
-    # every tick where a limit rests on it (a touch, a press, force-limited motion); else
-    # every DISPLAY_EVERY-th tick, for the page, the logs and the topics (it costs ~0.4 ms)
-    needed = getattr(source, "presses", False) or monitor.settings.collision_stop
-    if not needed and state.contact.valid and state.tick % DISPLAY_EVERY:
-        return
-    reading = monitor.read(state.joints)
+    reading = monitor.read(state.joints)  # every tick (~20 us: app/control/force.py)
     state.contact = reading if not state.freshness.stale else replace(reading, fresh=False)
     fault = monitor.check(state.contact, source, state.point_m, now())
     if fault is None:

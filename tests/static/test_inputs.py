@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import re
+import urllib.error
 from collections.abc import Iterator
 from typing import Any
 
@@ -104,7 +105,12 @@ def arrive(page: Any, server: Server, point_m: list[float], what: str) -> None:
     the form (confirming it when it is long), as an operator would."""
 
     def step() -> bool:
-        s = status(server)
+        try:
+            s = status(server)
+        except urllib.error.HTTPError as exc:  # the node's link late on a loaded machine
+            if exc.code == 503:
+                return False
+            raise
         if visible(page, "#confirm"):
             page.click("#confirm-yes")
         elif s["mode"] == "fault":

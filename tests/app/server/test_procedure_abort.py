@@ -143,7 +143,13 @@ def test_tuning_holds_the_robot_between_its_runs_and_abort_stops_them(twin) -> N
     body = ok_json(twin.get(f"/api/tuning/{run_id}"))
     assert body["state"] == "aborted", body
     for kind, recorded in body["runs"].items():  # none goes on, and no chirp starts after
-        run = ok_json(twin.get(f"/api/runs/{recorded}"))
-        assert run["state"] != "running", (kind, run)
+        # (a run's recorder closes its files and records its end in a thread of its own)
+        wait_for(
+            lambda recorded=recorded: ok_json(twin.get(f"/api/runs/{recorded}"))["state"]
+            != "running",
+            f"the tuning's {kind} run recorded as ended",
+            WAIT_S,
+            seen=lambda recorded=recorded: ok_json(twin.get(f"/api/runs/{recorded}")),
+        )
     assert all(r["state"] != "running" for r in ok_json(twin.get("/api/runs")))
     assert twin.post(abort).status_code == 409
