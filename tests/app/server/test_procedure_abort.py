@@ -145,8 +145,9 @@ def test_tuning_holds_the_robot_between_its_runs_and_abort_stops_them(twin) -> N
     for kind, recorded in body["runs"].items():  # none goes on, and no chirp starts after
         # (a run's recorder closes its files and records its end in a thread of its own)
         wait_for(
-            lambda recorded=recorded: ok_json(twin.get(f"/api/runs/{recorded}"))["state"]
-            != "running",
+            lambda recorded=recorded: (
+                ok_json(twin.get(f"/api/runs/{recorded}"))["state"] != "running"
+            ),
             f"the tuning's {kind} run recorded as ended",
             WAIT_S,
             seen=lambda recorded=recorded: ok_json(twin.get(f"/api/runs/{recorded}")),
