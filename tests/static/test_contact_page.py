@@ -106,6 +106,38 @@ def at_home(page: Any, server: Server) -> None:
     waiting.wait_for(arrived, "the arm at the home point", PAGE_WAIT_S, seen=server.brief)
 
 
+def touch_from_page(page: Any, server: Server, retract: str) -> dict:
+    """From the home point, a touch down to 2 N typed and sent from the page, followed to
+    its end as the page shows it; the server's record of it (each test makes its own: the
+    suite runs tests in any order)."""
+    at_home(page, server)
+    before = server.get("/api/contact")["touch"]
+    requests = len(sent(page, "/api/contact/touch"))
+    fill_touch(page, "2", "10", "50", retract)
+    page.select_option("#contact-touch-dir", "-z")
+    page.click("#contact-touch-go")
+    waiting.wait_for(
+        lambda: len(sent(page, "/api/contact/touch")) > requests,
+        "the touch sent",
+        PAGE_WAIT_S,
+        seen=server.brief,
+    )
+
+    def ended() -> bool:
+        touch = server.get("/api/contact")["touch"]
+        return (
+            touch is not None
+            and touch != before
+            and touch["outcome"] != "touching"
+            and server.get("/api/status")["mode"] != "touch"
+            and text(page, "#contact-outcome") == touch["outcome"]
+        )
+
+    seen = lambda: shown(page, server)  # noqa: E731
+    waiting.wait_for(ended, "the touch's end shown", 3 * PAGE_WAIT_S, seen=seen)
+    return server.get("/api/contact")["touch"]
+
+
 def fill_touch(page: Any, force: str, speed: str, travel: str, retract: str) -> None:
     for field, value in (("force-n", force), ("speed", speed), ("travel", travel)):
         page.fill(f"#contact-touch-{field}", value)
@@ -220,14 +252,7 @@ def test_a_refusal_of_the_server_is_said_in_the_pages_words(page: Any, server: S
 
 
 def test_a_touch_from_the_page_finds_the_plate(page: Any, server: Server) -> None:
-    at_home(page, server)
-    before = server.get("/api/contact")["touch"]
-    fill_touch(page, "2", "10", "50", "2")
-    page.select_option("#contact-touch-dir", "-z")
-    page.click("#contact-touch-go")
-    waiting.wait_for(
-        lambda: sent(page, "/api/contact/touch"), "the touch sent", PAGE_WAIT_S, seen=server.brief
-    )
+    touch = touch_from_page(page, server, retract="2")
     # hand-converted: 10 mm/s = 0.01 m/s, 50 mm = 0.05 m, 2 mm = 0.002 m
     body = sent(page, "/api/contact/touch")[-1]
     assert body == {
@@ -237,18 +262,6 @@ def test_a_touch_from_the_page_finds_the_plate(page: Any, server: Server) -> Non
         "max_travel_m": pytest.approx(0.05, abs=1e-15),
         "retract_m": pytest.approx(0.002, abs=1e-15),
     }
-
-    def ended() -> bool:
-        touch = server.get("/api/contact")["touch"]
-        return (
-            touch is not None
-            and touch != before
-            and touch["outcome"] != "touching"
-            and text(page, "#contact-outcome") == touch["outcome"]
-        )
-
-    seen = lambda: shown(page, server)  # noqa: E731
-    waiting.wait_for(ended, "the touch's end shown", 3 * PAGE_WAIT_S, seen=seen)
     touch = server.get("/api/contact")["touch"]
     assert touch["outcome"] == "contact", shown(page, server)
     point_mm = [float(v) for v in text(page, "#contact-point").split(",")]
@@ -275,6 +288,7 @@ def test_the_touch_force_is_in_the_plots(page: Any, server: Server) -> None:
     """Right after the touch (which pressed 2 N down, the peak in GET /api/contact): the
     plots' "tip force" set draws x, y, z and their 1-sigma, and its z trace went down to
     the pressed force within the last 30 s."""
+    touch_from_page(page, server, retract="2")
     plots = plots_frame(page)
     plots.select_option("#plot-window", "30")
     plots.select_option("#plot-signals", "force")
@@ -299,11 +313,18 @@ def test_the_touch_force_is_in_the_plots(page: Any, server: Server) -> None:
 def test_a_press_is_sent_in_si_and_stop_ends_it_without_an_e_stop(
     page: Any, server: Server
 ) -> None:
+    # a press starts on the surface: a touch with retract 0 leaves the tip there
+    assert touch_from_page(page, server, retract="0")["outcome"] == "contact"
+    presses, stops = len(sent(page, "/api/contact/press")), len(sent(page, "/api/stop"))
+    page.select_option("#contact-press-dir", "-z")
     page.fill("#contact-press-force", "3")
     page.fill("#contact-press-duration", "20")
     page.click("#contact-press-go")
     waiting.wait_for(
-        lambda: sent(page, "/api/contact/press"), "the press sent", PAGE_WAIT_S, seen=server.brief
+        lambda: len(sent(page, "/api/contact/press")) > presses,
+        "the press sent",
+        PAGE_WAIT_S,
+        seen=server.brief,
     )
     body = sent(page, "/api/contact/press")[-1]
     assert body == {"direction": [0, 0, -1], "force_n": 3, "frame": "base", "duration_s": 20}
@@ -325,4 +346,4 @@ def test_a_press_is_sent_in_si_and_stop_ends_it_without_an_e_stop(
     )
     status = server.get("/api/status")
     assert not status["estopped"] and status["torque"]  # a stop, not an e-stop
-    assert sent(page, "/api/stop") == [{}]
+    assert sent(page, "/api/stop")[stops:] == [{}]
